@@ -1,0 +1,61 @@
+"""Communication graph of the team (paper §3.1).
+
+Robots are indexed from 0 inside the code and shown from 1 to users. An edge
+``(j, i)`` means robot ``i`` receives messages from robot ``j`` (j is an
+in-neighbour of i), so the adjacency has ``a[i, j] = 1``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+@dataclass(frozen=True)
+class Graph:
+    """A directed graph on ``n`` robots, edges as 0-based ``(from, to)`` pairs."""
+
+    n: int
+    edges: tuple[tuple[int, int], ...]
+
+    def adjacency(self) -> np.ndarray:
+        """Adjacency matrix ``A`` with ``a[i, j] = 1`` iff ``j -> i`` (§3.1)."""
+        a = np.zeros((self.n, self.n))
+        for j, i in self.edges:
+            a[i, j] = 1.0
+        return a
+
+    def laplacian(self) -> np.ndarray:
+        """Laplacian ``L = diag(d) - A`` with ``d_i`` the in-degree (§3.1)."""
+        a = self.adjacency()
+        return np.diag(a.sum(axis=1)) - a
+
+    def in_degree(self) -> np.ndarray:
+        """In-degree ``d_i = |N_i|`` of every robot."""
+        return self.adjacency().sum(axis=1)
+
+    def in_neighbours(self, i: int) -> list[int]:
+        """The robots whose messages robot ``i`` receives."""
+        return sorted(j for j, k in self.edges if k == i)
+
+    def is_strongly_connected(self) -> bool:
+        """True when a directed path joins every ordered pair of robots."""
+        if self.n <= 1:
+            return True
+        src = [j for j, _ in self.edges]
+        dst = [i for _, i in self.edges]
+        m = csr_matrix((np.ones(len(src)), (src, dst)), shape=(self.n, self.n))
+        count, _ = connected_components(m, directed=True, connection="strong")
+        return bool(count == 1)
+
+    def without(self, k: int) -> Graph:
+        """The graph with robot ``k`` and its edges removed; later robots shift down by one."""
+
+        def shift(v: int) -> int:
+            return v - 1 if v > k else v
+
+        kept = tuple((shift(j), shift(i)) for j, i in self.edges if k not in (j, i))
+        return Graph(self.n - 1, kept)

@@ -1,0 +1,193 @@
+"""The global mission: desired centroid path, formation, and the task map σ = J x.
+
+σ = [σ₁; σ₂] with σ₁ the centroid (eq. 12) and σ₂ the chain of differences
+x_{k+1} − x_k (eq. 13). J is square and invertible (NOTES 11), so J† = J⁻¹,
+and both J x and J⁻¹ σ are computed in O(N n) without forming J.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scenario import CentroidPath, Formation
+
+# --------------------------------------------------------------------------- task map
+
+
+def task_matrix(n_robots: int, n_dim: int = 2) -> np.ndarray:
+    """The dense J of eq. 11 (for tests and documentation; the loop never forms it)."""
+    j1 = np.kron(np.ones((1, n_robots)) / n_robots, np.eye(n_dim))  # eq. 12
+    d = np.zeros((n_robots - 1, n_robots))
+    d[np.arange(n_robots - 1), np.arange(n_robots - 1)] = -1.0
+    d[np.arange(n_robots - 1), np.arange(1, n_robots)] = 1.0
+    j2 = np.kron(d, np.eye(n_dim))  # eq. 13
+    return np.vstack([j1, j2])
+
+
+def task_map(x: np.ndarray) -> np.ndarray:
+    """σ = J x (eqs. 11-13) for positions ``x`` of shape (..., N, n); returns (..., N, n).
+
+    Row 0 is the centroid σ₁, rows 1..N-1 the formation differences σ₂.
+    """
+    sigma = np.empty_like(x)
+    sigma[..., 0, :] = x.mean(axis=-2)
+    sigma[..., 1:, :] = np.diff(x, axis=-2)
+    return sigma
+
+
+def task_inverse(sigma: np.ndarray) -> np.ndarray:
+    """x = J⁻¹ σ, the inverse of :func:`task_map`, in O(N n)."""
+    chain = np.zeros_like(sigma)
+    chain[..., 1:, :] = np.cumsum(sigma[..., 1:, :], axis=-2)  # x_k - x_1
+    return chain - chain.mean(axis=-2, keepdims=True) + sigma[..., :1, :]
+
+
+# --------------------------------------------------------------------------- formation
+
+
+def polygon_offsets(n_robots: int, side: float, rotation_deg: float = 0.0) -> np.ndarray:
+    """Vertices (N, 2) of a regular N-gon of the given side, centred on the origin.
+
+    Robot k sits at vertex k, counter-clockwise; with rotation 0 and N = 4 the
+    square is axis-aligned. For N = 2 the "polygon" is a segment of length ``side``.
+    """
+    if n_robots == 1:
+        return np.zeros((1, 2))
+    radius = side / (2.0 * np.sin(np.pi / n_robots)) if n_robots > 2 else side / 2.0
+    start = -np.pi / 2 - np.pi / n_robots + np.deg2rad(rotation_deg)
+    ang = start + 2.0 * np.pi * np.arange(n_robots) / n_robots
+    return radius * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+
+
+def formation_offsets(formation: Formation, n_robots: int) -> np.ndarray:
+    """Offsets (N, 2) from the centroid for the scenario's formation shape."""
+    if formation.shape == "polygon":
+        return polygon_offsets(n_robots, formation.side, formation.rotation)
+    raise ValueError(f"unknown formation shape {formation.shape!r}")
+
+
+# --------------------------------------------------------------------------- centroid path
+
+
+@dataclass(frozen=True)
+class PathTable:
+    """Desired centroid position and velocity sampled at every control instant."""
+
+    t: np.ndarray  # (K,)
+    position: np.ndarray  # (K, 2)
+    velocity: np.ndarray  # (K, 2)
+
+    def at(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Position and velocity at control step ``k`` (clamped to the table)."""
+        k = min(k, len(self.t) - 1)
+        return self.position[k], self.velocity[k]
+
+
+def _filleted_path(waypoints: np.ndarray, corner_radius: float):
+    """Polyline with circular fillets at interior corners: tangent-continuous.
+
+    Returns a list of segments, each ("line", p0, p1) or ("arc", centre, r, a0, da),
+    and the total length.
+    """
+    pts = np.asarray(waypoints, float)
+    keep = [pts[0]]
+    for p in pts[1:]:
+        if np.linalg.norm(p - keep[-1]) > 1e-9:
+            keep.append(p)
+    pts = np.array(keep)
+    if len(pts) == 1:
+        return [("line", pts[0], pts[0])], 0.0
+    seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    # Tangent length of each corner fillet, limited to half the adjacent segments.
+    segments = []
+    cursor = pts[0]
+    for c in range(1, len(pts) - 1):
+        a = (pts[c] - pts[c - 1]) / seg_len[c - 1]
+        b = (pts[c + 1] - pts[c]) / seg_len[c]
+        turn = np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)
+        if abs(turn) < 1e-9 or corner_radius <= 0:
+            continue
+        tan_len = min(corner_radius * np.tan(abs(turn) / 2), seg_len[c - 1] / 2, seg_len[c] / 2)
+        r = tan_len / np.tan(abs(turn) / 2)
+        p_in = pts[c] - a * tan_len
+        p_out = pts[c] + b * tan_len
+        segments.append(("line", cursor, p_in))
+        normal = np.array([-a[1], a[0]]) * np.sign(turn)  # towards the centre
+        centre = p_in + normal * r
+        a0 = np.arctan2(*(p_in - centre)[::-1])
+        segments.append(("arc", centre, r, a0, turn))
+        cursor = p_out
+    segments.append(("line", cursor, pts[-1]))
+    length = sum(
+        np.linalg.norm(s[2] - s[1]) if s[0] == "line" else s[2] * abs(s[4]) for s in segments
+    )
+    return segments, float(length)
+
+
+def _eval_path(segments, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position and unit tangent at arc lengths ``s`` (vectorised over s)."""
+    pos = np.zeros((len(s), 2))
+    tan = np.zeros((len(s), 2))
+    tan[:, 0] = 1.0
+    offset = 0.0
+    remaining = np.ones(len(s), bool)
+    for k, seg in enumerate(segments):
+        if seg[0] == "line":
+            p0, p1 = seg[1], seg[2]
+            seg_l = float(np.linalg.norm(p1 - p0))
+            direction = (p1 - p0) / seg_l if seg_l > 0 else np.array([1.0, 0.0])
+        else:
+            _, centre, r, a0, da = seg
+            seg_l = r * abs(da)
+        last = k == len(segments) - 1
+        m = remaining & ((s <= offset + seg_l) | last)
+        u = np.clip(s[m] - offset, 0.0, seg_l)
+        if seg[0] == "line":
+            pos[m] = p0 + np.outer(u, direction)
+            tan[m] = direction
+        else:
+            ang = a0 + np.sign(da) * u / r
+            pos[m] = centre + r * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+            tan[m] = np.sign(da) * np.stack([-np.sin(ang), np.cos(ang)], axis=1)
+        remaining &= ~m
+        offset += seg_l
+    return pos, tan
+
+
+def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:
+    """Sample the desired centroid at t = 0, dt, ..., duration.
+
+    The speed rises smoothly from 0 over ``ramp_time`` and, near the last
+    waypoint, falls as (L − s)/ramp_time, so the desired velocity is continuous
+    everywhere; the fillets make the direction continuous at the corners.
+    """
+    segments, length = _filleted_path(path.waypoints, path.corner_radius)
+    k = round(duration / dt) + 1
+    t = np.arange(k) * dt
+    # Integrate ds/dt = v * ramp(t) * min(1, (L - s)/(v T_r)) with a fine step.
+    fine = 10
+    h = dt / fine
+    s = np.zeros(k)
+    sdot = np.zeros(k)
+    cur = 0.0
+    v, tr = path.speed, path.ramp_time
+
+    def rate(tt: float, ss: float) -> float:
+        ramp = 1.0 if tt >= tr else 0.5 - 0.5 * np.cos(np.pi * tt / tr)
+        brake = min(1.0, max(0.0, (length - ss) / (v * tr)))
+        return v * ramp * brake
+
+    for i in range(k):
+        s[i] = cur
+        sdot[i] = rate(t[i], cur)
+        for j in range(fine):  # midpoint rule
+            tt = t[i] + j * h
+            mid = cur + 0.5 * h * rate(tt, cur)
+            cur = min(length, cur + h * rate(tt + 0.5 * h, mid))
+    pos, tan = _eval_path(segments, s)
+    pos.setflags(write=False)
+    vel = tan * sdot[:, None]
+    vel.setflags(write=False)
+    return PathTable(t, pos, vel)

@@ -1,0 +1,10 @@
+"""Where the repository's data folders live (``models/``, ``scenarios/``, ``renders/``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+MODELS = ROOT / "models"
+SCENARIOS = ROOT / "scenarios"
+RENDERS = ROOT / "renders"
