@@ -1,0 +1,92 @@
+"""Actuator faults injected through the actuator model (NOTES 15).
+
+A velocity actuator produces ``gain·ctrl + bias0 + bias2·qvel`` with
+gain = kv and bias2 = −kv. A *bias* fault φ(t) sets ``bias0 = kv·φ``: the
+actuator tracks ctrl + φ, after ctrl clamping, like a real offset. A *stop*
+sets gain = bias0 = 0: the force is −kv·qvel and the robot brakes to rest
+whatever it is commanded. The controller's command is never touched.
+Works for any N (no actuator groups).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from ..scenario import Fault
+
+
+def bias_profile(fault: Fault, t: float) -> np.ndarray:
+    """φ(t) = value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f, else 0 (paper §6)."""
+    if t < fault.t:
+        return np.zeros(2)
+    if fault.time_constant <= 0:
+        return np.array(fault.value)
+    return np.asarray(fault.value) * (1.0 - np.exp(-(t - fault.t) / fault.time_constant))
+
+
+class ActuatorFaults:
+    """Switches the scenario's faults on in the model's actuator parameters."""
+
+    def __init__(
+        self, model: mujoco.MjModel, faults: tuple[Fault, ...], actuator: np.ndarray, adapter
+    ) -> None:
+        self.model = model
+        self.faults = faults
+        self.actuator = actuator  # (N, A)
+        self.adapter = adapter
+        self.kv = model.actuator_gainprm[actuator, 0].copy()  # (N, A)
+        self._gain0 = model.actuator_gainprm[:, 0].copy()
+        self._bias0 = model.actuator_biasprm[:, 0].copy()
+        self.stopped = np.zeros(len(actuator), bool)
+        self.started = [False] * len(faults)
+        self._bias_robots = sorted({f.robot for f in faults if f.kind == "bias"})
+
+    def apply(self, t: float) -> list[Fault]:
+        """Write the actuator parameters for time ``t``; returns the faults that start now."""
+        new = []
+        for k, f in enumerate(self.faults):
+            if not self.started[k] and t >= f.t:
+                self.started[k] = True
+                new.append(f)
+                if f.kind == "stop":
+                    self.stopped[f.robot] = True
+        if not self._bias_robots and not new:
+            return new
+        phi = self.bias_phi(t)
+        ids = self.actuator[self._bias_robots]
+        self.model.actuator_biasprm[ids, 0] = self.kv[self._bias_robots] * self.adapter.bias(
+            phi[self._bias_robots]
+        )
+        stop = self.actuator[self.stopped]
+        self.model.actuator_gainprm[stop, 0] = 0.0
+        self.model.actuator_biasprm[stop, 0] = 0.0
+        return new
+
+    def bias_phi(self, t: float) -> np.ndarray:
+        """Sum of the bias faults on each robot at time ``t``, (N, 2)."""
+        phi = np.zeros((len(self.actuator), 2))
+        for f in self.faults:
+            if f.kind == "bias":
+                phi[f.robot] += bias_profile(f, t)
+        return phi
+
+    def phi(self, t: float, ctrl: np.ndarray) -> np.ndarray:
+        """The additive fault φ of eq. 1 each robot suffers at ``t``, (N, 2).
+
+        A bias is its profile; a stop is φ = −(clamped command), the velocity
+        that the actuators no longer deliver.
+        """
+        phi = self.bias_phi(t)
+        if self.stopped.any():
+            lo, hi = self.model.actuator_ctrlrange[self.actuator].transpose(2, 0, 1)
+            clamped = np.clip(ctrl, lo, hi)
+            phi[self.stopped] = -self.adapter.planar(clamped[self.stopped])
+        return phi
+
+    def clear(self) -> None:
+        """Restore the healthy actuator parameters."""
+        self.model.actuator_gainprm[:, 0] = self._gain0
+        self.model.actuator_biasprm[:, 0] = self._bias0
+        self.stopped[:] = False
+        self.started = [False] * len(self.faults)

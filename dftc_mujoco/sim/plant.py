@@ -1,0 +1,108 @@
+"""The plant: MuJoCo stepping, measurement noise η and disturbance ξ (eqs. 1-4)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from ..errors import SimulationError
+from ..scenario import Noise
+from .scene import Scene
+
+_WARNINGS = [
+    (int(w), name.removeprefix("mjWARN_"))
+    for name, w in mujoco.mjtWarning.__members__.items()
+    if name.startswith("mjWARN_")
+]
+
+
+def _disk_sample(rng: np.random.Generator, n: int, radius: float, at_bound: bool) -> np.ndarray:
+    """n planar vectors, uniform in the disk of ``radius`` (or on its rim if ``at_bound``)."""
+    ang = rng.uniform(0.0, 2.0 * np.pi, n)
+    mag = np.full(n, radius) if at_bound else radius * np.sqrt(rng.uniform(0.0, 1.0, n))
+    return mag[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+
+
+class Plant:
+    """MuJoCo model + data of one run, with the robots' sensors and the disturbance.
+
+    ``rng`` is the run's only source of randomness (passed in, never global).
+    ξ is a low-pass filtered random planar velocity, bounded by ξ̄ by
+    construction (a convex combination of points in the disk), applied as the
+    force kv·ξ on each robot's base so that a holonomic robot's velocity is
+    shifted by ξ; with ``noise_at_bound`` both η and ξ have norm exactly at their bounds.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        noise: Noise,
+        control_period: float,
+        rng: np.random.Generator,
+        noise_at_bound: bool = False,
+    ) -> None:
+        self.scene = scene
+        self.model = scene.model
+        self.data = mujoco.MjData(self.model)
+        self.noise = noise
+        self.rng = rng
+        self.at_bound = noise_at_bound
+        self.n = len(scene.body)
+        self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
+        self._xi_state = _disk_sample(rng, self.n, noise.xi_bar, False)
+        self.xi = np.zeros((self.n, 2))
+        # force per unit velocity: the actuators' kv along x and y
+        self._force_gain = self.model.actuator_gainprm[scene.actuator, 0][:, :2].copy()
+        self._ctrl_index = scene.actuator.ravel()
+        mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def positions(self) -> np.ndarray:
+        """True planar positions (N, 2) from the robots' sites (world frame, NOTES 13)."""
+        return self.data.site_xpos[self.scene.site, :2].copy()
+
+    def velocities(self) -> np.ndarray:
+        """True planar velocities (N, 2) of the robots' bases."""
+        v = np.empty((self.n, 6))
+        for k, b in enumerate(self.scene.body):
+            mujoco.mj_objectVelocity(
+                self.model, self.data, mujoco.mjtObj.mjOBJ_BODY, int(b), v[k], 0
+            )
+        return v[:, 3:5].copy()
+
+    def measure(self) -> np.ndarray:
+        """Each robot's own noisy position x_m,i = x_i + η_i, ‖η_i‖ ≤ η̄ (eqs. 3-4)."""
+        eta = _disk_sample(self.rng, self.n, self.noise.eta_bar, self.at_bound)
+        return self.positions() + eta
+
+    def _update_disturbance(self) -> None:
+        w = _disk_sample(self.rng, self.n, self.noise.xi_bar, False)
+        self._xi_state = self._alpha * self._xi_state + (1.0 - self._alpha) * w
+        if self.at_bound:
+            norm = np.linalg.norm(self._xi_state, axis=1, keepdims=True)
+            self.xi = self.noise.xi_bar * self._xi_state / np.maximum(norm, 1e-12)
+        else:
+            self.xi = self._xi_state
+        self.data.xfrc_applied[self.scene.body, :2] = self._force_gain * self.xi
+
+    def step(self, ctrl: np.ndarray, nsub: int) -> None:
+        """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
+        self._update_disturbance()
+        self.data.ctrl[self._ctrl_index] = ctrl.ravel()
+        mujoco.mj_step(self.model, self.data, nstep=nsub)
+        self.check()
+
+    def check(self) -> None:
+        """Raise :class:`SimulationError` on any MuJoCo warning or non-finite state."""
+        counts = self.data.warning.number
+        if counts.any():
+            idx, name = next((i, nm) for i, nm in _WARNINGS if counts[i])
+            info = self.data.warning[idx].lastinfo
+            raise SimulationError(
+                f"MuJoCo warning {name} at t = {self.time:.3f} s (info {info}); the run was stopped"
+            )
+        if not np.isfinite(self.data.qpos).all() or not np.isfinite(self.data.qvel).all():
+            raise SimulationError(f"non-finite state at t = {self.time:.3f} s; the run was stopped")
