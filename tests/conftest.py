@@ -1,0 +1,45 @@
+"""Shared helpers: scenarios derived from the shipped ones, and cached physics runs."""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from dftc_mujoco import scenario
+from dftc_mujoco.loop import RunResult, simulate
+from dftc_mujoco.paths import SCENARIOS
+
+
+def scenario_dict(name: str = "paper_case") -> dict[str, Any]:
+    """A shipped scenario as a plain dict, to be modified by a test."""
+    with open(SCENARIOS / f"{name}.toml", "rb") as fh:
+        return tomllib.load(fh)
+
+
+def ring_with_chords(n: int, chord: int = 3) -> list[list[int]]:
+    """Directed ring 1 -> 2 -> ... -> n -> 1 plus a chord i -> i + chord from every robot."""
+    edges = [[i, i % n + 1] for i in range(1, n + 1)]
+    edges += [[i, (i + chord - 1) % n + 1] for i in range(1, n + 1)]
+    return edges
+
+
+def make(data: dict[str, Any], source: str = "<test>") -> scenario.Scenario:
+    return scenario.from_dict(copy.deepcopy(data), source=source)
+
+
+def write_toml(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="session")
+def fault_free_run() -> RunResult:
+    """paper_case without faults, 28 s: two avoidance episodes, then plain tracking."""
+    d = scenario_dict()
+    d["faults"] = []
+    d["duration"] = 28.0
+    return simulate(make(d))

@@ -1,0 +1,240 @@
+"""Physics in the loop: real MuJoCo stepping, physical outcomes asserted."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dftc_mujoco import loop, run, scenario
+from dftc_mujoco.record import LOG_FIELDS
+from dftc_mujoco.sim import faults as sim_faults
+from dftc_mujoco.sim import robots, scene
+from dftc_mujoco.sim.plant import Plant
+from tests.conftest import make, ring_with_chords, scenario_dict
+
+
+def _fault_free(**changes):
+    d = scenario_dict()
+    d["faults"] = []
+    d.update(changes)
+    return make(d)
+
+
+def test_fault_free_run_converges_without_obstacles():
+    d = scenario_dict()
+    d["faults"], d["obstacles"], d["duration"] = [], [], 20.0
+    r = loop.simulate(make(d))
+    t, err = r.log["t"], r.log["sigma_err"]
+    after = t >= 5.0
+    assert err[after].max() < 0.01  # centroid and formation within 1 cm after the transient
+    est = np.abs(r.log["x_hat"] - r.log["x"][:, None]).max(axis=(1, 2, 3))
+    assert est[after].max() < 0.01  # every robot's estimate of every robot
+    assert r.summary["errors"]["centroid_rms"] < 0.005
+    assert r.summary["detections"] == [] and r.summary["status"] == "ok"
+
+
+def test_avoidance_keeps_the_safe_distance_and_then_reconverges(fault_free_run):
+    r = fault_free_run
+    s = r.summary
+    assert len(s["reactive"]) >= 2  # two cylinders on the path
+    assert all(e["t_on"] < 41.8 for e in s["reactive"])
+    assert s["min_safe_distance_margin"] >= -0.01  # never closer than d − 1 cm
+    # check it independently from the logged true positions
+    obs = np.array([o.position for o in r.scenario.obstacles])
+    d = np.array([o.safe_distance for o in r.scenario.obstacles])
+    dist = np.linalg.norm(r.log["x"][:, :, None, :] - obs[None, None], axis=3)
+    assert (dist - d).min() >= -0.01
+    assert s["min_obstacle_clearance"] > 0.1  # surface gap: no robot touches a cylinder
+    # after the last avoidance episode the formation is back within 1 cm
+    last_off = max(e["t_off"] for e in s["reactive"] if e["t_off"] is not None)
+    after = r.log["t"] >= last_off + 1.0
+    assert after.any() and r.log["sigma_err"][after].max() < 0.01
+    est = np.abs(r.log["x_hat"] - r.log["x"][:, None]).max(axis=(1, 2, 3))
+    assert est[r.log["t"] >= 5.0].max() < 0.05  # estimation error stays bounded
+
+
+def test_robot_stopped_by_a_cylinder_on_contact():
+    """Contacts are on: a robot driven through a cylinder is stopped by it."""
+    d = scenario_dict()
+    d["faults"] = []
+    d["obstacles"] = [
+        {
+            "position": [0.6, -0.25],
+            "radius": 0.1,
+            "safe_distance": 0.25,
+            "activation_distance": 0.25,
+        }
+    ]
+    s = make(d)
+    model = robots.get("disk")
+    sc = scene.build(s, model)
+    plant = Plant(sc, s.noise, 0.01, np.random.default_rng(0))
+    ctrl = np.zeros((4, 2))
+    ctrl[0] = [0.3, 0.0]  # robot 1 starts at (-0.4, -0.2), cylinder surface at x = 0.5
+    for _ in range(600):
+        plant.step(ctrl, 5)
+    x = plant.positions()[0]
+    gap = np.linalg.norm(x - [0.6, -0.25]) - 0.1 - model.footprint_radius
+    assert gap > -0.01  # not through the cylinder
+    assert x[0] < 0.6
+
+
+def _plant(changes=None):
+    s = _fault_free(**(changes or {}))
+    model = robots.get("disk")
+    sc = scene.build(s, model)
+    adapter = model.adapter()
+    plant = Plant(sc, s.noise, s.physics.control_period, np.random.default_rng(0))
+    return s, sc, adapter, plant
+
+
+@pytest.mark.parametrize("kind", ["stop", "bias"])
+def test_fault_acts_through_the_actuators(kind):
+    _, sc, adapter, plant = _plant()
+    fault = scenario.Fault(1, kind, 0.5, np.array([0.3, -0.35]), 0.05)
+    inj = sim_faults.ActuatorFaults(sc.model, (fault,), sc.actuator, adapter)
+    command = np.tile([0.2, 0.1], (4, 1))
+    sent = command.copy()
+    x_at = {}
+    for k in range(300):  # 3 s
+        t = k * 0.01
+        inj.apply(t)
+        if k in (100, 300 - 1):
+            x_at[k] = plant.positions()
+        plant.step(command, 5)
+    assert np.array_equal(command, sent)  # the controller's command is untouched
+    v = plant.velocities()
+    healthy = [0, 2, 3]
+    assert np.abs(v[healthy] - command[healthy]).max() < 0.01
+    if kind == "stop":
+        assert np.linalg.norm(v[1]) < 0.006  # braked to rest (up to ξ̄), not coasting
+        moved = np.linalg.norm(x_at[299] - x_at[100], axis=1)
+        assert moved[1] < 0.012 and moved[0] > 0.4
+    else:
+        assert np.abs(v[1] - (command[1] + [0.3, -0.35])).max() < 0.01
+    np.testing.assert_allclose(
+        inj.phi(3.0, command)[1], [-0.2, -0.1] if kind == "stop" else [0.3, -0.35], atol=1e-6
+    )
+    inj.clear()
+    assert np.array_equal(sc.model.actuator_gainprm[sc.actuator, 0], np.full((4, 2), 200.0))
+
+
+def test_stop_fault_in_the_closed_loop():
+    s = scenario.load("paper_case").with_overrides(duration=44.0)
+    r = loop.simulate(s)
+    t, x = r.log["t"], r.log["x"]
+    after = t >= 42.0
+    drift = np.linalg.norm(x[after, 0] - x[after][0, 0], axis=1).max()
+    assert drift < 0.02  # robot 1 stays where it stopped (ξ̄ = 5 mm/s at most)
+    assert np.linalg.norm(r.log["u"][after, 0], axis=1).min() > 0.0  # still commanded
+    assert r.summary["faults"] == [
+        {"robot": 2, "kind": "bias", "t": 19.0},
+        {"robot": 1, "kind": "stop", "t": 41.8},
+    ]
+    phi = r.log["phi"]
+    np.testing.assert_allclose(
+        phi[t >= 25.0, 1], np.tile([0.3, -0.35], (int((t >= 25).sum()), 1)), atol=1e-6
+    )
+
+
+def test_same_seed_same_numbers_other_seed_other_numbers():
+    s = scenario.load("paper_case").with_overrides(duration=6.0)
+    a, b = loop.simulate(s), loop.simulate(s)
+    c = loop.simulate(s.with_overrides(seed=2))
+    for key in ("wall_time", "real_time_factor", "build_time"):
+        a.summary.pop(key), b.summary.pop(key), c.summary.pop(key)
+    assert json.dumps(a.summary) == json.dumps(b.summary)
+    for name in a.log:
+        assert np.array_equal(a.log[name], b.log[name], equal_nan=True), name
+    assert not np.array_equal(a.log["x"], c.log["x"])
+
+
+def test_twelve_robots_converge():
+    n = 12
+    d = scenario_dict()
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    d["team"] = {
+        "robots": n,
+        "initial_positions": (1.1 * np.c_[np.cos(ang), np.sin(ang)] + 0.05).tolist(),
+        "graph": ring_with_chords(n),
+    }
+    d["obstacles"], d["faults"], d["duration"] = [], [], 25.0
+    d["mission"]["formation"]["side"] = 0.6
+    r = loop.simulate(make(d))
+    after = r.log["t"] >= 18.0  # slowest observer mode: λ ≈ 0.37 1/s on this graph
+    assert r.summary["status"] == "ok"
+    assert r.log["sigma_err"][after].max() < 0.01
+    est = np.abs(r.log["x_hat"] - r.log["x"][:, None]).max(axis=(1, 2, 3))
+    assert est[after].max() < 0.01
+
+
+def test_physics_trouble_stops_the_run_and_keeps_the_log(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo appends warnings to ./MUJOCO_LOG.TXT
+    s = _fault_free(duration=10.0)
+
+    def break_physics(t, plant):
+        if t >= 2.0:
+            plant.data.qvel[0] = np.nan
+
+    r = loop.simulate(s, hook=break_physics)
+    assert not r.ok
+    assert "MuJoCo warning BADQVEL" in str(r.error)
+    assert r.summary["status"] == "failed" and "BADQVEL" in r.summary["error"]
+    assert 1.9 < r.log["t"][-1] < 2.1 and np.isfinite(r.log["x"]).all()
+    run.write_records(r, tmp_path)
+    saved = json.loads((tmp_path / "summary.json").read_text())
+    assert saved["status"] == "failed"
+    assert np.load(tmp_path / "log.npz")["t"][-1] == r.log["t"][-1]
+    assert not list(tmp_path.glob(".*tmp"))  # no half-written files left
+
+
+def test_cli_writes_the_output_contract(tmp_path, capsys):
+    code = run.main(
+        ["paper_case", "--duration", "21", "--seed", "3", "--out", str(tmp_path), "--no-progress"]
+    )
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "fault: bias on robot 2" in out and "real time" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for key in (
+        "scenario",
+        "seed",
+        "duration",
+        "robots",
+        "robot_model",
+        "wall_time",
+        "real_time_factor",
+        "faults",
+        "reactive",
+        "detections",
+        "exclusions",
+        "errors",
+        "min_obstacle_clearance",
+    ):
+        assert key in summary, key
+    assert summary["seed"] == 3 and summary["duration"] == 21.0
+    assert set(summary["errors"]) >= {
+        "centroid_rms",
+        "formation_rms",
+        "final_centroid",
+        "final_formation",
+    }
+    log = np.load(tmp_path / "log.npz")
+    assert set(log.files) == set(LOG_FIELDS)
+    n_t = len(log["t"])
+    assert n_t == 21 * 50 + 1  # default 50 Hz
+    shapes = {
+        "x": (n_t, 4, 2),
+        "x_hat": (n_t, 4, 4, 2),
+        "u": (n_t, 4, 2),
+        "phi": (n_t, 4, 2),
+        "phi_hat": (n_t, 4, 2),
+        "residual": (n_t, 4, 4),
+        "threshold": (n_t, 4, 4),
+        "reactive": (n_t, 4),
+        "active": (n_t, 4),
+        "sigma_err": (n_t, 2),
+    }
+    for name, shape in shapes.items():
+        assert log[name].shape == shape, name
+    assert log["reactive"].any() and log["active"].all()
