@@ -1,0 +1,134 @@
+"""FDIR blocks in pure numpy: κ/λ of eq. 41, thresholds (eq. 40), decisions, exclusion."""
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from dftc_mujoco.graph import Graph
+from dftc_mujoco.onboard import fdir
+from tests.test_onboard import _integrate, _team
+
+PAPER = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)))
+SMALL = {
+    "paper": PAPER,
+    "ring3": Graph(3, ((0, 1), (1, 2), (2, 0))),
+    "complete3": Graph(3, tuple((i, j) for i in range(3) for j in range(3) if i != j)),
+    "line3_undirected": Graph(3, ((0, 1), (1, 0), (1, 2), (2, 1))),
+    "random5": Graph(5, ((0, 1), (1, 2), (2, 3), (3, 4), (4, 0), (2, 0), (4, 2))),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_kappa_lambda_against_brute_force_sup(name):
+    g = SMALL[name]
+    for k in range(g.n):
+        m = fdir.observer_matrix(g, 6.0, k)
+        kappa, lam = fdir.decay_bound(m)
+        lam_min = np.linalg.eigvals(m).real.min()
+        assert 0 < lam < lam_min
+        t = np.linspace(0, 60 / lam_min, 6001)
+        norms = np.array([np.linalg.norm(expm(-m * tt), 2) for tt in t])
+        sampled = norms * np.exp(lam * t)
+        assert sampled.max() <= kappa * (1 + 1e-9)  # eq. 41 holds on a fine grid
+        assert kappa <= sampled.max() * 1.01  # and κ is the sup, not a loose bound
+        # λ was chosen well: no λ on a finer grid gives a clearly smaller κ/λ
+        for other in lam_min * np.linspace(0.05, 0.95, 19):
+            k_other = (norms * np.exp(other * t)).max()
+            assert kappa / lam <= k_other / other * 1.05
+
+
+def test_paper_graph_values_match_notes():
+    kappa, lam = fdir.decay_bounds(PAPER, 6.0)
+    assert np.all((kappa >= 1.0) & (kappa <= 1.3))  # NOTES 6: κ ≈ 1.0-1.2
+    assert np.all((lam >= 0.5) & (lam <= 1.6))  # NOTES 6: λ ≈ 0.6-1.5
+
+
+def test_not_strongly_connected_gives_infinite_thresholds():
+    ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
+    assert fdir.decay_bound(fdir.observer_matrix(ring_without_1, 6.0, 1)) == (np.inf, 0.0)
+    th = fdir.Thresholds(ring_without_1, 6.0, 0.001, 0.005, np.ones(3))
+    mu = th.mu(10.0)
+    assert not np.isnan(mu).any()
+    assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
+
+
+def test_threshold_formula_eq40():
+    th = fdir.Thresholds(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8))
+    d = PAPER.in_degree()
+    mu0 = th.mu(0.0)
+    for i in range(4):
+        for k in range(4):
+            coef = np.sqrt(2) * d[i] + (i == k)
+            assert mu0[i, k] == pytest.approx(coef * 0.8 * th.kappa[k] + 0.001 * (i == k))
+    steady = th.kappa * (6.0 * 0.001 + 2.0 * 0.005) / th.lam
+    mu_inf = th.mu(1e4)
+    assert mu_inf[0, 2] == pytest.approx(np.sqrt(2) * 1 * steady[2])
+    # restarted thresholds count time from t0
+    late = fdir.Thresholds(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8), t0=30.0)
+    assert np.allclose(late.mu(30.0), mu0)
+
+
+def test_decision_window_and_release():
+    dec = fdir.Decision(2, window=0.2, dt=0.01)
+    mu = np.ones((2, 2))
+    high = np.array([[0.0, 2.0], [0.0, 0.0]])
+    raised_at = []
+    for k in range(60):
+        r = high if 10 <= k < 25 else np.zeros((2, 2))  # 0.15 s above: too short
+        if dec.update(r, mu).any():
+            raised_at.append(k)
+    assert raised_at == [] and not dec.flag.any()
+    for k in range(40):
+        if dec.update(high, mu)[0, 1]:
+            raised_at.append(k)
+    assert raised_at == [19]  # the 20th sample above: 0.2 s
+    for _ in range(19):
+        dec.update(np.zeros((2, 2)), mu)
+    assert dec.flag[0, 1]  # still flagged 0.19 s after the residual dropped
+    dec.update(np.zeros((2, 2)), mu)
+    assert not dec.flag[0, 1]
+
+
+def test_team_excludes_a_stopped_robot_and_forms_a_triangle():
+    """Ideal integrator plant, no noise: the protocol and the re-planning on their own."""
+    team, x = _team(4, dt_d_max=2.0)
+    x = _integrate(team, x, 1000)  # 10 s healthy
+    events = []
+
+    def stop_robot_1(t, out):
+        events.extend(out.events)
+        phi = np.zeros((4, 2))
+        phi[0] = -out.u_bar[0]  # φ₁ = −ū₁: robot 1 does not move
+        return phi
+
+    x = _integrate(team, x, 2500, t0=10.0, fault=stop_robot_1)
+    detections = [e for e in events if e["kind"] == "detection"]
+    assert detections and all(e["robot"] == 0 for e in detections)
+    first = min(e["t"] for e in detections)
+    (excl,) = [e for e in events if e["kind"] == "exclusion"]
+    assert excl["robot"] == 0 and excl["t"] == pytest.approx(first + 2.0)  # eq. 43
+    assert list(team.members) == [1, 2, 3]
+    assert team.state.y_hat.shape == (3, 3, 2) and team.decision.flag.shape == (3, 3)
+    tri = x[1:]
+    sides = np.linalg.norm(tri - np.roll(tri, -1, axis=0), axis=1)
+    assert np.allclose(sides, 0.5, atol=0.005)
+
+
+def test_exclusion_cancelled_when_nobody_flags_at_t_r():
+    """NOTES 10: a fault that goes away before t_r must not cost the team a robot."""
+    team, x = _team(4, dt_d_max=3.0)
+    x = _integrate(team, x, 1000)
+    events = []
+
+    def burst(t, out):
+        events.extend(out.events)
+        phi = np.zeros((4, 2))
+        if t < 11.5:  # for 1.5 s robot 3 slips: its actuators ignore the compensation
+            phi[2] = [0.6, 0.0] + out.phi_hat[2]
+        return phi
+
+    _integrate(team, x, 800, t0=10.0, fault=burst)
+    kinds = [e["kind"] for e in events]
+    assert {e["robot"] for e in events if e["kind"] == "detection"} == {2}
+    assert "exclusion_cancelled" in kinds and "exclusion" not in kinds
+    assert list(team.members) == [0, 1, 2, 3]
