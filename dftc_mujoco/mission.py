@@ -191,3 +191,59 @@ def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:
     vel = tan * sdot[:, None]
     vel.setflags(write=False)
     return PathTable(t, pos, vel)
+
+
+# --------------------------------------------------------------------------- re-planning
+
+
+def replan_polygon(old: np.ndarray, side: float, n_angles: int = 90) -> np.ndarray:
+    """A regular polygon with one vertex per row of ``old``, assigned to minimise travel.
+
+    ``old`` (M, 2) are the remaining robots' current formation offsets. The
+    new polygon keeps ``side``; its rotation (searched on a grid over one
+    symmetry period) and the robot-to-vertex assignment (Hungarian method)
+    minimise Σ‖newᵢ − oldᵢ‖². Every robot computes the same plan from the same
+    common knowledge (old offsets, who left), so the plan needs no messages.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    m = len(old)
+    base = polygon_offsets(m, side)
+    best_cost, best = np.inf, base
+    for ang in np.linspace(0.0, 2.0 * np.pi / max(m, 1), n_angles, endpoint=False):
+        c, s = np.cos(ang), np.sin(ang)
+        verts = base @ np.array([[c, s], [-s, c]])
+        cost = ((old[:, None, :] - verts[None, :, :]) ** 2).sum(axis=2)
+        rows, cols = linear_sum_assignment(cost)
+        total = cost[rows, cols].sum()
+        if total < best_cost:
+            best_cost, best = total, verts[cols]
+    return best
+
+
+@dataclass(frozen=True)
+class FormationPlan:
+    """Formation offsets moving from ``start`` to ``target`` over ``blend`` s from ``t0``.
+
+    The blend is the quintic 10τ³ − 15τ⁴ + 6τ⁵: offsets, their rate and
+    acceleration are continuous, so re-planning makes no command jump (NOTES 12).
+    """
+
+    start: np.ndarray  # (M, 2)
+    target: np.ndarray  # (M, 2)
+    t0: float = 0.0
+    blend: float = 0.0
+
+    @classmethod
+    def fixed(cls, offsets: np.ndarray) -> FormationPlan:
+        return cls(offsets, offsets)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Offsets (M, 2) and their time derivative at ``t``."""
+        if self.blend <= 0 or t >= self.t0 + self.blend:
+            return self.target, np.zeros_like(self.target)
+        tau = max(0.0, (t - self.t0) / self.blend)
+        s = tau**3 * (10 - 15 * tau + 6 * tau**2)
+        ds = 30 * tau**2 * (1 - tau) ** 2 / self.blend
+        delta = self.target - self.start
+        return self.start + s * delta, ds * delta

@@ -48,15 +48,20 @@ class Messages:
         self.src = np.array([j for j, _ in order], dtype=np.intp)
         dst = np.array([i for _, i in order], dtype=np.intp)
         self.in_degree = np.bincount(dst, minlength=n).astype(float)
-        if np.any(self.in_degree == 0):
-            raise ValueError("every robot needs at least one in-neighbour")
-        self.starts = np.searchsorted(dst, np.arange(n))
+        # robots that hear someone, and where their incoming edges start in src
+        self.rows = np.flatnonzero(self.in_degree > 0)
+        self.starts = np.searchsorted(dst, self.rows)
 
     def neighbour_sum(self, y_hat: np.ndarray) -> np.ndarray:
         """Σ_{j∈Nᵢ} (ʲŷ − ⁱŷ) for every robot i, shape (N, N, n)."""
-        received = np.add.reduceat(y_hat[self.src], self.starts, axis=0)
-        received -= self.in_degree[:, None, None] * y_hat
-        return received
+        out = -self.in_degree[:, None, None] * y_hat
+        if len(self.src):
+            received = np.add.reduceat(y_hat[self.src], self.starts, axis=0)
+            if len(self.rows) == len(out):
+                out += received
+            else:
+                out[self.rows] += received
+        return out
 
 
 def residual(state: ObserverState, messages: Messages, x_m: np.ndarray) -> np.ndarray:

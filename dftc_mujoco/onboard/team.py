@@ -3,17 +3,28 @@
 Row i of every array belongs to robot i and is computed from robot i's own
 measurement and inputs, the messages ʲŷ of its in-neighbours j (delivered by
 :class:`~dftc_mujoco.onboard.observer.Messages` along the graph's edges), its
-own obstacle sensing and the mission that every robot is given.
+own sensing of obstacles and the mission every robot is given.
+
+Robots are identified by their index in the original team (0-based). The
+*members* are those still in the team; collective vectors (ⁱŷ, ⁱx̂, ⁱr, the
+thresholds, the flags) are sized by the members and shrink at an exclusion
+(eqs. 42-43). The local fault estimator is a per-robot block and keeps
+running on every robot, member or not.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..graph import Graph
+from ..mission import FormationPlan, formation_offsets, replan_polygon
+from ..scenario import Formation
 from . import controller, observer
+from .fault_estimator import FaultEstimator
+from .fdir import Decision, Thresholds
 from .supervisor import Supervisor
 
 
@@ -24,54 +35,264 @@ class TeamConfig:
     graph: Graph
     kc: float
     ko: float
+    K: np.ndarray
+    G: np.ndarray
     theta: float
     dt: float  # control period
+    eta_bar: float
+    xi_bar: float
+    formation: Formation
     obstacle_position: np.ndarray  # (O, 2) what the robots' sensors report
     obstacle_safe: np.ndarray  # (O,) d of eq. 17
     obstacle_activation: np.ndarray  # (O,)
+    detection_window: float = 0.2
+    dt_d_max: float = 5.0
+    initial_error_bound: float = 1.0
+    replan_time: float = 4.0
+    excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)
+    excluded_activation: float = 0.45
+    phi_low_pass: float = 0.0
+    command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
+    fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
 
 
 @dataclass
 class TeamOutput:
-    """What one control period of the whole team produces (leading robot axis)."""
+    """One control period of the whole team, on the *original* robot axis (N).
 
-    u: np.ndarray  # (N, 2) nominal input uᵢ of eq. 8
-    u_bar: np.ndarray  # (N, 2) input sent to the actuators (eq. 28)
+    Entries of robots that are no longer members are NaN (or False / 0).
+    """
+
+    u: np.ndarray  # (N, 2) nominal input uᵢ of eq. 8 (0 once excluded)
+    u_bar: np.ndarray  # (N, 2) input sent to the actuators, ūᵢ = uᵢ − φ̂ᵢ (eq. 28)
+    phi_hat: np.ndarray  # (N, 2)
     x_hat: np.ndarray  # (N, N, 2) ⁱx̂ at this instant (before the update)
-    residual: np.ndarray  # (N, N, 2) ⁱr (eq. 35)
-    reactive: np.ndarray  # (N,) bool: robot on a reactive behaviour
+    x_d: np.ndarray  # (N, 2) desired positions of the members
+    residual: np.ndarray  # (N, N) ‖ⁱr_k‖ (eq. 35)
+    threshold: np.ndarray  # (N, N) ⁱμ_k (eq. 40)
+    flag: np.ndarray  # (N, N) robot i currently flags robot k
+    reactive: np.ndarray  # (N,) bool
+    avoiding: np.ndarray  # (N,) int: cylinder index, O + robot id for an excluded robot, or -1
+    active: np.ndarray  # (N,) bool: member of the team
+    events: list[dict[str, Any]] = field(default_factory=list)
 
 
 class Team:
-    """The team's onboard computers; :meth:`step` advances all of them by one period.
+    """The team's onboard computers; :meth:`step` advances all of them by one period."""
 
-    The observer state is updated in place (preallocated arrays); the outputs
-    of :meth:`step` are views into buffers that the next call overwrites.
-    """
-
-    def __init__(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+    def __init__(self, config: TeamConfig, x_m0: np.ndarray, centroid0: np.ndarray) -> None:
         n = config.graph.n
         self.config = config
         self.n = n
-        self.messages = observer.Messages(config.graph.edges, n)
-        self.state = observer.ObserverState.initial(x_m0, prior)
+        self.members = np.arange(n)
+        self.gone = np.zeros(0, dtype=int)  # robots excluded so far
+        self.graph = config.graph
+        offsets = formation_offsets(config.formation, n)
+        self.plan = FormationPlan.fixed(offsets)
+        self.messages = observer.Messages(self.graph.edges, n)
+        # every robot starts believing its teammates are at their planned slots
+        self.state = observer.ObserverState.initial(x_m0, prior=centroid0 + offsets)
         self.supervisor = Supervisor(n, config.theta)
-        self._x_hat = np.empty((n, n, 2))
-        self._u_hat_g = np.empty((n, n, 2))
+        self.estimator = FaultEstimator(
+            config.K,
+            config.G,
+            config.dt,
+            x_m0,
+            command_limit=config.command_limit,
+            low_pass=config.phi_low_pass,
+        )
+        self.thresholds = Thresholds(
+            self.graph,
+            config.ko,
+            config.eta_bar,
+            config.xi_bar,
+            np.full(n, config.initial_error_bound),
+        )
+        self.decision = Decision(n, config.detection_window, config.dt)
+        self.first_detection: dict[int, float] = {}  # robot id -> earliest flag by anyone
+        self.pending: dict[int, float] = {}  # robot id -> exclusion instant t_r (eq. 43)
+        self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
 
-    def step(self, x_m: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray) -> TeamOutput:
+    # ------------------------------------------------------------------ one period
+
+    def step(
+        self,
+        t: float,
+        x_m: np.ndarray,
+        c: np.ndarray,
+        c_dot: np.ndarray,
+        sensed_bodies: np.ndarray | None = None,
+    ) -> TeamOutput:
         """One control period for every robot.
 
-        ``x_m`` (N, 2): each robot's own noisy position; ``x_d``, ``xd_dot``
-        (N, 2): the desired positions and velocities J⁻¹σ_d, J⁻¹σ̇_d.
+        ``x_m`` (N, 2): each robot's own noisy position; ``c``, ``c_dot``: the
+        desired centroid and its velocity (σ₁,d, σ̇₁,d); ``sensed_bodies``
+        (N, 2): where each robot's range sensor sees every robot (used only
+        for robots that were excluded, which become obstacles).
         """
-        c = self.config
-        x_hat = self.state.estimate(out=self._x_hat)  # eq. 21
-        u_hat_g = controller.collective_input(x_hat, x_d, xd_dot, c.kc, out=self._u_hat_g)
+        cfg = self.config
+        events: list[dict[str, Any]] = []
+        self._exclusions_due(t, events)
+        mem = self.members
+        m = len(mem)
+
+        offsets, rates = self.plan.at(t)
+        x_d = c + offsets  # J⁻¹σ_d for the members
+        xd_dot = c_dot + rates
+        x_hat = self.state.estimate()  # eq. 21
+        u_hat_g = controller.collective_input(x_hat, x_d, xd_dot, cfg.kc)  # eq. 15
         u_g = controller.own_input(u_hat_g)  # eq. 16
-        u, delta_u = self.supervisor.step(
-            x_m, u_g, c.obstacle_position, c.obstacle_safe, c.obstacle_activation
-        )  # eqs. 8, 18, 22
-        r = observer.residual(self.state, self.messages, x_m)  # eq. 35
-        observer.update(self.state, r, u_hat_g, delta_u, u, c.ko, c.dt)  # eqs. 19-21
-        return TeamOutput(u=u, u_bar=u, x_hat=x_hat, residual=r, reactive=self.supervisor.reactive)
+        obs_p, obs_d, obs_a = self._obstacles(sensed_bodies)
+        u_mem, delta_u = self.supervisor.step(x_m[mem], u_g, obs_p, obs_d, obs_a)
+        r = observer.residual(self.state, self.messages, x_m[mem])  # eq. 35
+        observer.update(self.state, r, u_hat_g, delta_u, u_mem, cfg.ko, cfg.dt)
+
+        u = np.zeros((self.n, 2))
+        u[mem] = u_mem  # an excluded robot is told to stay where it is
+        r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
+        mu = self.thresholds.mu(t)
+        if cfg.fdir:
+            u_bar = self.estimator.step(x_m, u)  # eqs. 28-31, nominal u (NOTES 2)
+            raised = self.decision.update(r_norm, mu)
+            self._report(t, raised, events)
+        else:
+            u_bar = u
+
+        out = TeamOutput(
+            u=u,
+            u_bar=u_bar,
+            phi_hat=self.estimator.phi_hat.copy(),
+            x_hat=_expand(x_hat, mem, self.n, (2,)),
+            x_d=_expand(x_d, mem, self.n, (2,)),
+            residual=_expand(r_norm, mem, self.n),
+            threshold=_expand(mu, mem, self.n),
+            flag=_expand(self.decision.flag, mem, self.n, fill=False),
+            reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
+            avoiding=self._avoiding(),
+            active=_expand(np.ones(m, bool), mem, self.n, fill=False),
+            events=events,
+        )
+        return out
+
+    # ------------------------------------------------------------------ FDIR
+
+    def _report(self, t: float, raised: np.ndarray, events: list[dict[str, Any]]) -> None:
+        """Detection events for first flags; schedule exclusions (eq. 43)."""
+        for pi, pk in zip(*np.nonzero(raised), strict=True):
+            by, robot = int(self.members[pi]), int(self.members[pk])
+            if (by, robot) in self.detected:
+                continue
+            self.detected.add((by, robot))
+            events.append({"kind": "detection", "t": t, "by": by, "robot": robot})
+            if robot not in self.first_detection:
+                self.first_detection[robot] = t
+                self.pending[robot] = t + self.config.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
+                events.append(
+                    {
+                        "kind": "exclusion_scheduled",
+                        "t": t,
+                        "robot": robot,
+                        "t_r": t + self.config.dt_d_max,
+                    }
+                )
+
+    def _exclusions_due(self, t: float, events: list[dict[str, Any]]) -> None:
+        """At t_r, drop a robot that some teammate still flags (NOTES 10)."""
+        for robot, t_r in sorted(self.pending.items(), key=lambda kv: kv[1]):
+            if t + 1e-9 < t_r:
+                continue
+            del self.pending[robot]
+            self.first_detection.pop(robot, None)
+            p = int(np.flatnonzero(self.members == robot)[0])
+            flaggers = [int(self.members[i]) for i in np.flatnonzero(self.decision.flag[:, p])]
+            detectors = sorted(by for by, k in self.detected if k == robot)
+            if not flaggers:
+                events.append(
+                    {
+                        "kind": "exclusion_cancelled",
+                        "t": t,
+                        "robot": robot,
+                        "detected_by": detectors,
+                    }
+                )
+                self.detected = {(b, k) for b, k in self.detected if k != robot}
+                continue
+            self._exclude(t, p)
+            events.append(
+                {
+                    "kind": "exclusion",
+                    "t": t,
+                    "robot": robot,
+                    "flagged_by": flaggers,
+                    "detected_by": detectors,
+                }
+            )
+            if not self.graph.is_strongly_connected():
+                events.append(
+                    {
+                        "kind": "graph_not_strongly_connected",
+                        "t": t,
+                        "robots": [int(k) for k in self.members],
+                    }
+                )
+
+    def _exclude(self, t: float, p: int) -> None:
+        """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
+        keep = np.delete(np.arange(len(self.members)), p)
+        bound = self.thresholds.bracket(t)[keep]  # ‖ỹ*_k(t_r)‖ for the remaining k
+        old_offsets, _ = self.plan.at(t)
+        self.gone = np.append(self.gone, self.members[p])
+        self.members = self.members[keep]
+        self.graph = self.graph.without(p)
+        s = self.state
+        s.y_hat = s.y_hat[np.ix_(keep, keep)]
+        s.int_u_hat = s.int_u_hat[np.ix_(keep, keep)]
+        s.int_u_own = s.int_u_own[keep]
+        self.messages = observer.Messages(self.graph.edges, len(keep))
+        self.supervisor.active = self.supervisor.active[keep]
+        self.supervisor.n_robots = len(keep)
+        self.decision.drop(p)
+        cfg = self.config
+        self.thresholds = Thresholds(self.graph, cfg.ko, cfg.eta_bar, cfg.xi_bar, bound, t0=t)
+        target = replan_polygon(old_offsets[keep], cfg.formation.side)
+        self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+
+    def _avoiding(self) -> np.ndarray:
+        """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
+        n_cyl = len(self.config.obstacle_position)
+        gone = self.gone
+        act = self.supervisor.active
+        label = np.where(
+            act >= n_cyl, n_cyl + gone[np.clip(act - n_cyl, 0, None)] if len(gone) else act, act
+        )
+        out = np.full(self.n, -1)
+        out[self.members] = label
+        return out
+
+    def _obstacles(self, sensed: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        cfg = self.config
+        gone = self.gone
+        if sensed is None or len(gone) == 0:
+            return cfg.obstacle_position, cfg.obstacle_safe, cfg.obstacle_activation
+        return (
+            np.vstack([cfg.obstacle_position, sensed[gone]]),
+            np.concatenate([cfg.obstacle_safe, np.full(len(gone), cfg.excluded_safe)]),
+            np.concatenate([cfg.obstacle_activation, np.full(len(gone), cfg.excluded_activation)]),
+        )
+
+
+def _expand(
+    a: np.ndarray, members: np.ndarray, n: int, tail: tuple[int, ...] = (), fill: Any = np.nan
+) -> np.ndarray:
+    """Place a members-indexed array on the original robot axis (and axes)."""
+    m = len(members)
+    if len(members) == n:
+        return a.copy()
+    dtype = bool if fill is False else float
+    if a.ndim - len(tail) == 1:
+        out = np.full((n, *a.shape[1:]), fill, dtype=dtype)
+        out[members] = a
+    else:
+        out = np.full((n, n, *a.shape[2:]), fill, dtype=dtype)
+        out[np.ix_(members, members)] = a.reshape(m, m, *a.shape[2:])
+    return out
