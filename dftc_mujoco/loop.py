@@ -43,18 +43,36 @@ class RunResult:
         return self.error is None
 
 
-def team_config(s: Scenario) -> TeamConfig:
-    """The onboard configuration a scenario gives every robot."""
+def team_config(s: Scenario, command_limit: float = np.inf) -> TeamConfig:
+    """The onboard configuration a scenario gives every robot.
+
+    ``command_limit`` is the per-axis planar command range of the robot model.
+    """
     obs = s.obstacles
+    f = s.fdir
     return TeamConfig(
         graph=s.team.graph,
         kc=s.gains.kc,
         ko=s.gains.ko,
+        K=np.asarray(s.gains.K),
+        G=np.asarray(s.gains.G),
         theta=s.gains.theta,
         dt=s.physics.control_period,
+        eta_bar=s.noise.eta_bar,
+        xi_bar=s.noise.xi_bar,
+        formation=s.mission.formation,
         obstacle_position=np.array([o.position for o in obs]).reshape(-1, 2),
         obstacle_safe=np.array([o.safe_distance for o in obs]),
         obstacle_activation=np.array([o.activation_distance for o in obs]),
+        detection_window=f.detection_window,
+        dt_d_max=f.dt_d_max,
+        initial_error_bound=f.initial_error_bound,
+        replan_time=f.replan_time,
+        excluded_safe=f.excluded_safe_distance,
+        excluded_activation=f.excluded_activation_distance,
+        phi_low_pass=f.phi_low_pass,
+        command_limit=command_limit,
+        fdir=f.enabled,
     )
 
 
@@ -62,12 +80,10 @@ def simulate(
     s: Scenario,
     *,
     progress: bool = False,
-    noise_at_bound: bool = False,
     hook: Callable[[float, Plant], None] | None = None,
 ) -> RunResult:
     """Run scenario ``s`` on MuJoCo physics and return its records.
 
-    ``noise_at_bound`` draws η and ξ with norms exactly at η̄ and ξ̄.
     ``hook(t, plant)``, if given, is called after every control period with
     the plant (for instrumentation or to perturb the physics).
     Physics trouble does not raise: the result carries the error and the log
@@ -79,7 +95,7 @@ def simulate(
     adapter = model.adapter()
     rng = np.random.default_rng(s.seed)
     dt = s.physics.control_period
-    plant = Plant(sc, s.noise, dt, rng, noise_at_bound=noise_at_bound)
+    plant = Plant(sc, s.noise, dt, rng)
     actuator_faults = sim_faults.ActuatorFaults(sc.model, s.faults, sc.actuator, adapter)
 
     n = s.team.robots
@@ -89,9 +105,16 @@ def simulate(
     events = Events()
 
     path = mission.centroid_table(s.mission.centroid, s.duration, dt)
-    offsets = mission.formation_offsets(s.mission.formation, n)
-    x_d = path.position[0] + offsets
-    team = Team(team_config(s), plant.measure(), prior=x_d)
+    limited = sc.model.actuator_ctrllimited[sc.actuator].all()
+    limit = float(np.abs(sc.model.actuator_ctrlrange[sc.actuator]).min()) if limited else np.inf
+    team = Team(team_config(s, limit), plant.measure(), path.position[0])
+    fault_start = np.full(n, np.inf)  # ground truth, for the margin only
+    bias_only = np.ones(n, bool)
+    for f in s.faults:
+        fault_start[f.robot] = min(fault_start[f.robot], f.t)
+        bias_only[f.robot] &= f.kind == "bias"
+    margin = {"healthy": 0.0, "compensated": 0.0}
+    settle = 5.0
 
     obs_pos = team.config.obstacle_position
     obs_gap = np.array([o.radius for o in s.obstacles]) + model.footprint_radius
@@ -101,7 +124,6 @@ def simulate(
     reactive_prev = np.zeros(n, bool)
     reactive_on = np.zeros(n)
     reactive_spans: list[dict[str, Any]] = []
-    active = np.ones(n, bool)
     nsub = s.physics.substeps
     error: SimulationError | None = None
 
@@ -117,9 +139,23 @@ def simulate(
             x = plant.positions()
             x_m = plant.measure()
             c, c_dot = path.at(k)
-            x_d = c + offsets
-            out = team.step(x_m, x_d, np.broadcast_to(c_dot, x_d.shape))
+            out = team.step(t, x_m, c, c_dot, sensed_bodies=x)
             ctrl = adapter.command(out.u_bar)
+            for e in out.events:
+                events.add(t, e.pop("kind"), **{k_: v for k_, v in e.items() if k_ != "t"})
+            if s.fdir.enabled:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    ratio = out.residual / out.threshold
+                healthy = fault_start > t
+                if healthy.any():
+                    margin["healthy"] = max(
+                        margin["healthy"], float(np.nanmax(ratio[:, healthy], initial=0.0))
+                    )
+                settled = bias_only & (fault_start + settle <= t)
+                if settled.any():
+                    margin["compensated"] = max(
+                        margin["compensated"], float(np.nanmax(ratio[:, settled], initial=0.0))
+                    )
 
             if len(obs_pos):
                 dist = np.linalg.norm(x[:, None, :] - obs_pos[None], axis=2)
@@ -130,23 +166,31 @@ def simulate(
                 for i in np.flatnonzero(switched):
                     if out.reactive[i]:
                         reactive_on[i] = t
-                        events.add(t, "reactive_on", robot=int(i))
+                        events.add(
+                            t,
+                            "reactive_on",
+                            robot=int(i),
+                            obstacle=_obstacle_label(int(out.avoiding[i]), len(obs_pos)),
+                        )
                     else:
                         reactive_spans.append({"robot": int(i), "t_on": reactive_on[i], "t_off": t})
                         events.add(t, "reactive_off", robot=int(i))
                 reactive_prev = out.reactive.copy()
 
             if k % log_every == 0:
-                err = mission.task_map(x) - mission.task_map(x_d)
+                act = out.active
+                err = mission.task_map(x[act]) - mission.task_map(out.x_d[act])
                 log.sample(
                     t=t,
                     x=x,
                     x_hat=out.x_hat,
                     u=out.u,
                     phi=actuator_faults.phi(t, ctrl),
-                    residual=np.linalg.norm(out.residual, axis=2),
+                    phi_hat=out.phi_hat if s.fdir.enabled else np.nan,
+                    residual=out.residual,
+                    threshold=out.threshold if s.fdir.enabled else np.nan,
                     reactive=out.reactive,
-                    active=active,
+                    active=act,
                     sigma_err=(np.linalg.norm(err[0]), np.linalg.norm(err[1:])),
                 )
             if k == steps:
@@ -171,7 +215,50 @@ def simulate(
         s, arrays, events, reactive_spans, wall, min_gap, min_margin, error, plant.time
     )
     summary["build_time"] = build_time
+    if s.fdir.enabled:
+        summary["margin"] = margin["healthy"]
+        summary["margin_compensated"] = (
+            margin["compensated"] if bias_only[np.isfinite(fault_start)].any() else None
+        )
+        summary["fault_estimates"] = _fault_estimates(s, arrays, events, settle)
     return RunResult(s, arrays, events, summary, error)
+
+
+def _fault_estimates(
+    s: Scenario, log: dict[str, np.ndarray], events: Events, settle: float
+) -> list[dict[str, Any]]:
+    """Error of φ̂ against the injected φ per bias fault, from t_f + settle to the next event."""
+    t = log["t"]
+    marks = sorted(
+        {e["t"] for e in events.items if e["kind"] in ("fault", "exclusion", "simulation_error")}
+    )
+    rows = []
+    for f in s.faults:
+        if f.kind != "bias":
+            continue
+        start = f.t + settle
+        end = min([m for m in marks if m > f.t] + [t[-1] + 1e-9 if len(t) else start])
+        win = (t >= start) & (t < end)
+        if win.sum() < 2:
+            continue
+        err = log["phi_hat"][win, f.robot] - log["phi"][win, f.robot]
+        rows.append(
+            {
+                "robot": f.robot + 1,
+                "t": f.t,
+                "window": [start, float(t[win][-1])],
+                "mean_error": np.abs(err.mean(axis=0)).tolist(),
+                "rms_error": np.sqrt((err**2).mean(axis=0)).tolist(),
+            }
+        )
+    return rows
+
+
+def _obstacle_label(index: int, n_cylinders: int) -> str:
+    """'cylinder k' or 'robot k' (1-based) for what a robot's supervisor avoids."""
+    if index < n_cylinders:
+        return f"cylinder {index + 1}"
+    return f"robot {index - n_cylinders + 1}"
 
 
 def _rms(a: np.ndarray) -> float | None:
@@ -235,6 +322,12 @@ def _summary(
             "final_centroid": _finite_or_none(last[0]),
             "final_formation": _finite_or_none(last[1]),
         },
+        "warnings": [
+            f"t = {e['t']:g} s: after an exclusion the graph of robots "
+            f"{', '.join(str(r + 1) for r in e['robots'])} is not strongly connected; "
+            "some estimates and thresholds are no longer bounded"
+            for e in events.of_kind("graph_not_strongly_connected")
+        ],
         "min_obstacle_clearance": _finite_or_none(min_gap),
         "min_safe_distance_margin": _finite_or_none(min_margin),
     }

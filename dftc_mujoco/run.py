@@ -48,19 +48,30 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _fmt_event(e: dict, obstacles: int) -> str:
+def _fmt_event(e: dict) -> str:
     k = e["kind"]
     r = e.get("robot", -1) + 1
     if k == "fault":
         return f"fault: {e['fault']} on robot {r}"
     if k == "reactive_on":
-        return f"robot {r} switches to obstacle avoidance"
+        return f"robot {r} switches to obstacle avoidance ({e.get('obstacle', '?')})"
     if k == "reactive_off":
         return f"robot {r} back to the global mission"
     if k == "detection":
         return f"robot {e['by'] + 1} flags robot {r}"
+    if k == "exclusion_scheduled":
+        return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
     if k == "exclusion":
-        return f"robot {r} excluded from the team"
+        by = ", ".join(str(b + 1) for b in e["flagged_by"])
+        return f"robot {r} excluded from the team (still flagged by {by})"
+    if k == "exclusion_cancelled":
+        return f"robot {r} kept: nobody flags it any more at t_r"
+    if k == "graph_not_strongly_connected":
+        left = ", ".join(str(b + 1) for b in e["robots"])
+        return (
+            f"WARNING: the graph of robots {left} is not strongly connected: "
+            "estimates and thresholds of some robots are no longer bounded"
+        )
     if k == "simulation_error":
         return f"SIMULATION ERROR: {e['message']}"
     return f"{k} {e}"
@@ -77,7 +88,7 @@ def report(result: RunResult, out: Path) -> str:
         "   t [s]  event",
     ]
     for e in result.events.ordered():
-        lines.append(f"{e['t']:8.2f}  {_fmt_event(e, len(result.scenario.obstacles))}")
+        lines.append(f"{e['t']:8.2f}  {_fmt_event(e)}")
     err = s["errors"]
 
     def m(v: float | None) -> str:
@@ -93,6 +104,14 @@ def report(result: RunResult, out: Path) -> str:
         lines.append(
             f"closest approach to a cylinder: {s['min_obstacle_clearance']:.4f} m surface gap, "
             f"{s['min_safe_distance_margin']:+.4f} m from its safe distance d"
+        )
+    if s.get("margin") is not None:
+        lines.append(f"largest residual / threshold on robots without a fault: {s['margin']:.3f}")
+    for f in s.get("fault_estimates", []):
+        mean = ", ".join(f"{v:.4f}" for v in f["mean_error"])
+        lines.append(
+            f"fault estimate on robot {f['robot']} (from {f['window'][0]:g} s): "
+            f"mean error [{mean}] m/s"
         )
     lines.append(f"records: {out / 'summary.json'}, {out / 'log.npz'}")
     return "\n".join(lines)

@@ -74,6 +74,7 @@ class Noise:
     eta_bar: float
     xi_bar: float
     xi_time_constant: float = 0.5
+    at_bound: bool = False  # draw η and ξ with norms exactly at η̄ and ξ̄
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,11 +129,20 @@ class Fault:
 
 @dataclass(frozen=True)
 class Fdir:
-    """Fault detection, isolation and recovery settings (eqs. 39-43)."""
+    """Fault detection, isolation and recovery settings (eqs. 39-43).
+
+    ``enabled = false`` runs the nominal DFTC only (no compensation, no
+    decisions), to compare against.
+    """
 
     detection_window: float = 0.2
     dt_d_max: float = 5.0
     initial_error_bound: float = 1.0
+    replan_time: float = 4.0
+    excluded_safe_distance: float = 0.35
+    excluded_activation_distance: float = 0.45
+    phi_low_pass: float = 0.0
+    enabled: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -489,6 +499,7 @@ def _noise(t: _Table) -> Noise:
         eta_bar=t.number("eta_bar", low=0.0, strict_low=False),
         xi_bar=t.number("xi_bar", low=0.0, strict_low=False),
         xi_time_constant=t.number("xi_time_constant", 0.5, low=0.0),
+        at_bound=t.boolean("at_bound", False),
     )
     t.finish()
     return n
@@ -554,10 +565,18 @@ def _fault(t: _Table, n: int, duration: float) -> Fault:
 
 
 def _fdir(t: _Table) -> Fdir:
+    safe = t.number("excluded_safe_distance", 0.35, low=0.0)
     f = Fdir(
         detection_window=t.number("detection_window", 0.2, low=0.0, strict_low=False),
         dt_d_max=t.number("dt_d_max", 5.0, low=0.0),
         initial_error_bound=t.number("initial_error_bound", 1.0, low=0.0, strict_low=False),
+        replan_time=t.number("replan_time", 4.0, low=0.0, strict_low=False),
+        excluded_safe_distance=safe,
+        excluded_activation_distance=t.number(
+            "excluded_activation_distance", safe + 0.1, low=safe, strict_low=False
+        ),
+        phi_low_pass=t.number("phi_low_pass", 0.0, low=0.0, strict_low=False),
+        enabled=t.boolean("enabled", True),
     )
     t.finish()
     return f

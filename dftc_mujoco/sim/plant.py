@@ -30,7 +30,7 @@ class Plant:
     ξ is a low-pass filtered random planar velocity, bounded by ξ̄ by
     construction (a convex combination of points in the disk), applied as the
     force kv·ξ on each robot's base so that a holonomic robot's velocity is
-    shifted by ξ; with ``noise_at_bound`` both η and ξ have norm exactly at their bounds.
+    shifted by ξ; with ``noise.at_bound`` both η and ξ have norms exactly at their bounds.
     """
 
     def __init__(
@@ -39,14 +39,13 @@ class Plant:
         noise: Noise,
         control_period: float,
         rng: np.random.Generator,
-        noise_at_bound: bool = False,
     ) -> None:
         self.scene = scene
         self.model = scene.model
         self.data = mujoco.MjData(self.model)
         self.noise = noise
         self.rng = rng
-        self.at_bound = noise_at_bound
+        self.at_bound = noise.at_bound
         self.n = len(scene.body)
         self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
         self._xi_state = _disk_sample(rng, self.n, noise.xi_bar, False)
