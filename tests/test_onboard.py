@@ -10,6 +10,7 @@ from dftc_mujoco.mission import polygon_offsets
 from dftc_mujoco.onboard import observer
 from dftc_mujoco.onboard.supervisor import Supervisor
 from dftc_mujoco.onboard.team import Team, TeamConfig
+from dftc_mujoco.scenario import Formation
 from tests.conftest import ring_with_chords
 
 PAPER_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1))
@@ -21,64 +22,76 @@ def _graph(n: int) -> Graph:
     return Graph(n, tuple((a - 1, b - 1) for a, b in ring_with_chords(n)))
 
 
-def _team(n: int, obstacles: bool = False) -> tuple[Team, np.ndarray]:
+def _team(n: int, obstacles: bool = False, **changes) -> tuple[Team, np.ndarray]:
     rng = np.random.default_rng(n)
     offsets = polygon_offsets(n, 0.5)
     pos = np.array([[0.0, 0.6]]) if obstacles else np.zeros((0, 2))
-    cfg = TeamConfig(
-        _graph(n),
+    settings = dict(
+        graph=_graph(n),
         kc=4.0,
         ko=6.0,
+        K=3.0 * np.eye(2),
+        G=0.01 * np.eye(2),
         theta=3.0,
         dt=0.01,
+        eta_bar=0.001,
+        xi_bar=0.005,
+        formation=Formation("polygon", 0.5),
         obstacle_position=pos,
         obstacle_safe=np.full(len(pos), 0.37),
         obstacle_activation=np.full(len(pos), 0.45),
     )
+    settings.update(changes)
     x = offsets + rng.normal(scale=0.1, size=offsets.shape)
-    return Team(cfg, x, prior=offsets), x
+    return Team(TeamConfig(**settings), x, np.zeros(2)), x
 
 
-def _integrate(team: Team, x: np.ndarray, steps: int, velocity=(0.1, 0.0)):
-    """Closed loop with an ideal integrator plant ẋ = u (eq. 1 with φ = ξ = 0)."""
-    offsets = polygon_offsets(team.n, 0.5)
+def _integrate(
+    team: Team, x: np.ndarray, steps: int, velocity=(0.1, 0.0), t0: float = 0.0, fault=None
+):
+    """Closed loop with an ideal integrator plant ẋ = ū + φ (eq. 1 with ξ = η = 0)."""
     v = np.array(velocity)
     for k in range(steps):
-        t = k * team.config.dt
-        out = team.step(x.copy(), offsets + v * t, np.broadcast_to(v, x.shape))
-        x = x + team.config.dt * out.u_bar
+        t = t0 + k * team.config.dt
+        out = team.step(t, x.copy(), v * t, v)
+        phi = fault(t, out) if fault else 0.0
+        x = x + team.config.dt * (out.u_bar + phi)
     return x
 
 
 @pytest.mark.parametrize("n", [4, 12])
 def test_update_of_robot_i_ignores_non_neighbours(n):
+    """Robot i's command, residual, thresholds, flags and next state use only its own
+    data and its in-neighbours' messages: changing anything else leaves them bit-identical."""
     team, x = _team(n)
     x = _integrate(team, x, 50)
     graph = team.config.graph
-    x_d = polygon_offsets(n, 0.5) + np.array([0.5, 0.0])
-    v = np.broadcast_to([0.1, 0.0], x.shape)
+    c, v = np.array([0.5, 0.0]), np.array([0.1, 0.0])
+
+    def robot_view(tm, out, i):
+        return (
+            out.u_bar[i],
+            out.phi_hat[i],
+            out.residual[i],
+            out.threshold[i],
+            out.flag[i],
+            tm.state.y_hat[i],
+            tm.state.int_u_hat[i],
+            tm.state.int_u_own[i],
+        )
+
     for i in range(n):
         heard = set(graph.in_neighbours(i)) | {i}
         base = copy.deepcopy(team)
-        out = base.step(x.copy(), x_d, v)
-        ref = (
-            out.u.copy(),
-            out.residual[i].copy(),
-            base.state.y_hat[i].copy(),
-            base.state.int_u_hat[i].copy(),
-        )
+        ref = [a.copy() for a in robot_view(base, base.step(0.5, x.copy(), c, v), i)]
         for k in range(n):
             other = copy.deepcopy(team)
             other.state.y_hat[k] += 0.37  # robot k broadcasts a different ŷ
             x_m = x.copy()
             if k != i:
                 x_m[k] += 0.21  # and measures something else
-            o = other.step(x_m, x_d, v)
-            got = (o.u, o.residual[i], other.state.y_hat[i], other.state.int_u_hat[i])
-            same = all(
-                np.array_equal(a[i] if j == 0 else a, b[i] if j == 0 else b)
-                for j, (a, b) in enumerate(zip(ref, got, strict=True))
-            )
+            got = robot_view(other, other.step(0.5, x_m, c, v), i)
+            same = all(np.array_equal(a, b) for a, b in zip(ref, got, strict=True))
             if k in heard:
                 assert not same, f"robot {i + 1} must react to robot {k + 1}'s message"
             else:
@@ -107,11 +120,10 @@ def test_observer_and_formation_converge_on_an_ideal_plant(n):
 def test_reactive_input_does_not_disturb_the_estimates():
     """Remark 4.1: with Δuᵢ in the observer, reactive inputs are not mistaken for faults."""
     team2, x2 = _team(4, obstacles=True)
-    offsets = polygon_offsets(4, 0.5)
     any_reactive = False
+    v = np.array([0.0, 0.1])
     for k in range(1200):
-        v = np.array([0.0, 0.1])
-        out = team2.step(x2.copy(), offsets + v * k * 0.01, np.broadcast_to(v, x2.shape))
+        out = team2.step(k * 0.01, x2.copy(), v * k * 0.01, v)
         any_reactive |= out.reactive.any()
         x2 = x2 + 0.01 * out.u_bar
     assert any_reactive
