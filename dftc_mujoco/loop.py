@@ -101,7 +101,8 @@ def simulate(
     n = s.team.robots
     steps = round(s.duration / dt)
     log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
-    log = Log(steps // log_every + 1, n)
+    obstacles = np.array([[*o.position, o.radius, o.safe_distance] for o in s.obstacles])
+    log = Log(steps // log_every + 1, n, obstacles=obstacles.reshape(-1, 4))
     events = Events()
 
     path = mission.centroid_table(s.mission.centroid, s.duration, dt)
@@ -192,6 +193,9 @@ def simulate(
                     reactive=out.reactive,
                     active=act,
                     sigma_err=(np.linalg.norm(err[0]), np.linalg.norm(err[1:])),
+                    x_d=out.x_d,
+                    c_d=c,
+                    flagged=out.flagged,
                 )
             if k == steps:
                 break

@@ -28,7 +28,12 @@ LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
     "reactive": ("N", np.bool_, False),
     "active": ("N", np.bool_, False),
     "sigma_err": ("2", np.float64, np.nan),
+    "x_d": ("N2", np.float64, np.nan),
+    "c_d": ("2", np.float64, np.nan),
+    "flagged": ("N", np.bool_, False),
 }
+# arrays without a time axis stored beside them in log.npz
+STATIC_FIELDS = ("obstacles",)  # (O, 4): x, y, radius, safe distance d
 
 
 def _shape(code: str, n: int) -> tuple[int, ...]:
@@ -38,9 +43,10 @@ def _shape(code: str, n: int) -> tuple[int, ...]:
 class Log:
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part."""
 
-    def __init__(self, n_samples: int, n_robots: int) -> None:
+    def __init__(self, n_samples: int, n_robots: int, **static: np.ndarray) -> None:
         self.n = n_robots
         self.size = 0
+        self.static = static
         self.data = {
             name: np.full((n_samples, *_shape(code, n_robots)), fill, dtype=dtype)
             for name, (code, dtype, fill) in LOG_FIELDS.items()
@@ -54,8 +60,8 @@ class Log:
         self.size += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The samples taken so far, by field name."""
-        return {name: a[: self.size] for name, a in self.data.items()}
+        """The samples taken so far, by field name, plus the static arrays."""
+        return {**{name: a[: self.size] for name, a in self.data.items()}, **self.static}
 
 
 @dataclass

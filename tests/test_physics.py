@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import loop, run, scenario
-from dftc_mujoco.record import LOG_FIELDS
+from dftc_mujoco.record import LOG_FIELDS, STATIC_FIELDS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
@@ -220,7 +220,8 @@ def test_cli_writes_the_output_contract(tmp_path, capsys):
         "final_formation",
     }
     log = np.load(tmp_path / "log.npz")
-    assert set(log.files) == set(LOG_FIELDS)
+    assert set(log.files) == set(LOG_FIELDS) | set(STATIC_FIELDS)
+    assert log["obstacles"].shape == (2, 4)
     n_t = len(log["t"])
     assert n_t == 21 * 50 + 1  # default 50 Hz
     shapes = {
@@ -234,6 +235,9 @@ def test_cli_writes_the_output_contract(tmp_path, capsys):
         "reactive": (n_t, 4),
         "active": (n_t, 4),
         "sigma_err": (n_t, 2),
+        "x_d": (n_t, 4, 2),
+        "c_d": (n_t, 2),
+        "flagged": (n_t, 4),
     }
     for name, shape in shapes.items():
         assert log[name].shape == shape, name

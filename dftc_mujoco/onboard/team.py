@@ -71,6 +71,7 @@ class TeamOutput:
     residual: np.ndarray  # (N, N) ‖ⁱr_k‖ (eq. 35)
     threshold: np.ndarray  # (N, N) ⁱμ_k (eq. 40)
     flag: np.ndarray  # (N, N) robot i currently flags robot k
+    flagged: np.ndarray  # (N,) bool: some teammate (i ≠ k) currently flags robot k
     reactive: np.ndarray  # (N,) bool
     avoiding: np.ndarray  # (N,) int: cylinder index, O + robot id for an excluded robot, or -1
     active: np.ndarray  # (N,) bool: member of the team
@@ -167,6 +168,9 @@ class Team:
             residual=_expand(r_norm, mem, self.n),
             threshold=_expand(mu, mem, self.n),
             flag=_expand(self.decision.flag, mem, self.n, fill=False),
+            flagged=_expand(
+                (self.decision.flag & ~np.eye(m, dtype=bool)).any(axis=0), mem, self.n, fill=False
+            ),
             reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
             avoiding=self._avoiding(),
             active=_expand(np.ones(m, bool), mem, self.n, fill=False),

@@ -27,6 +27,7 @@ class Scene:
     site: np.ndarray  # (N,) position site of each robot
     actuator: np.ndarray  # (N, A) actuator ids, in the adapter's order
     obstacle_geom: np.ndarray  # (O,) geom ids of the cylinders
+    joint_qpos: np.ndarray  # (N, 2) qpos addresses of each robot's x and y slide joints
 
 
 def robot_prefix(i: int) -> str:
@@ -70,4 +71,10 @@ def build(scenario: Scenario, robot: RobotModel) -> Scene:
     obs = np.array(
         [model.geom(f"obstacle{k + 1}").id for k in range(len(scenario.obstacles))], dtype=int
     )
-    return Scene(model, robot, body, site, act, obs)
+    qpos = np.array(
+        [
+            [model.jnt_qposadr[model.joint(robot_prefix(i) + j).id] for j in ("x", "y")]
+            for i in range(n)
+        ]
+    )
+    return Scene(model, robot, body, site, act, obs, qpos)
