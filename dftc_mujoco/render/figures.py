@@ -1,0 +1,223 @@
+"""The paper's figures (Figs. 3-10) for any run, drawn from ``log.npz`` and ``summary.json``.
+
+Each figure adapts to N and to the run's fault times: the snapshots of Fig. 3
+are taken at the paper's fractions of the duration (22.8, 38 and 53.2 s of
+60 s), Fig. 4 shows every robot with a bias fault (or every robot's φ̂ when
+there is none), and the residual grid shows at most six rows and columns,
+faulty robots first.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
+MAX_GRID = 6
+FIGURES = ("fig3_paths", "fig4_fault_estimate", "fig5_8_residuals", "fig9_errors", "fig10_inputs")
+
+
+def _faulty(summary: dict[str, Any]) -> dict[int, list[dict[str, Any]]]:
+    out: dict[int, list[dict[str, Any]]] = {}
+    for f in summary.get("faults", []):
+        out.setdefault(f["robot"] - 1, []).append(f)
+    return out
+
+
+def _mark_events(ax, summary: dict[str, Any], robot: int | None = None) -> None:
+    """Vertical lines at fault instants (grey) and exclusions (black), optionally of one robot."""
+    for f in summary.get("faults", []):
+        if robot is None or f["robot"] - 1 == robot:
+            ax.axvline(f["t"], color="0.6", lw=0.8, ls=":")
+    for e in summary.get("exclusions", []):
+        if robot is None or e["robot"] - 1 == robot:
+            ax.axvline(e["t"], color="k", lw=0.9, ls="--")
+
+
+def fig_paths(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """Fig. 3: paths, desired centroid path, snapshots, initial and final configurations."""
+    t, x = log["t"], log["x"]
+    faulty = _faulty(summary)
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for ox, oy, r, d in log["obstacles"]:
+        ax.add_patch(plt.Circle((ox, oy), r, color="0.55"))
+        ax.add_patch(plt.Circle((ox, oy), d, fill=False, ls="--", color="0.55", lw=0.8))
+    ax.plot(log["c_d"][:, 0], log["c_d"][:, 1], "b--", lw=1.2, label="desired centroid")
+    for i in range(x.shape[1]):
+        colour = "tab:red" if i in faulty else "tab:green"
+        ax.plot(
+            x[:, i, 0],
+            x[:, i, 1],
+            ls="--",
+            color=colour,
+            lw=1.0,
+            label=(
+                "faulty robots"
+                if i == min(faulty, default=-1)
+                else "healthy robots"
+                if i == min(set(range(x.shape[1])) - set(faulty), default=-1)
+                else None
+            ),
+        )
+        ax.annotate(str(i + 1), x[0, i], textcoords="offset points", xytext=(4, 4), fontsize=8)
+    duration = t[-1]
+    for frac in SNAPSHOT_FRACTIONS:
+        k = int(np.searchsorted(t, frac * duration))
+        if k >= len(t):
+            continue
+        act = log["active"][k]
+        pts = x[k][act]
+        ax.plot(*np.vstack([pts, pts[:1]]).T, "k-", lw=0.8)
+        ax.plot(pts[:, 0], pts[:, 1], "ko", mfc="none", ms=8)
+        ax.annotate(f"{t[k]:.1f} s", pts.mean(axis=0), fontsize=8, ha="center")
+    ax.plot(x[0, :, 0], x[0, :, 1], "kx", ms=7, label="initial")
+    ax.plot(x[-1, :, 0], x[-1, :, 1], "kD", ms=5, mfc="none", label="final")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Paths (paper Fig. 3)")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """Fig. 4: φ and φ̂ of every robot with a bias fault (components x and y)."""
+    t = log["t"]
+    biased = sorted({f["robot"] - 1 for f in summary.get("faults", []) if f["kind"] == "bias"})
+    robots = biased or list(range(log["x"].shape[1]))
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True, squeeze=False)
+    for c, name in enumerate("xy"):
+        ax = axes[c, 0]
+        for i in robots:
+            ax.plot(t, log["phi_hat"][:, i, c], lw=0.6, label=f"φ̂{i + 1},{name}")
+            if biased:
+                ax.plot(t, log["phi"][:, i, c], "k--", lw=1.2, label=f"φ{i + 1},{name}")
+        ax.set_ylabel(f"{name} [m/s]")
+        ax.legend(fontsize=7, loc="upper left", ncol=2)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("t [s]")
+    title = (
+        "Fault and its estimate (paper Fig. 4)"
+        if biased
+        else "Fault estimates φ̂ (no bias fault in this run: noise level)"
+    )
+    axes[0, 0].set_title(title)
+    return fig
+
+
+def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """Figs. 5-8: ‖ⁱr_k‖ and ⁱμ_k, rows i (observer), columns k (monitored robot)."""
+    t, r, mu = log["t"], log["residual"], log["threshold"]
+    n = r.shape[1]
+    faulty = sorted(_faulty(summary))
+    cols = (faulty + [k for k in range(n) if k not in faulty])[:MAX_GRID]
+    rows = list(range(n))[:MAX_GRID]
+    fig, axes = plt.subplots(
+        len(rows), len(cols), figsize=(2.6 * len(cols), 1.9 * len(rows)), sharex=True, squeeze=False
+    )
+    for a, i in enumerate(rows):
+        for b, k in enumerate(cols):
+            ax = axes[a, b]
+            ax.semilogy(t, r[:, i, k], "b-", lw=0.7)
+            ax.semilogy(t, mu[:, i, k], "g--", lw=0.9)
+            _mark_events(ax, summary, robot=k)
+            for d in summary.get("detections", []):
+                if d["by"] - 1 == i and d["robot"] - 1 == k:
+                    ax.axvline(d["t"], color="r", lw=1.0)
+            if a == 0:
+                ax.set_title(f"k = {k + 1}", fontsize=9)
+            if b == 0:
+                ax.set_ylabel(f"i = {i + 1}", fontsize=9)
+            ax.tick_params(labelsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]", fontsize=8)
+    fig.suptitle(
+        "‖ⁱr_k‖ (blue) and ⁱμ_k (green dashed); detection (red), fault (grey), "
+        "exclusion (black) — paper Figs. 5-8",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    return fig
+
+
+def estimation_error(log: dict[str, np.ndarray]) -> np.ndarray:
+    """‖x̃*‖ over the robots in the team at each sample (paper Fig. 9, top)."""
+    err = log["x_hat"] - log["x"][:, None, :, :]
+    act = log["active"]
+    mask = act[:, :, None] & act[:, None, :]
+    sq = np.where(mask, (err**2).sum(axis=-1), 0.0)
+    return np.sqrt(sq.sum(axis=(1, 2)))
+
+
+def fig_errors(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """Fig. 9: ‖x̃*‖ (top) and the task errors ‖σ̃₁‖, ‖σ̃₂‖ (bottom)."""
+    t = log["t"]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    top.semilogy(t, estimation_error(log), "b-", lw=0.8)
+    top.set_ylabel("‖x̃*‖ [m]")
+    top.set_title("Estimation and task errors (paper Fig. 9)")
+    bottom.semilogy(t, log["sigma_err"][:, 0], lw=0.8, label="‖σ̃₁‖ centroid")
+    bottom.semilogy(t, log["sigma_err"][:, 1], lw=0.8, label="‖σ̃₂‖ formation")
+    bottom.set_ylabel("[m]")
+    bottom.set_xlabel("t [s]")
+    bottom.legend(fontsize=8)
+    for ax in (top, bottom):
+        _mark_events(ax, summary)
+        for sp in summary.get("reactive", []):
+            ax.axvspan(
+                sp["t_on"],
+                sp["t_off"] if sp["t_off"] is not None else t[-1],
+                color="tab:green",
+                alpha=0.08,
+            )
+        ax.grid(alpha=0.3)
+    return fig
+
+
+def fig_inputs(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """Fig. 10: each robot's nominal input uᵢ (x and y)."""
+    t, u = log["t"], log["u"]
+    n = min(u.shape[1], 8)
+    fig, axes = plt.subplots(n, 1, figsize=(8, 1.4 * n + 0.8), sharex=True, squeeze=False)
+    for i in range(n):
+        ax = axes[i, 0]
+        ax.plot(t, u[:, i, 0], lw=0.7, label="x")
+        ax.plot(t, u[:, i, 1], lw=0.7, label="y")
+        _mark_events(ax, summary)
+        ax.set_ylabel(f"u{i + 1} [m/s]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[0, 0].set_title("Control inputs (paper Fig. 10)")
+    axes[-1, 0].set_xlabel("t [s]")
+    return fig
+
+
+DRAW = {
+    "fig3_paths": fig_paths,
+    "fig4_fault_estimate": fig_fault_estimate,
+    "fig5_8_residuals": fig_residuals,
+    "fig9_errors": fig_errors,
+    "fig10_inputs": fig_inputs,
+}
+
+
+def draw_all(log: dict[str, np.ndarray], summary: dict[str, Any], folder: Path) -> list[Path]:
+    """Draw every figure as a PNG in ``folder``; returns the paths written."""
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name in FIGURES:
+        fig = DRAW[name](log, summary)
+        path = folder / f"{name}.png"
+        tmp = folder / f".{name}.tmp.png"
+        fig.savefig(tmp, dpi=110)
+        plt.close(fig)
+        tmp.replace(path)
+        written.append(path)
+    return written

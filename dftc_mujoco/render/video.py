@@ -1,0 +1,409 @@
+"""Offscreen video of a run, drawn from its records (``log.npz``, ``summary.json``).
+
+A private copy of the run's scene is re-posed from the logged positions at
+each video frame (linear interpolation between log samples) and rendered with
+``mujoco.Renderer`` through an orthographic top-down camera that follows the
+team. On top of the MuJoCo scene: each robot's trail, the desired centroid
+path, a ghost of the desired formation, a ring while a robot avoids an
+obstacle, robot colours by state, and a text overlay (time, latest events,
+robot numbers, legend) drawn with Pillow.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from ..scenario import Scenario
+from ..sim import robots as robot_models
+from ..sim import scene as scene_mod
+from . import gl
+from .gl import RenderError
+from .options import VideoOptions, frame_times
+
+HEALTHY = (0.20, 0.45, 0.85, 1.0)
+COMPENSATING = (0.95, 0.60, 0.10, 1.0)
+FLAGGED = (0.85, 0.15, 0.15, 1.0)
+EXCLUDED = (0.45, 0.45, 0.45, 1.0)
+STATES = (
+    ("healthy", HEALTHY),
+    ("compensating", COMPENSATING),
+    ("flagged", FLAGGED),
+    ("excluded", EXCLUDED),
+)
+AVOIDING = (0.1, 0.75, 0.3, 0.55)
+GHOST_ALPHA = 0.28
+SAFE = (0.35, 0.35, 0.4, 0.9)
+PATH = (0.15, 0.3, 0.95, 0.8)
+
+
+class FrameRenderer:
+    """Renders frames of a recorded run; use as a context manager (it owns a GL context)."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        log: dict[str, np.ndarray],
+        summary: dict[str, Any],
+        options: VideoOptions | None = None,
+    ) -> None:
+        options = options or VideoOptions()
+        self.options = options
+        self.log = log
+        self.summary = summary
+        self.t = log["t"]
+        if len(self.t) < 2:
+            raise RenderError("the log has fewer than two samples: nothing to render")
+        model = robot_models.get(scenario.team.robot_model)
+        self.footprint = model.footprint_radius
+        self.scene = scene_mod.build(scenario, model)
+        m = self.scene.model
+        m.vis.global_.offwidth = max(m.vis.global_.offwidth, options.width)
+        m.vis.global_.offheight = max(m.vis.global_.offheight, options.height)
+        if options.quality:
+            m.vis.quality.shadowsize = 4096
+            m.vis.quality.offsamples = 4
+        self.model = m
+        self.data = mujoco.MjData(m)
+        self.n = log["x"].shape[1]
+        self.origin = np.asarray(scenario.team.initial_positions)
+        self.qpos_x, self.qpos_y = self.scene.joint_qpos.T
+        self.hull_geoms = [
+            [
+                g
+                for g in range(m.ngeom)
+                if m.geom_bodyid[g] == b and (m.geom_contype[g] or m.geom_conaffinity[g])
+            ]
+            for b in self.scene.body
+        ]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # glfw warns before it fails
+                self.renderer = mujoco.Renderer(m, options.height, options.width, max_geom=20000)
+        except Exception as exc:
+            raise gl.explain(exc) from None
+        self.camera = mujoco.MjvCamera()
+        self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
+        self.camera.orthographic = 1
+        self.camera.azimuth, self.camera.elevation = 90.0, -90.0
+        self._track = self._camera_track()
+        self._events = _overlay_events(summary)
+        self._bias_from = _bias_start(summary, self.n)
+        self._font = ImageFont.load_default()
+
+    # ------------------------------------------------------------------ resources
+
+    def close(self) -> None:
+        """Free the GL context."""
+        if getattr(self, "renderer", None) is not None:
+            self.renderer.close()
+            self.renderer = None
+
+    def __enter__(self) -> FrameRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ geometry
+
+    def _camera_track(self) -> np.ndarray:
+        """(T, 3): centre x, y and view height, smoothed so the team stays in view."""
+        x = np.where(self.log["active"][..., None], self.log["x"], np.nan)
+        x_d = self.log["x_d"]
+        pts = np.concatenate([x, x_d], axis=1)
+        lo, hi = np.nanmin(pts, axis=1), np.nanmax(pts, axis=1)
+        aspect = self.options.width / self.options.height
+        margin = 0.6 + 2 * self.footprint
+        half = np.maximum((hi - lo)[:, 1] / 2, (hi - lo)[:, 0] / 2 / aspect) + margin
+        half = np.maximum(half, 1.5)
+        centre = (lo + hi) / 2
+        dt = float(np.median(np.diff(self.t)))
+        w = max(1, round(2.0 / dt))  # ±2 s
+        half = _moving(half, w, np.max)
+        half = _moving(half, w, np.mean)
+        centre = np.stack([_moving(centre[:, j], w, np.mean) for j in range(2)], axis=1)
+        return np.column_stack([centre, 2 * half])
+
+    def _index(self, t: float) -> tuple[int, float]:
+        j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2))
+        a = float(np.clip((t - self.t[j]) / (self.t[j + 1] - self.t[j]), 0.0, 1.0))
+        return j, a
+
+    def _lerp(self, name: str, j: int, a: float) -> np.ndarray:
+        v = self.log[name]
+        return (1 - a) * v[j] + a * v[j + 1]
+
+    def view(self, t: float) -> tuple[np.ndarray, float]:
+        """Camera centre (x, y) and view height [m] at time ``t``."""
+        j, a = self._index(t)
+        c = (1 - a) * self._track[j] + a * self._track[j + 1]
+        return c[:2], float(c[2])
+
+    def project(self, xy: np.ndarray, t: float) -> np.ndarray:
+        """Pixel (column, row) of world points ``xy`` (..., 2) in the frame at time ``t``."""
+        centre, height = self.view(t)
+        scale = self.options.height / height  # pixels per metre
+        col = self.options.width / 2 + (xy[..., 0] - centre[0]) * scale
+        row = self.options.height / 2 - (xy[..., 1] - centre[1]) * scale
+        return np.stack([col, row], axis=-1)
+
+    def positions(self, t: float) -> np.ndarray:
+        """Logged robot positions interpolated at ``t``, (N, 2)."""
+        j, a = self._index(t)
+        return self._lerp("x", j, a)
+
+    def states(self, t: float) -> list[str]:
+        """Each robot's state at ``t``: healthy, compensating, flagged or excluded."""
+        j, a = self._index(t)
+        k = j + 1 if a >= 1.0 else j
+        out = []
+        for i in range(self.n):
+            if not self.log["active"][k, i]:
+                out.append("excluded")
+            elif self.log["flagged"][k, i]:
+                out.append("flagged")
+            elif t >= self._bias_from[i]:
+                out.append("compensating")
+            else:
+                out.append("healthy")
+        return out
+
+    # ------------------------------------------------------------------ drawing
+
+    def frame(self, t: float) -> np.ndarray:
+        """The frame at time ``t``: (height, width, 3) uint8."""
+        j, a = self._index(t)
+        x = self._lerp("x", j, a)
+        self.data.qpos[self.qpos_x] = x[:, 0] - self.origin[:, 0]
+        self.data.qpos[self.qpos_y] = x[:, 1] - self.origin[:, 1]
+        mujoco.mj_kinematics(self.model, self.data)
+        colours = dict(STATES)
+        states = self.states(t)
+        for i, st in enumerate(states):
+            self.model.geom_rgba[self.hull_geoms[i]] = colours[st]
+        centre, height = self.view(t)
+        self.camera.lookat[:] = [centre[0], centre[1], 0.0]
+        self.camera.distance = 20.0
+        self.model.vis.global_.fovy = height  # orthographic: the view height in metres
+        self.renderer.update_scene(self.data, self.camera)
+        scn = self.renderer.scene
+        self._draw_path(scn, j)
+        self._draw_trails(scn, j, x, states)
+        self._draw_ghost(scn, j, states)
+        self._draw_safe_circles(scn)
+        self._draw_rings(scn, j, x)
+        img = self.renderer.render()
+        return self._overlay(img, t, x, states)
+
+    def _add(self, scn: mujoco.MjvScene) -> mujoco.MjvGeom | None:
+        if scn.ngeom >= scn.maxgeom:
+            return None
+        g = scn.geoms[scn.ngeom]
+        scn.ngeom += 1
+        return g
+
+    def _segment(self, scn, p0, p1, width, rgba, z=0.002) -> None:
+        """A GL line of ``width`` pixels (lines cost far less than capsule meshes)."""
+        g = self._add(scn)
+        if g is None:
+            return
+        mujoco.mjv_initGeom(
+            g,
+            mujoco.mjtGeom.mjGEOM_LINE,
+            np.zeros(3),
+            np.zeros(3),
+            np.eye(3).ravel(),
+            np.asarray(rgba, np.float32),
+        )
+        mujoco.mjv_connector(
+            g,
+            mujoco.mjtGeom.mjGEOM_LINE,
+            width,
+            np.array([p0[0], p0[1], z]),
+            np.array([p1[0], p1[1], z]),
+        )
+
+    def _disc(self, scn, xy, radius, rgba, z=0.003, thickness=0.001) -> None:
+        g = self._add(scn)
+        if g is None:
+            return
+        mujoco.mjv_initGeom(
+            g,
+            mujoco.mjtGeom.mjGEOM_CYLINDER,
+            np.array([radius, thickness, 0.0]),
+            np.array([xy[0], xy[1], z]),
+            np.eye(3).ravel(),
+            np.asarray(rgba, np.float32),
+        )
+
+    def _draw_path(self, scn, j) -> None:
+        c = self.log["c_d"]
+        step = max(1, len(c) // 150)
+        pts = c[::step]
+        for k in range(0, len(pts) - 1, 2):  # dashed
+            self._segment(scn, pts[k], pts[k + 1], 3.0, PATH, z=0.001)
+
+    def _draw_trails(self, scn, j, x_now, states) -> None:
+        dt = float(np.median(np.diff(self.t)))
+        stride = max(1, round(0.2 / dt))
+        start = 0
+        if np.isfinite(self.options.trail_seconds):
+            start = max(0, j - round(self.options.trail_seconds / dt))
+        idx = np.arange(start, j + 1, stride)
+        hist = self.log["x"][idx]
+        colours = dict(STATES)
+        for i in range(self.n):
+            rgba = np.array(colours[states[i]])
+            rgba[3] = 0.7
+            pts = np.vstack([hist[:, i], x_now[i]])
+            for k in range(len(pts) - 1):
+                self._segment(scn, pts[k], pts[k + 1], 2.0, rgba)
+
+    def _draw_ghost(self, scn, j, states) -> None:
+        """Each member's desired slot: a faint disc in the robot's colour."""
+        colours = dict(STATES)
+        for i, xy in enumerate(self.log["x_d"][j]):
+            if np.isfinite(xy).all():
+                rgba = np.array(colours[states[i]])
+                rgba[3] = GHOST_ALPHA
+                self._disc(scn, xy, self.footprint, rgba, z=0.004)
+
+    def _draw_safe_circles(self, scn) -> None:
+        """The safe distance d around each cylinder, dashed."""
+        ang = np.linspace(0, 2 * np.pi, 49)
+        for ox, oy, _, d in self.log["obstacles"]:
+            pts = np.c_[ox + d * np.cos(ang), oy + d * np.sin(ang)]
+            for k in range(0, len(pts) - 1, 2):
+                self._segment(scn, pts[k], pts[k + 1], 1.5, SAFE, z=0.001)
+
+    def _draw_rings(self, scn, j, x) -> None:
+        for i in np.flatnonzero(self.log["reactive"][j]):
+            self._disc(scn, x[i], self.footprint + 0.06, AVOIDING, z=0.005)
+
+    def _overlay(self, img: np.ndarray, t: float, x: np.ndarray, states: list[str]) -> np.ndarray:
+        pil = Image.fromarray(img)
+        draw = ImageDraw.Draw(pil)
+        font = self._font
+        draw.rectangle([0, 0, self.options.width, 18], fill=(255, 255, 255))
+        draw.text(
+            (6, 3),
+            f"{self.summary.get('scenario', '')}   t = {t:6.2f} s",
+            fill=(0, 0, 0),
+            font=font,
+        )
+        recent = [e for e in self._events if e[0] <= t + 1e-9][-4:]
+        for k, (te, text) in enumerate(recent):
+            draw.text((6, 22 + 13 * k), f"{te:6.2f} s  {text}", fill=(20, 20, 20), font=font)
+        pix = self.project(x, t)
+        off = self.footprint * self.options.height / self.view(t)[1] * 0.8 + 2
+        for i, (c, r) in enumerate(pix):
+            if 0 <= c < self.options.width and 0 <= r < self.options.height:
+                pos = (c + off, r - off - 10)
+                draw.rectangle(draw.textbbox(pos, str(i + 1), font=font), fill=(255, 255, 255))
+                draw.text(pos, str(i + 1), fill=(0, 0, 0), font=font)
+        y0 = self.options.height - 16
+        xpos = 6
+        for name, rgba in STATES:
+            col = tuple(int(255 * v) for v in rgba[:3])
+            draw.rectangle([xpos, y0 + 2, xpos + 9, y0 + 11], fill=col)
+            draw.text((xpos + 13, y0), name, fill=(0, 0, 0), font=font)
+            xpos += 20 + 7 * len(name)
+        ring = tuple(int(255 * v) for v in AVOIDING[:3])
+        draw.ellipse([xpos, y0 + 1, xpos + 10, y0 + 11], outline=ring, width=2)
+        draw.text((xpos + 14, y0), "avoiding", fill=(0, 0, 0), font=font)
+        xpos += 80
+        draw.ellipse([xpos, y0 + 1, xpos + 10, y0 + 11], fill=(205, 215, 240))
+        draw.text((xpos + 14, y0), "desired slot", fill=(0, 0, 0), font=font)
+        return np.asarray(pil)
+
+
+def _moving(a: np.ndarray, w: int, fn) -> np.ndarray:
+    pad = np.pad(a, (w, w), mode="edge")
+    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * w + 1)
+    return fn(win, axis=1)
+
+
+def _bias_start(summary: dict[str, Any], n: int) -> np.ndarray:
+    start = np.full(n, np.inf)
+    for f in summary.get("faults", []):
+        if f["kind"] == "bias":
+            start[f["robot"] - 1] = min(start[f["robot"] - 1], f["t"])
+    return start
+
+
+def _overlay_events(summary: dict[str, Any]) -> list[tuple[float, str]]:
+    """Fault injections, each robot's first detection, and exclusions, in time order."""
+    ev = [(f["t"], f"fault: {f['kind']} on robot {f['robot']}") for f in summary.get("faults", [])]
+    seen: set[int] = set()
+    for d in sorted(summary.get("detections", []), key=lambda d: d["t"]):
+        if d["robot"] not in seen:
+            seen.add(d["robot"])
+            ev.append((d["t"], f"robot {d['by']} flags robot {d['robot']} (first detection)"))
+    ev += [(e["t"], f"robot {e['robot']} excluded") for e in summary.get("exclusions", [])]
+    return sorted(ev)
+
+
+def iter_frames(renderer: FrameRenderer, duration: float) -> Iterator[np.ndarray]:
+    """Frames at the video rate from t = 0 to ``duration``."""
+    for t in frame_times(duration, renderer.options.fps):
+        yield renderer.frame(float(t))
+
+
+def write_video(
+    path: Path,
+    scenario: Scenario,
+    log: dict[str, np.ndarray],
+    summary: dict[str, Any],
+    options: VideoOptions | None = None,
+    progress: bool = False,
+) -> int:
+    """Render the run to an H.264 MP4 at ``path`` (atomically); returns the frame count."""
+    options = options or VideoOptions()
+    import imageio.v2 as imageio
+    from tqdm import tqdm
+
+    duration = float(log["t"][-1])
+    times = frame_times(duration, options.fps)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.mp4")
+    params = (
+        ["-preset", "slow", "-crf", "18"]
+        if options.quality
+        else ["-preset", "veryfast", "-crf", "23"]
+    )
+    try:
+        with FrameRenderer(scenario, log, summary, options) as fr:
+            writer = imageio.get_writer(
+                str(tmp),
+                fps=options.fps,
+                codec="libx264",
+                quality=None,
+                pixelformat="yuv420p",
+                macro_block_size=8,
+                ffmpeg_params=params,
+                ffmpeg_log_level="error",
+            )
+            try:
+                for t in tqdm(
+                    times,
+                    disable=not progress,
+                    unit="frame",
+                    desc="video",
+                    leave=False,
+                    mininterval=0.5,
+                ):
+                    writer.append_data(fr.frame(float(t)))
+            finally:
+                writer.close()
+        tmp.replace(path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return len(times)
