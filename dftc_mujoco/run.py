@@ -1,25 +1,32 @@
 """``python -m dftc_mujoco.run SCENARIO``: run a scenario and write its records.
 
-Writes ``summary.json`` and ``log.npz`` to ``renders/<name>/`` (or ``--out``)
-and prints a short table of the run. Exit codes: 0 success, 2 bad input
-(scenario file or command line), 3 the physics failed (the records written so
-far are kept and ``summary.json`` says what went wrong).
+Writes ``summary.json``, ``log.npz``, a copy of the scenario, the paper's
+figures and (unless ``--no-video``) ``video.mp4`` to ``renders/<name>/`` (or
+``--out``), and prints a short table of the run. Exit codes: 0 success, 2 bad
+input (scenario file or command line), 3 the physics failed (the records
+written so far are kept and ``summary.json`` says what went wrong), 4 no
+OpenGL backend for the video.
+
+MuJoCo reads ``MUJOCO_GL`` when it is imported, so this module imports the
+simulator only after ``--gl`` has been applied.
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from . import scenario as scenario_mod
 from .errors import ScenarioError
-from .loop import RunResult, simulate
 from .paths import RENDERS
-from .record import write_json, write_npz
-from .sim import robots
+from .render import gl
 
-EXIT_OK, EXIT_INPUT, EXIT_PHYSICS = 0, 2, 3
+if TYPE_CHECKING:
+    from .loop import RunResult
+
+EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER = 0, 2, 3, 4
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,14 +45,47 @@ def build_parser() -> argparse.ArgumentParser:
         "would start after the new end are dropped (and listed)",
     )
     p.add_argument("--robot", metavar="MODEL", help="override team.robot_model")
+    add_video_options(p)
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    return p
+
+
+def add_video_options(p: argparse.ArgumentParser) -> None:
+    """Video options shared by the run and plot commands."""
     p.add_argument(
         "--no-video",
         action="store_true",
-        help="do not render a video (no video renderer exists yet: "
-        "runs write summary.json and log.npz only)",
+        help="skip the video (figures are still drawn); needs no OpenGL",
     )
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    return p
+    p.add_argument(
+        "--gl",
+        choices=gl.BACKENDS,
+        help="OpenGL backend for offscreen rendering (default: $MUJOCO_GL, else egl)",
+    )
+    p.add_argument("--fps", type=float, default=30.0, help="video frame rate (default 30)")
+    p.add_argument(
+        "--size", default="640x480", metavar="WxH", help="video frame size (default 640x480)"
+    )
+    p.add_argument(
+        "--quality", action="store_true", help="shadows, multisampling and a slower, finer encoding"
+    )
+
+
+def video_options(args: argparse.Namespace):
+    """VideoOptions from the command line, or a ScenarioError naming the bad flag."""
+    from .render.options import VideoOptions
+
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise ScenarioError(
+            f"--size: expected WIDTHxHEIGHT such as 640x480, got {args.size!r}"
+        ) from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096) or w % 2 or h % 2:
+        raise ScenarioError(f"--size: expected even sizes between 16 and 4096, got {args.size}")
+    if not 1 <= args.fps <= 240:
+        raise ScenarioError(f"--fps: expected 1 to 240 frames per second, got {args.fps:g}")
+    return VideoOptions(width=w, height=h, fps=args.fps, quality=args.quality)
 
 
 def _fmt_event(e: dict) -> str:
@@ -118,14 +158,37 @@ def report(result: RunResult, out: Path) -> str:
 
 
 def write_records(result: RunResult, out: Path) -> None:
-    """Write ``log.npz`` then ``summary.json`` (each atomically) into ``out``."""
+    """Write ``log.npz``, the scenario copy, then ``summary.json`` (atomically) into ``out``."""
+    from .record import write_json, write_npz
+
     write_npz(out / "log.npz", result.log)
+    src = Path(result.scenario.source)
+    if src.is_file() and src.resolve() != (out / "scenario.toml").resolve():
+        shutil.copyfile(src, out / "scenario.toml")
     write_json(out / "summary.json", result.summary)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = build_parser().parse_args(argv)
+    progress = not args.no_progress and sys.stderr.isatty()
+    try:
+        if not args.no_video:
+            gl.select(args.gl)  # before anything imports mujoco
+        options = None if args.no_video else video_options(args)
+        if options is not None:
+            gl.probe()  # fail before simulating, not after
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except gl.RenderError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_RENDER
+
+    from . import scenario as scenario_mod
+    from .loop import simulate
+    from .sim import robots
+
     try:
         original = scenario_mod.load(args.scenario)
         if args.robot is not None:
@@ -137,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"--duration {s.duration:g} s and will not happen",
                 file=sys.stderr,
             )
-        result = simulate(s, progress=not args.no_progress and sys.stderr.isatty())
+        result = simulate(s, progress=progress)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INPUT
@@ -148,9 +211,40 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: cannot write the records to {out}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_INPUT
     print(report(result, out))
+    code = EXIT_OK
     if not result.ok:
         print(f"error: {result.error}", file=sys.stderr)
-        return EXIT_PHYSICS
+        code = EXIT_PHYSICS
+    return max(
+        code, render_outputs(result.scenario, result.log, result.summary, out, options, progress)
+    )
+
+
+def render_outputs(scenario, log, summary, out: Path, options, progress: bool) -> int:
+    """Draw the figures and (if ``options``) the video of a run; returns an exit code."""
+    import time
+
+    from .render import figures
+
+    t0 = time.perf_counter()
+    paths = figures.draw_all(log, summary, out / "figures")
+    print(f"figures: {len(paths)} in {out / 'figures'} ({time.perf_counter() - t0:.1f} s)")
+    if options is None:
+        return EXIT_OK
+    from .render.video import write_video
+
+    t0 = time.perf_counter()
+    try:
+        frames = write_video(out / "video.mp4", scenario, log, summary, options, progress)
+    except gl.RenderError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_RENDER
+    wall = time.perf_counter() - t0
+    print(
+        f"video: {out / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
+        f"{options.width}x{options.height}, rendered and encoded at {frames / wall:.0f} "
+        f"frames/s)"
+    )
     return EXIT_OK
 
 
