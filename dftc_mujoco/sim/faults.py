@@ -55,9 +55,9 @@ class ActuatorFaults:
             return new
         phi = self.bias_phi(t)
         ids = self.actuator[self._bias_robots]
-        self.model.actuator_biasprm[ids, 0] = self.kv[self._bias_robots] * self.adapter.bias(
-            phi[self._bias_robots]
-        )
+        # adapters map the whole team (a wheel offset depends on each robot's heading)
+        offsets = self.adapter.bias(phi)[self._bias_robots]
+        self.model.actuator_biasprm[ids, 0] = self.kv[self._bias_robots] * offsets
         stop = self.actuator[self.stopped]
         self.model.actuator_gainprm[stop, 0] = 0.0
         self.model.actuator_biasprm[stop, 0] = 0.0
@@ -81,7 +81,7 @@ class ActuatorFaults:
         if self.stopped.any():
             lo, hi = self.model.actuator_ctrlrange[self.actuator].transpose(2, 0, 1)
             clamped = np.clip(ctrl, lo, hi)
-            phi[self.stopped] = -self.adapter.planar(clamped[self.stopped])
+            phi[self.stopped] = -self.adapter.planar(clamped)[self.stopped]
         return phi
 
     def clear(self) -> None:
