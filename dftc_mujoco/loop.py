@@ -43,13 +43,29 @@ class RunResult:
         return self.error is None
 
 
-def team_config(s: Scenario, command_limit: float = np.inf) -> TeamConfig:
-    """The onboard configuration a scenario gives every robot.
+CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
 
-    ``command_limit`` is the per-axis planar command range of the robot model.
+
+def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """ξ̄ of the run: the scenario's if it sets one, else the robot model's measured one."""
+    if s.noise.xi_bar is not None:
+        return s.noise.xi_bar
+    return robot.xi_bar if robot is not None else 0.0
+
+
+def team_config(
+    s: Scenario, robot: robots.RobotModel | None = None, command_limit: float = np.inf
+) -> TeamConfig:
+    """The onboard configuration a scenario gives every robot of model ``robot``.
+
+    A robot too big for a safe distance d (cylinder radius + its footprint +
+    2 cm > d) gets the larger value, so no hull ever reaches a cylinder or an
+    excluded robot. ``command_limit`` is the per-axis planar command range.
     """
     obs = s.obstacles
     f = s.fdir
+    reach = robot.footprint_radius if robot is not None else 0.0
+    excluded_safe = max(f.excluded_safe_distance, 2 * reach + CLEARANCE)
     return TeamConfig(
         graph=s.team.graph,
         kc=s.gains.kc,
@@ -59,17 +75,17 @@ def team_config(s: Scenario, command_limit: float = np.inf) -> TeamConfig:
         theta=s.gains.theta,
         dt=s.physics.control_period,
         eta_bar=s.noise.eta_bar,
-        xi_bar=s.noise.xi_bar,
+        xi_bar=effective_xi_bar(s, robot),
         formation=s.mission.formation,
         obstacle_position=np.array([o.position for o in obs]).reshape(-1, 2),
-        obstacle_safe=np.array([o.safe_distance for o in obs]),
+        obstacle_safe=np.array([max(o.safe_distance, o.radius + reach + CLEARANCE) for o in obs]),
         obstacle_activation=np.array([o.activation_distance for o in obs]),
         detection_window=f.detection_window,
         dt_d_max=f.dt_d_max,
         initial_error_bound=f.initial_error_bound,
         replan_time=f.replan_time,
-        excluded_safe=f.excluded_safe_distance,
-        excluded_activation=f.excluded_activation_distance,
+        excluded_safe=excluded_safe,
+        excluded_activation=max(f.excluded_activation_distance, excluded_safe + 0.1),
         phi_low_pass=f.phi_low_pass,
         command_limit=command_limit,
         fdir=f.enabled,
@@ -92,10 +108,12 @@ def simulate(
     wall0 = time.perf_counter()
     model = robots.get(s.team.robot_model, where=f"{s.source}: team.robot_model")
     sc = scene.build(s, model)
-    adapter = model.adapter()
     rng = np.random.default_rng(s.seed)
     dt = s.physics.control_period
-    plant = Plant(sc, s.noise, dt, rng)
+    xi_bar = effective_xi_bar(s, model)
+    # the model's own mismatch already uses part of ξ̄ (eq. 2 bounds their sum)
+    plant = Plant(sc, s.noise, dt, rng, xi_bar=max(xi_bar - model.mismatch, 0.0))
+    adapter = model.adapter(sc, plant.data)
     actuator_faults = sim_faults.ActuatorFaults(sc.model, s.faults, sc.actuator, adapter)
 
     n = s.team.robots
@@ -104,11 +122,21 @@ def simulate(
     obstacles = np.array([[*o.position, o.radius, o.safe_distance] for o in s.obstacles])
     log = Log(steps // log_every + 1, n, obstacles=obstacles.reshape(-1, 4))
     events = Events()
+    if xi_bar < model.mismatch:
+        events.add(
+            0.0,
+            "warning",
+            message=(
+                f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
+                f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate {model.name}; "
+                f"recommended {model.xi_bar:g}): thresholds may raise false alarms"
+            ),
+        )
 
     path = mission.centroid_table(s.mission.centroid, s.duration, dt)
     limited = sc.model.actuator_ctrllimited[sc.actuator].all()
-    limit = float(np.abs(sc.model.actuator_ctrlrange[sc.actuator]).min()) if limited else np.inf
-    team = Team(team_config(s, limit), plant.measure(), path.position[0])
+    limit = adapter.command_limit if limited else np.inf
+    team = Team(team_config(s, model, limit), plant.measure(), path.position[0])
     fault_start = np.full(n, np.inf)  # ground truth, for the margin only
     bias_only = np.ones(n, bool)
     for f in s.faults:
@@ -141,7 +169,7 @@ def simulate(
             x_m = plant.measure()
             c, c_dot = path.at(k)
             out = team.step(t, x_m, c, c_dot, sensed_bodies=x)
-            ctrl = adapter.command(out.u_bar)
+            ctrl = adapter.command(out.u_bar + plant.disturbance())
             for e in out.events:
                 events.add(t, e.pop("kind"), **{k_: v for k_, v in e.items() if k_ != "t"})
             if s.fdir.enabled:
@@ -194,6 +222,7 @@ def simulate(
                     active=act,
                     sigma_err=(np.linalg.norm(err[0]), np.linalg.norm(err[1:])),
                     x_d=out.x_d,
+                    pose=plant.poses(),
                     c_d=c,
                     flagged=out.flagged,
                 )
@@ -216,7 +245,7 @@ def simulate(
     wall = time.perf_counter() - wall0
     arrays = log.arrays()
     summary = _summary(
-        s, arrays, events, reactive_spans, wall, min_gap, min_margin, error, plant.time
+        s, xi_bar, arrays, events, reactive_spans, wall, min_gap, min_margin, error, plant.time
     )
     summary["build_time"] = build_time
     if s.fdir.enabled:
@@ -276,6 +305,7 @@ def _finite_or_none(v: float) -> float | None:
 
 def _summary(
     s: Scenario,
+    xi_bar_used: float,
     log: dict[str, np.ndarray],
     events: Events,
     reactive: list[dict[str, Any]],
@@ -326,7 +356,10 @@ def _summary(
             "final_centroid": _finite_or_none(last[0]),
             "final_formation": _finite_or_none(last[1]),
         },
-        "warnings": [
+        "xi_bar": xi_bar_used,
+        "xi_bar_source": "scenario" if s.noise.xi_bar is not None else "robot model",
+        "warnings": [e["message"] for e in events.of_kind("warning")]
+        + [
             f"t = {e['t']:g} s: after an exclusion the graph of robots "
             f"{', '.join(str(r + 1) for r in e['robots'])} is not strongly connected; "
             "some estimates and thresholds are no longer bounded"

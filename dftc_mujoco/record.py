@@ -31,6 +31,7 @@ LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
     "x_d": ("N2", np.float64, np.nan),
     "c_d": ("2", np.float64, np.nan),
     "flagged": ("N", np.bool_, False),
+    "pose": ("N3", np.float64, np.nan),
 }
 # arrays without a time axis stored beside them in log.npz
 STATIC_FIELDS = ("obstacles",)  # (O, 4): x, y, radius, safe distance d

@@ -112,6 +112,8 @@ def _fmt_event(e: dict) -> str:
             f"WARNING: the graph of robots {left} is not strongly connected: "
             "estimates and thresholds of some robots are no longer bounded"
         )
+    if k == "warning":
+        return f"WARNING: {e['message']}"
     if k == "simulation_error":
         return f"SIMULATION ERROR: {e['message']}"
     return f"{k} {e}"

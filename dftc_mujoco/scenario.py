@@ -72,7 +72,7 @@ class Noise:
     """Bounds of measurement noise (eq. 4) and disturbance (eq. 2)."""
 
     eta_bar: float
-    xi_bar: float
+    xi_bar: float | None  # None: the robot model's measured mismatch
     xi_time_constant: float = 0.5
     at_bound: bool = False  # draw η and ξ with norms exactly at η̄ and ξ̄
 
@@ -497,7 +497,9 @@ def _gains(t: _Table) -> Gains:
 def _noise(t: _Table) -> Noise:
     n = Noise(
         eta_bar=t.number("eta_bar", low=0.0, strict_low=False),
-        xi_bar=t.number("xi_bar", low=0.0, strict_low=False),
+        xi_bar=None
+        if t.raw("xi_bar", None) is None
+        else t.number("xi_bar", low=0.0, strict_low=False),
         xi_time_constant=t.number("xi_time_constant", 0.5, low=0.0),
         at_bound=t.boolean("at_bound", False),
     )

@@ -72,8 +72,6 @@ class FrameRenderer:
         self.model = m
         self.data = mujoco.MjData(m)
         self.n = log["x"].shape[1]
-        self.origin = np.asarray(scenario.team.initial_positions)
-        self.qpos_x, self.qpos_y = self.scene.joint_qpos.T
         self.hull_geoms = [
             [
                 g
@@ -181,8 +179,10 @@ class FrameRenderer:
         """The frame at time ``t``: (height, width, 3) uint8."""
         j, a = self._index(t)
         x = self._lerp("x", j, a)
-        self.data.qpos[self.qpos_x] = x[:, 0] - self.origin[:, 0]
-        self.data.qpos[self.qpos_y] = x[:, 1] - self.origin[:, 1]
+        pose = self._lerp("pose", j, a)
+        yaw0, yaw1 = self.log["pose"][j, :, 2], self.log["pose"][j + 1, :, 2]
+        pose[:, 2] = yaw0 + a * np.angle(np.exp(1j * (yaw1 - yaw0)))  # shortest turn
+        scene_mod.place(self.scene, self.data, pose)
         mujoco.mj_kinematics(self.model, self.data)
         colours = dict(STATES)
         states = self.states(t)
@@ -273,7 +273,7 @@ class FrameRenderer:
             if np.isfinite(xy).all():
                 rgba = np.array(colours[states[i]])
                 rgba[3] = GHOST_ALPHA
-                self._disc(scn, xy, self.footprint, rgba, z=0.004)
+                self._disc(scn, xy, 0.6 * self.footprint, rgba, z=0.004)
 
     def _draw_safe_circles(self, scn) -> None:
         """The safe distance d around each cylinder, dashed."""
@@ -285,7 +285,7 @@ class FrameRenderer:
 
     def _draw_rings(self, scn, j, x) -> None:
         for i in np.flatnonzero(self.log["reactive"][j]):
-            self._disc(scn, x[i], self.footprint + 0.06, AVOIDING, z=0.005)
+            self._disc(scn, x[i], self.footprint + 0.03, AVOIDING, z=0.005)
 
     def _overlay(self, img: np.ndarray, t: float, x: np.ndarray, states: list[str]) -> np.ndarray:
         pil = Image.fromarray(img)

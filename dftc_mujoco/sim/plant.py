@@ -28,9 +28,10 @@ class Plant:
 
     ``rng`` is the run's only source of randomness (passed in, never global).
     ξ is a low-pass filtered random planar velocity, bounded by ξ̄ by
-    construction (a convex combination of points in the disk), applied as the
-    force kv·ξ on each robot's base so that a holonomic robot's velocity is
-    shifted by ξ; with ``noise.at_bound`` both η and ξ have norms exactly at their bounds.
+    construction (a convex combination of points in the disk); the loop adds it
+    to the velocity each robot's adapter is asked for, so it reaches any robot
+    model through its actuators (a braked robot ignores it). With
+    ``noise.at_bound`` both η and ξ have norms exactly at their bounds.
     """
 
     def __init__(
@@ -39,6 +40,7 @@ class Plant:
         noise: Noise,
         control_period: float,
         rng: np.random.Generator,
+        xi_bar: float | None = None,
     ) -> None:
         self.scene = scene
         self.model = scene.model
@@ -47,11 +49,11 @@ class Plant:
         self.rng = rng
         self.at_bound = noise.at_bound
         self.n = len(scene.body)
+        # bound of the injected disturbance; the loop passes ξ̄ minus the model's mismatch
+        self.xi_bar = xi_bar if xi_bar is not None else (noise.xi_bar or 0.0)
         self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
-        self._xi_state = _disk_sample(rng, self.n, noise.xi_bar, False)
+        self._xi_state = _disk_sample(rng, self.n, self.xi_bar, False)
         self.xi = np.zeros((self.n, 2))
-        # force per unit velocity: the actuators' kv along x and y
-        self._force_gain = self.model.actuator_gainprm[scene.actuator, 0][:, :2].copy()
         self._ctrl_index = scene.actuator.ravel()
         mujoco.mj_forward(self.model, self.data)
 
@@ -62,6 +64,12 @@ class Plant:
     def positions(self) -> np.ndarray:
         """True planar positions (N, 2) from the robots' sites (world frame, NOTES 13)."""
         return self.data.site_xpos[self.scene.site, :2].copy()
+
+    def poses(self) -> np.ndarray:
+        """Each robot base's planar pose (N, 3): x, y, heading [rad]."""
+        mat = self.data.xmat[self.scene.body]
+        pos = self.data.xpos[self.scene.body, :2]
+        return np.column_stack([pos, np.arctan2(mat[:, 3], mat[:, 0])])
 
     def velocities(self) -> np.ndarray:
         """True planar velocities (N, 2) of the robots' bases."""
@@ -77,19 +85,19 @@ class Plant:
         eta = _disk_sample(self.rng, self.n, self.noise.eta_bar, self.at_bound)
         return self.positions() + eta
 
-    def _update_disturbance(self) -> None:
-        w = _disk_sample(self.rng, self.n, self.noise.xi_bar, False)
+    def disturbance(self) -> np.ndarray:
+        """Advance and return ξ (N, 2), ‖ξᵢ‖ ≤ ξ̄ (eq. 2): one draw per control period."""
+        w = _disk_sample(self.rng, self.n, self.xi_bar, False)
         self._xi_state = self._alpha * self._xi_state + (1.0 - self._alpha) * w
         if self.at_bound:
             norm = np.linalg.norm(self._xi_state, axis=1, keepdims=True)
-            self.xi = self.noise.xi_bar * self._xi_state / np.maximum(norm, 1e-12)
+            self.xi = self.xi_bar * self._xi_state / np.maximum(norm, 1e-12)
         else:
             self.xi = self._xi_state
-        self.data.xfrc_applied[self.scene.body, :2] = self._force_gain * self.xi
+        return self.xi
 
     def step(self, ctrl: np.ndarray, nsub: int) -> None:
         """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
-        self._update_disturbance()
         self.data.ctrl[self._ctrl_index] = ctrl.ravel()
         mujoco.mj_step(self.model, self.data, nstep=nsub)
         self.check()
