@@ -83,8 +83,8 @@ def _plant(changes=None):
     s = _fault_free(**(changes or {}))
     model = robots.get("disk")
     sc = scene.build(s, model)
-    adapter = model.adapter()
     plant = Plant(sc, s.noise, s.physics.control_period, np.random.default_rng(0))
+    adapter = model.adapter(sc, plant.data)
     return s, sc, adapter, plant
 
 
@@ -238,6 +238,7 @@ def test_cli_writes_the_output_contract(tmp_path, capsys):
         "x_d": (n_t, 4, 2),
         "c_d": (n_t, 2),
         "flagged": (n_t, 4),
+        "pose": (n_t, 4, 3),
     }
     for name, shape in shapes.items():
         assert log[name].shape == shape, name

@@ -93,7 +93,11 @@ def test_paper_case_matches_the_paper():
     s = scenario.load("paper_case")
     assert (s.gains.kc, s.gains.ko) == (4.0, 6.0)
     assert (s.gains.K == 3 * np.eye(2)).all() and (s.gains.G == 0.01 * np.eye(2)).all()
-    assert (s.noise.eta_bar, s.noise.xi_bar) == (0.001, 0.005)
+    assert (s.noise.eta_bar, s.noise.xi_bar) == (0.001, None)  # ξ̄ from the robot model
+    from dftc_mujoco.loop import effective_xi_bar
+    from dftc_mujoco.sim import robots
+
+    assert effective_xi_bar(s, robots.get("disk")) == 0.005  # the paper's value
     assert set(s.team.graph.edges) == {(0, 1), (1, 2), (2, 3), (3, 0), (3, 1)}
     assert not any(0 in (j, i) and i in (2, 3) for j, i in s.team.graph.edges)
     assert s.team.graph.without(0).is_strongly_connected()

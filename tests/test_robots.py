@@ -1,0 +1,249 @@
+"""Robot models: the contract, the three models on physics, calibration, swapping in a new one."""
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+import trimesh
+
+from dftc_mujoco import calibrate, loop, run, scenario
+from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.paths import MODELS
+from dftc_mujoco.sim import faults as sim_faults
+from dftc_mujoco.sim import robots, scene
+from tests.conftest import make, scenario_dict
+
+BOX_ROBOT = """<mujoco model="boxbot">
+  <custom>
+    <text name="dftc_adapter" data="holonomic"/>
+  </custom>
+  <worldbody>
+    <body name="base" pos="0 0 0.04">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="y" type="slide" axis="0 1 0"/>
+      <geom name="hull" type="box" size="0.07 0.05 0.04" mass="1.5" rgba="0.2 0.45 0.85 1"/>
+      <site name="center"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <velocity name="vx" joint="x" kv="150" ctrlrange="-1 1" ctrllimited="true"/>
+    <velocity name="vy" joint="y" kv="150" ctrlrange="-1 1" ctrllimited="true"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def test_registry_lists_models_and_explains_unknown_names():
+    assert robots.available() == ["diffdrive", "disk", "hexbot"]
+    with pytest.raises(
+        ScenarioError,
+        match=r"unknown robot model 'tank' \(available: "
+        r"diffdrive, disk, hexbot",
+    ):
+        robots.get("tank")
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (
+            lambda t: t.replace("<custom>", "<option timestep='0.01'/>\n  <custom>"),
+            "<option> is not allowed in a robot file",
+        ),
+        (lambda t: t.replace('<site name="center"/>', ""), "no site named 'center'"),
+        (
+            lambda t: t.replace('data="holonomic"', 'data="legged"'),
+            "dftc_adapter: expected one of holonomic, diffdrive",
+        ),
+        (lambda t: t.replace('name="vy"', 'name="vz"'), "missing: vy"),
+        (lambda t: t.replace("<worldbody>", "<worldbody"), "not valid XML"),
+    ],
+)
+def test_contract_violations_are_one_clear_line(tmp_path, change, message):
+    path = tmp_path / "bad.xml"
+    path.write_text(change(BOX_ROBOT))
+    with pytest.raises(ScenarioError, match=message) as info:
+        robots.get(str(path))
+    assert str(path) in str(info.value)
+
+
+def test_mesh_robot_mass_inertia_and_footprint_come_from_the_mesh():
+    hexbot = robots.get("hexbot")
+    mesh = trimesh.load(MODELS / "robots" / "meshes" / "hexbot.stl", force="mesh")
+    mesh.density = 1000.0
+    assert hexbot.mass == pytest.approx(mesh.mass)
+    assert np.allclose(hexbot.inertia, np.diag(mesh.moment_inertia))
+    assert hexbot.footprint_radius == pytest.approx(
+        np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 1]).max()
+    )
+    sc = scene.compose(hexbot, np.zeros((2, 2)))
+    body = sc.body[0]
+    assert sc.model.body_mass[body] == pytest.approx(mesh.mass)
+    assert np.allclose(sorted(sc.model.body_inertia[body]), sorted(hexbot.inertia))
+    # obstacle avoidance keeps the mesh's footprint clear of a cylinder too close for it
+    d = scenario_dict()
+    d["obstacles"] = [
+        {"position": [1, 1], "radius": 0.2, "safe_distance": 0.25, "activation_distance": 0.4}
+    ]
+    cfg = loop.team_config(make(d), hexbot)
+    assert cfg.obstacle_safe[0] == pytest.approx(0.2 + hexbot.footprint_radius + loop.CLEARANCE)
+
+
+def test_diffdrive_moves_only_through_wheel_contact():
+    dd = robots.get("diffdrive")
+    sc = scene.compose(dd, np.zeros((1, 2)))
+    m = sc.model
+    assert not any(m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE for j in range(m.njnt))
+    assert m.jnt_type[m.body_jntadr[sc.body[0]]] == mujoco.mjtJoint.mjJNT_FREE
+
+    def drive(floor_friction):
+        model = scene.compose(dd, np.zeros((1, 2))).model
+        model.geom_friction[model.geom("floor").id] = floor_friction
+        for g in range(model.ngeom):  # tyres use their own friction: make it the floor's
+            if model.geom(g).name.endswith(("tyre_l", "tyre_r")):
+                model.geom_friction[g] = floor_friction
+                model.geom_priority[g] = 1
+        data = mujoco.MjData(model)
+        adapter = dd.adapter(sc, data)
+        for _ in range(200):
+            data.ctrl[sc.actuator[0]] = adapter.command(np.array([[0.2, 0.0]]))[0]
+            mujoco.mj_step(model, data, nstep=5)
+        return data.site_xpos[sc.site[0], 0] - dd.params["offset"]
+
+    assert drive([1.2, 0.01, 0.0005]) > 0.3  # 2 s at 0.2 m/s
+    assert abs(drive([0.0, 0.0, 0.0])) < 0.01  # no friction, no motion: wheels spin in place
+
+
+@pytest.mark.parametrize("kind", ["stop", "bias"])
+def test_diffdrive_faults_act_on_the_wheels(kind):
+    s = make(scenario_dict())
+    dd = robots.get("diffdrive")
+    sc = scene.compose(dd, np.asarray(s.team.initial_positions))
+    data = mujoco.MjData(sc.model)
+    adapter = dd.adapter(sc, data)
+    inj = sim_faults.ActuatorFaults(
+        sc.model, (scenario.Fault(1, kind, 1.0, np.array([0.1, -0.1]), 0.1),), sc.actuator, adapter
+    )
+    vel = np.zeros(6)
+    u = np.tile([0.15, 0.05], (4, 1))
+    for k in range(400):
+        inj.apply(k * 0.01)
+        data.ctrl[sc.actuator.ravel()] = adapter.command(u).ravel()
+        mujoco.mj_step(sc.model, data, nstep=5)
+    v = []
+    for site in sc.site:
+        mujoco.mj_objectVelocity(sc.model, data, mujoco.mjtObj.mjOBJ_SITE, int(site), vel, 0)
+        v.append(vel[3:5].copy())
+    v = np.array(v)
+    assert np.abs(v[[0, 2, 3]] - u[[0, 2, 3]]).max() < 0.01  # healthy ones follow u
+    if kind == "stop":
+        assert np.linalg.norm(v[1]) < 0.005  # wheels locked by the brakes
+        assert np.allclose(sc.model.actuator_gainprm[sc.actuator[1], 0], 0.0)
+    else:
+        assert np.abs(v[1] - (u[1] + [0.1, -0.1])).max() < 0.01  # offset at the control point
+
+
+@pytest.mark.parametrize("name", ["disk", "hexbot", "diffdrive"])
+def test_calibration_measures_the_mismatch_stored_with_the_model(name):
+    cal = calibrate.measure(name)
+    model = robots.get(name)
+    assert cal.smooth_max <= cal.all_max and cal.smooth_p99 <= cal.smooth_max
+    assert cal.all_max > 0.1  # command jumps are far from an integrator
+    assert model.mismatch == pytest.approx(cal.smooth_max, rel=1e-3)
+    assert model.xi_bar == pytest.approx(cal.recommended_xi_bar)
+    assert cal.recommended_xi_bar >= max(calibrate.PAPER_XI_BAR, cal.smooth_max)
+    if name in ("disk", "hexbot"):
+        assert cal.smooth_max < 0.003  # kv / m ≈ 100 1/s: a 10 ms lag (NOTES 14)
+
+
+def test_calibrate_cli_writes_into_a_copy(tmp_path, capsys):
+    path = tmp_path / "boxbot.xml"
+    path.write_text(BOX_ROBOT)
+    assert calibrate.main([str(path), "--write"]) == 0
+    out = capsys.readouterr().out
+    assert "smooth commands" in out and "recommended xi_bar" in out
+    model = robots.get(str(path))
+    assert 0 < model.mismatch < 0.005 and model.xi_bar == 0.005
+    assert calibrate.main(["tank"]) == 2
+
+
+def test_a_low_xi_bar_for_the_model_is_warned_about(tmp_path, capsys):
+    d = scenario_dict()
+    d["noise"]["xi_bar"] = 0.005
+    d["duration"] = 6.0
+    d["faults"] = []
+    d["team"]["robot_model"] = "diffdrive"
+    path = tmp_path / "low.toml"
+    path.write_text(_toml(d))
+    assert run.main([str(path), "--out", str(tmp_path / "o"), "--no-video", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: noise.xi_bar = 0.005 m/s is below the diffdrive model's measured" in out
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["xi_bar"] == 0.005 and summary["xi_bar_source"] == "scenario"
+    assert any("below the diffdrive model" in w for w in summary["warnings"])
+
+
+def _toml(d, prefix=""):
+    """A tiny TOML writer for the scenario dicts used here."""
+    lines, tables = [], []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            tables.append((k, v))
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            tables.append((k, v))
+        else:
+            lines.append(f"{k} = {json.dumps(v)}")
+    for k, v in tables:
+        name = f"{prefix}{k}"
+        if isinstance(v, list):
+            for item in v:
+                lines.append(f"\n[[{name}]]")
+                lines.append(_toml(item, f"{name}."))
+        else:
+            lines.append(f"\n[{name}]")
+            lines.append(_toml(v, f"{name}."))
+    return "\n".join(lines)
+
+
+@pytest.mark.parametrize("model", ["hexbot", "diffdrive"])
+def test_paper_case_outcome_with_every_robot_model(model):
+    s = scenario.load("paper_case").with_overrides(robot_model=model)
+    r = loop.simulate(s)
+    out = r.summary
+    assert out["status"] == "ok" and out["warnings"] == []
+    d1 = [d for d in out["detections"] if d["robot"] == 1]
+    assert sorted(d["by"] for d in d1) == [1, 2, 3, 4]
+    assert out["detections"] == d1  # nobody else flagged
+    assert [e["robot"] for e in out["exclusions"]] == [1]
+    tri = r.log["x"][-1, 1:]
+    sides = np.linalg.norm(tri - np.roll(tri, -1, axis=0), axis=1)
+    assert np.all(np.abs(sides - 0.5) <= 0.02), sides
+    assert out["min_obstacle_clearance"] > 0.0  # no hull ever touches a cylinder
+    assert out["margin"] < 1
+
+
+def test_a_fourth_model_from_an_mjcf_file(tmp_path):
+    """The README's recipe: write a robot file, calibrate it, run paper_case with it."""
+    path = tmp_path / "boxbot.xml"
+    path.write_text(BOX_ROBOT)
+    assert calibrate.main([str(path), "--write"]) == 0
+    out = tmp_path / "run"
+    code = run.main(
+        [
+            "paper_case",
+            "--robot",
+            str(path),
+            "--duration",
+            "44",
+            "--out",
+            str(out),
+            "--no-video",
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["robot_model"] == str(path)
+    assert {d["robot"] for d in summary["detections"]} <= {1}
+    assert summary["min_obstacle_clearance"] > 0.0
