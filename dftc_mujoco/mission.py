@@ -166,26 +166,25 @@ def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:
     segments, length = _filleted_path(path.waypoints, path.corner_radius)
     k = round(duration / dt) + 1
     t = np.arange(k) * dt
-    # Integrate ds/dt = v * ramp(t) * min(1, (L - s)/(v T_r)) with a fine step.
-    fine = 10
-    h = dt / fine
-    s = np.zeros(k)
-    sdot = np.zeros(k)
-    cur = 0.0
+    # Integrate ds/dt = v * ramp(t) * min(1, (L - s)/(v T_r)) (scipy, dense output).
+    from scipy.integrate import solve_ivp
+
     v, tr = path.speed, path.ramp_time
 
-    def rate(tt: float, ss: float) -> float:
+    def rate(tt: float, ss: np.ndarray) -> np.ndarray:
         ramp = 1.0 if tt >= tr else 0.5 - 0.5 * np.cos(np.pi * tt / tr)
-        brake = min(1.0, max(0.0, (length - ss) / (v * tr)))
+        brake = np.clip((length - ss) / (v * tr), 0.0, 1.0)
         return v * ramp * brake
 
-    for i in range(k):
-        s[i] = cur
-        sdot[i] = rate(t[i], cur)
-        for j in range(fine):  # midpoint rule
-            tt = t[i] + j * h
-            mid = cur + 0.5 * h * rate(tt, cur)
-            cur = min(length, cur + h * rate(tt + 0.5 * h, mid))
+    if length > 0 and duration > 0:
+        sol = solve_ivp(
+            rate, (0.0, t[-1]), [0.0], dense_output=True, max_step=tr, rtol=1e-8, atol=1e-10
+        )
+        s = np.clip(sol.sol(t)[0], 0.0, length)
+    else:
+        s = np.zeros(k)
+    ramp = np.where(t >= tr, 1.0, 0.5 - 0.5 * np.cos(np.pi * np.minimum(t, tr) / tr))
+    sdot = v * ramp * np.clip((length - s) / (v * tr), 0.0, 1.0)
     pos, tan = _eval_path(segments, s)
     pos.setflags(write=False)
     vel = tan * sdot[:, None]

@@ -54,7 +54,10 @@ class FaultEstimator:
         self.phi_hat = (e + self.int_e @ self.K.T) @ self._g_inv.T
         self.applied += self._alpha * (self.phi_hat - self.applied)
         step = self.dt * e
-        if np.isfinite(self.command_limit):
+        # one step changes φ̂ by G⁻¹K·dt·e: only commands within 5 cm/s of the range can
+        # be pushed out of it, so the look-ahead is needed only there
+        near = np.abs(u - self.phi_hat).max() > self.command_limit - 0.05
+        if near:
             # anti-windup: skip the step for robots it would drive further out of range
             ahead = (e + (self.int_e + step) @ self.K.T) @ self._g_inv.T
             now, nxt = (

@@ -54,6 +54,9 @@ class Supervisor:
             return u_g.copy(), np.zeros_like(u_g)
         rel = x[:, None, :] - obstacles[None, :, :]
         dist = np.sqrt(np.einsum("nok,nok->no", rel, rel))
+        if not (dist < activation[None, :]).any():  # nobody near anything: the global input
+            self.active[:] = -1
+            return u_g.copy(), np.zeros_like(u_g)
         r_hat = rel / np.maximum(dist, 1e-9)[..., None]  # obstacle-to-robot unit vector
         radial = np.einsum("nok,nk->no", r_hat, u_g)  # r̂ᵀ u_g,i
         barrier = self.theta * (safe[None, :] - dist)  # θ (d − ‖xᵢ − x_o‖), eq. 17

@@ -110,6 +110,8 @@ class Team:
             np.full(n, config.initial_error_bound),
         )
         self.decision = Decision(n, config.detection_window, config.dt)
+        self._others = ~np.eye(n, dtype=bool)  # i ≠ k
+        self.active = np.ones(n, bool)  # member of the team, on the original robot axis
         self.first_detection: dict[int, float] = {}  # robot id -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot id -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
@@ -133,7 +135,8 @@ class Team:
         """
         cfg = self.config
         events: list[dict[str, Any]] = []
-        self._exclusions_due(t, events)
+        if self.pending:
+            self._exclusions_due(t, events)
         mem = self.members
         m = len(mem)
 
@@ -143,19 +146,25 @@ class Team:
         x_hat = self.state.estimate()  # eq. 21
         u_hat_g = controller.collective_input(x_hat, x_d, xd_dot, cfg.kc)  # eq. 15
         u_g = controller.own_input(u_hat_g)  # eq. 16
+        whole = m == self.n
+        x_own = x_m if whole else x_m[mem]
         obs_p, obs_d, obs_a = self._obstacles(sensed_bodies)
-        u_mem, delta_u = self.supervisor.step(x_m[mem], u_g, obs_p, obs_d, obs_a)
-        r = observer.residual(self.state, self.messages, x_m[mem])  # eq. 35
+        u_mem, delta_u = self.supervisor.step(x_own, u_g, obs_p, obs_d, obs_a)
+        r = observer.residual(self.state, self.messages, x_own)  # eq. 35
         observer.update(self.state, r, u_hat_g, delta_u, u_mem, cfg.ko, cfg.dt)
 
-        u = np.zeros((self.n, 2))
-        u[mem] = u_mem  # an excluded robot is told to stay where it is
+        if whole:
+            u = u_mem
+        else:
+            u = np.zeros((self.n, 2))
+            u[mem] = u_mem  # an excluded robot is told to stay where it is
         r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         mu = self.thresholds.mu(t)
         if cfg.fdir:
             u_bar = self.estimator.step(x_m, u)  # eqs. 28-31, nominal u (NOTES 2)
             raised = self.decision.update(r_norm, mu)
-            self._report(t, raised, events)
+            if raised.any():
+                self._report(t, raised, events)
         else:
             u_bar = u
 
@@ -169,11 +178,11 @@ class Team:
             threshold=_expand(mu, mem, self.n),
             flag=_expand(self.decision.flag, mem, self.n, fill=False),
             flagged=_expand(
-                (self.decision.flag & ~np.eye(m, dtype=bool)).any(axis=0), mem, self.n, fill=False
+                (self.decision.flag & self._others[:m, :m]).any(axis=0), mem, self.n, fill=False
             ),
             reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
             avoiding=self._avoiding(),
-            active=_expand(np.ones(m, bool), mem, self.n, fill=False),
+            active=self.active.copy(),
             events=events,
         )
         return out
@@ -246,6 +255,7 @@ class Team:
         bound = self.thresholds.bracket(t)[keep]  # ‖ỹ*_k(t_r)‖ for the remaining k
         old_offsets, _ = self.plan.at(t)
         self.gone = np.append(self.gone, self.members[p])
+        self.active[self.members[p]] = False
         self.members = self.members[keep]
         self.graph = self.graph.without(p)
         s = self.state
@@ -264,8 +274,10 @@ class Team:
     def _avoiding(self) -> np.ndarray:
         """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
         n_cyl = len(self.config.obstacle_position)
-        gone = self.gone
         act = self.supervisor.active
+        if (act < 0).all():
+            return np.full(self.n, -1)
+        gone = self.gone
         label = np.where(
             act >= n_cyl, n_cyl + gone[np.clip(act - n_cyl, 0, None)] if len(gone) else act, act
         )
@@ -290,8 +302,8 @@ def _expand(
 ) -> np.ndarray:
     """Place a members-indexed array on the original robot axis (and axes)."""
     m = len(members)
-    if len(members) == n:
-        return a.copy()
+    if m == n:
+        return a  # the whole team: no copy (callers copy what they keep)
     dtype = bool if fill is False else float
     if a.ndim - len(tail) == 1:
         out = np.full((n, *a.shape[1:]), fill, dtype=dtype)

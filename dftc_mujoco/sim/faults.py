@@ -41,6 +41,11 @@ class ActuatorFaults:
         self.stopped = np.zeros(len(actuator), bool)
         self.started = [False] * len(faults)
         self._bias_robots = sorted({f.robot for f in faults if f.kind == "bias"})
+        bias = [f for f in faults if f.kind == "bias"]
+        self._b_robot = np.array([f.robot for f in bias], dtype=int)
+        self._b_t = np.array([f.t for f in bias])
+        self._b_tau = np.array([f.time_constant for f in bias])
+        self._b_value = np.array([f.value for f in bias]).reshape(-1, 2)
 
     def apply(self, t: float) -> list[Fault]:
         """Write the actuator parameters for time ``t``; returns the faults that start now."""
@@ -64,11 +69,14 @@ class ActuatorFaults:
         return new
 
     def bias_phi(self, t: float) -> np.ndarray:
-        """Sum of the bias faults on each robot at time ``t``, (N, 2)."""
+        """Sum of the bias faults on each robot at time ``t``, (N, 2) (profile of bias_profile)."""
         phi = np.zeros((len(self.actuator), 2))
-        for f in self.faults:
-            if f.kind == "bias":
-                phi[f.robot] += bias_profile(f, t)
+        if len(self._b_robot):
+            age = t - self._b_t
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                shape = np.where(self._b_tau > 0, 1.0 - np.exp(-age / self._b_tau), 1.0)
+            shape = np.where(age >= 0, shape, 0.0)
+            np.add.at(phi, self._b_robot, shape[:, None] * self._b_value)
         return phi
 
     def phi(self, t: float, ctrl: np.ndarray) -> np.ndarray:

@@ -18,9 +18,13 @@ _WARNINGS = [
 
 def _disk_sample(rng: np.random.Generator, n: int, radius: float, at_bound: bool) -> np.ndarray:
     """n planar vectors, uniform in the disk of ``radius`` (or on its rim if ``at_bound``)."""
-    ang = rng.uniform(0.0, 2.0 * np.pi, n)
-    mag = np.full(n, radius) if at_bound else radius * np.sqrt(rng.uniform(0.0, 1.0, n))
-    return mag[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    r = rng.random((2, n))
+    ang = (2.0 * np.pi) * r[0]
+    mag = radius if at_bound else radius * np.sqrt(r[1])
+    out = np.empty((n, 2))
+    out[:, 0] = mag * np.cos(ang)
+    out[:, 1] = mag * np.sin(ang)
+    return out
 
 
 class Plant:
@@ -80,10 +84,13 @@ class Plant:
             )
         return v[:, 3:5].copy()
 
-    def measure(self) -> np.ndarray:
-        """Each robot's own noisy position x_m,i = x_i + η_i, ‖η_i‖ ≤ η̄ (eqs. 3-4)."""
+    def measure(self, x: np.ndarray | None = None) -> np.ndarray:
+        """Each robot's own noisy position x_m,i = x_i + η_i, ‖η_i‖ ≤ η̄ (eqs. 3-4).
+
+        ``x`` are the true positions if the caller already has them.
+        """
         eta = _disk_sample(self.rng, self.n, self.noise.eta_bar, self.at_bound)
-        return self.positions() + eta
+        return (self.positions() if x is None else x) + eta
 
     def disturbance(self) -> np.ndarray:
         """Advance and return ξ (N, 2), ‖ξᵢ‖ ≤ ξ̄ (eq. 2): one draw per control period."""
