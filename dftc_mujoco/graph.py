@@ -59,3 +59,51 @@ class Graph:
 
         kept = tuple((shift(j), shift(i)) for j, i in self.edges if k not in (j, i))
         return Graph(self.n - 1, kept)
+
+
+# --------------------------------------------------------------------------- generated graphs
+
+
+def ring_with_chords(n: int, chords: tuple[int, ...] = ()) -> Graph:
+    """Directed ring i -> i+1 plus, for each c in ``chords``, i -> i+c (mod n)."""
+    edges = {(i, (i + 1) % n) for i in range(n)}
+    for c in chords:
+        edges |= {(i, (i + c) % n) for i in range(n) if (i + c) % n != i}
+    return Graph(n, tuple(sorted(edges)))
+
+
+def random_strongly_connected(n: int, in_degree: int, rng: np.random.Generator) -> Graph:
+    """A random ring (a random order, so strongly connected) plus random in-edges until
+    every robot hears exactly ``in_degree`` others (at most n − 1)."""
+    d = min(in_degree, n - 1)
+    order = rng.permutation(n)
+    edges = {(int(order[k]), int(order[(k + 1) % n])) for k in range(n)}
+    for i in range(n):
+        have = {j for j, k in edges if k == i}
+        pool = np.array([j for j in range(n) if j != i and j not in have])
+        extra = rng.choice(pool, size=max(0, d - len(have)), replace=False)
+        edges |= {(int(j), i) for j in extra}
+    return Graph(n, tuple(sorted(edges)))
+
+
+def k_nearest(positions: np.ndarray, k: int) -> Graph:
+    """Undirected graph linking each robot to its k nearest (by ``positions``), made
+    connected by joining nearest pairs across components."""
+    n = len(positions)
+    dist = np.linalg.norm(positions[:, None] - positions[None], axis=2)
+    np.fill_diagonal(dist, np.inf)
+    pairs = set()
+    for i in range(n):
+        for j in np.argsort(dist[i])[: min(k, n - 1)]:
+            pairs |= {(i, int(j)), (int(j), i)}
+    g = Graph(n, tuple(sorted(pairs)))
+    while not g.is_strongly_connected():
+        _, labels = connected_components(
+            csr_matrix((np.ones(len(g.edges)), tuple(np.array(g.edges).T)), shape=(n, n)),
+            directed=False,
+        )
+        a = labels == labels[0]
+        sub = np.where(a[:, None] & ~a[None, :], dist, np.inf)
+        i, j = np.unravel_index(np.argmin(sub), sub.shape)
+        g = Graph(n, tuple(sorted(set(g.edges) | {(int(i), int(j)), (int(j), int(i))})))
+    return g

@@ -61,10 +61,33 @@ def polygon_offsets(n_robots: int, side: float, rotation_deg: float = 0.0) -> np
     return radius * np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
 
+def grid_offsets(n_robots: int, spacing: float, rotation_deg: float = 0.0) -> np.ndarray:
+    """Row-major square-ish grid (ceil(√N) columns) of the given spacing, centred."""
+    cols = int(np.ceil(np.sqrt(n_robots)))
+    k = np.arange(n_robots)
+    pts = np.stack([k % cols, -(k // cols)], axis=1) * spacing
+    return _rotate(pts - pts.mean(axis=0), rotation_deg)
+
+
+def line_offsets(n_robots: int, spacing: float, rotation_deg: float = 0.0) -> np.ndarray:
+    """Robots on a line across the x axis (a rank), ``spacing`` apart, centred."""
+    pts = np.stack([np.zeros(n_robots), -np.arange(n_robots) * spacing], axis=1)
+    return _rotate(pts - pts.mean(axis=0), rotation_deg)
+
+
+def _rotate(pts: np.ndarray, deg: float) -> np.ndarray:
+    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
+    return pts @ np.array([[c, s], [-s, c]])
+
+
 def formation_offsets(formation: Formation, n_robots: int) -> np.ndarray:
     """Offsets (N, 2) from the centroid for the scenario's formation shape."""
     if formation.shape == "polygon":
         return polygon_offsets(n_robots, formation.side, formation.rotation)
+    if formation.shape == "grid":
+        return grid_offsets(n_robots, formation.side, formation.rotation)
+    if formation.shape == "line":
+        return line_offsets(n_robots, formation.side, formation.rotation)
     raise ValueError(f"unknown formation shape {formation.shape!r}")
 
 
@@ -193,6 +216,22 @@ def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:
 
 
 # --------------------------------------------------------------------------- re-planning
+
+
+def replan(formation: Formation, old: np.ndarray) -> np.ndarray:
+    """The same formation for the robots left (rows of ``old``), assigned to minimise travel.
+
+    A polygon may also rotate (:func:`replan_polygon`); a grid or a line keeps
+    its orientation and only the robot-to-slot assignment is optimised.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    if formation.shape == "polygon":
+        return replan_polygon(old, formation.side)
+    target = formation_offsets(formation, len(old))
+    cost = ((old[:, None, :] - target[None, :, :]) ** 2).sum(axis=2)
+    _, cols = linear_sum_assignment(cost)
+    return target[cols]
 
 
 def replan_polygon(old: np.ndarray, side: float, n_angles: int = 90) -> np.ndarray:

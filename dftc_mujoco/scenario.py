@@ -54,6 +54,7 @@ class Team:
     robot_model: str
     initial_positions: np.ndarray  # (N, 2)
     graph: Graph
+    graph_family: str = "explicit"  # or ring_chords, random, knn when generated
 
 
 @dataclass(frozen=True, eq=False)
@@ -387,10 +388,10 @@ def from_dict(data: dict[str, Any], source: str = "<memory>") -> Scenario:
     seed = top.integer("seed", 0, low=0)
 
     physics = _physics(top.table("physics", {}))
-    team = _team(top.table("team"))
+    mission = _mission(top.table("mission"), duration)
+    team = _team(top.table("team"), mission, seed)
     gains = _gains(top.table("gains"))
     noise = _noise(top.table("noise"))
-    mission = _mission(top.table("mission"), duration)
     obstacles = tuple(_obstacle(t) for t in top.tables("obstacles"))
     faults = tuple(_fault(t, team.robots, duration) for t in top.tables("faults"))
     fdir = _fdir(top.table("fdir", {}))
@@ -441,17 +442,76 @@ def _physics(t: _Table) -> Physics:
     return Physics(timestep, period, log_rate, contacts)
 
 
-def _team(t: _Table) -> Team:
+def _team(t: _Table, mission: Mission, seed: int) -> Team:
     n = t.integer("robots", low=2)
     model = t.string("robot_model", "disk")
-    x0 = t.array(
-        "initial_positions", (n, N_DIM), what=f"a list of {n} [x, y] pairs (team.robots = {n})"
-    )
-    raw_edges = t.raw("graph")
+    x0 = _initial_positions(t, n, mission, seed)
+    raw = t.raw("graph")
+    family = "explicit"
+    if isinstance(raw, dict):
+        graph, family = _generated_graph(t.table("graph"), n, x0, seed)
+    else:
+        graph = _edge_list(t, raw, n)
+    if not graph.is_strongly_connected():
+        t.fail(
+            "graph",
+            "expected a strongly connected graph (a directed path from every "
+            "robot to every other); the observer cannot converge otherwise",
+        )
+    t.finish()
+    return Team(n, model, x0, graph, family)
+
+
+def _initial_positions(t: _Table, n: int, mission: Mission, seed: int) -> np.ndarray:
+    """A list of N [x, y], or {layout = "formation", jitter = m}: the planned slots at t = 0."""
+    raw = t.raw("initial_positions")
+    if not isinstance(raw, dict):
+        return t.array(
+            "initial_positions",
+            (n, N_DIM),
+            what=f"a list of {n} [x, y] pairs (team.robots = {n}), or a table "
+            '{layout = "formation", jitter = ...}',
+        )
+    lay = t.table("initial_positions")
+    lay.string("layout", choices=("formation",))
+    jitter = lay.number("jitter", 0.0, low=0.0, strict_low=False)
+    lay.finish()
+    from .mission import formation_offsets
+
+    start = np.asarray(mission.centroid.waypoints[0])
+    rng = np.random.default_rng([seed, 7])
+    pts = start + formation_offsets(mission.formation, n) + rng.uniform(-jitter, jitter, (n, 2))
+    return _ro(pts)
+
+
+def _generated_graph(g: _Table, n: int, x0: np.ndarray, seed: int) -> tuple[Graph, str]:
+    """{family = "ring_chords", chords = [...]}, {family = "random", in_degree = d}
+    or {family = "knn", k = k}."""
+    from .graph import k_nearest, random_strongly_connected, ring_with_chords
+
+    family = g.string("family", choices=("ring_chords", "random", "knn"))
+    if family == "ring_chords":
+        chords = g.raw("chords", [])
+        if not isinstance(chords, list) or not all(
+            isinstance(c, int) and not isinstance(c, bool) and 1 <= c < n for c in chords
+        ):
+            g.fail("chords", f"expected a list of integers 1..{n - 1}, got {_describe(chords)}")
+        graph = ring_with_chords(n, tuple(chords))
+    elif family == "random":
+        d = g.integer("in_degree", low=1)
+        graph = random_strongly_connected(n, d, np.random.default_rng([seed, 11]))
+    else:
+        graph = k_nearest(np.asarray(x0), g.integer("k", low=1))
+    g.finish()
+    return graph, family
+
+
+def _edge_list(t: _Table, raw_edges: Any, n: int) -> Graph:
     if not isinstance(raw_edges, list) or not raw_edges:
         t.fail(
             "graph",
-            f"expected a non-empty list of [from, to] robot pairs, got {_describe(raw_edges)}",
+            f"expected a non-empty list of [from, to] robot pairs or a table "
+            f"{{family = ...}}, got {_describe(raw_edges)}",
         )
     edges: list[tuple[int, int]] = []
     for k, e in enumerate(raw_edges):
@@ -471,15 +531,7 @@ def _team(t: _Table) -> Team:
         if (a - 1, b - 1) in edges:
             t.fail(key, f"edge [{a}, {b}] appears twice")
         edges.append((a - 1, b - 1))
-    graph = Graph(n, tuple(edges))
-    if not graph.is_strongly_connected():
-        t.fail(
-            "graph",
-            "expected a strongly connected graph (a directed path from every "
-            "robot to every other); the observer cannot converge otherwise",
-        )
-    t.finish()
-    return Team(n, model, x0, graph)
+    return Graph(n, tuple(edges))
 
 
 def _gains(t: _Table) -> Gains:
@@ -518,7 +570,7 @@ def _mission(t: _Table, duration: float) -> Mission:
     c.finish()
     f = t.table("formation")
     formation = Formation(
-        shape=f.string("shape", "polygon", choices=("polygon",)),
+        shape=f.string("shape", "polygon", choices=("polygon", "grid", "line")),
         side=f.number("side", low=0.0),
         rotation=f.number("rotation", 0.0),
     )

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..graph import Graph
-from ..mission import FormationPlan, formation_offsets, replan_polygon
+from ..mission import FormationPlan, formation_offsets, replan
 from ..scenario import Formation
 from . import controller, observer
 from .fault_estimator import FaultEstimator
@@ -268,7 +268,7 @@ class Team:
         self.decision.drop(p)
         cfg = self.config
         self.thresholds = Thresholds(self.graph, cfg.ko, cfg.eta_bar, cfg.xi_bar, bound, t0=t)
-        target = replan_polygon(old_offsets[keep], cfg.formation.side)
+        target = replan(cfg.formation, old_offsets[keep])
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
 
     def _avoiding(self) -> np.ndarray:
