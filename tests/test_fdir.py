@@ -132,3 +132,13 @@ def test_exclusion_cancelled_when_nobody_flags_at_t_r():
     assert {e["robot"] for e in events if e["kind"] == "detection"} == {2}
     assert "exclusion_cancelled" in kinds and "exclusion" not in kinds
     assert list(team.members) == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_batched_kappa_lambda_agree_with_the_per_robot_ones(name):
+    g = SMALL[name]
+    kappa, lam = fdir.decay_bounds(g, 6.0)
+    for k in range(g.n):
+        k1, l1 = fdir.decay_bound(fdir.observer_matrix(g, 6.0, k))
+        assert lam[k] == pytest.approx(l1)
+        assert k1 * (1 - 1e-3) <= kappa[k] <= k1 * 1.002  # both bound the sup, within 0.2 %

@@ -59,7 +59,7 @@ def _integrate(
     return x
 
 
-@pytest.mark.parametrize("n", [4, 12])
+@pytest.mark.parametrize("n", [4, 12, 20])  # 20: the sparse-message path
 def test_update_of_robot_i_ignores_non_neighbours(n):
     """Robot i's command, residual, thresholds, flags and next state use only its own
     data and its in-neighbours' messages: changing anything else leaves them bit-identical."""
@@ -98,9 +98,12 @@ def test_update_of_robot_i_ignores_non_neighbours(n):
                 assert same, f"robot {i + 1} used robot {k + 1}'s data without a link"
 
 
-def test_messages_sum_matches_laplacian():
-    g = _graph(12)
+@pytest.mark.parametrize("n", [12, observer.SPARSE_FROM, 40])
+def test_messages_sum_matches_laplacian(n):
+    """Both paths (gather and sparse matrix) compute −(L ⊗ I) ŷ."""
+    g = _graph(n)
     msg = observer.Messages(g.edges, g.n)
+    assert (msg.adjacency is not None) == (n >= observer.SPARSE_FROM)
     y = np.random.default_rng(0).normal(size=(g.n, g.n, 2))
     expected = -np.einsum("ij,jkd->ikd", g.laplacian(), y)
     assert np.allclose(msg.neighbour_sum(y), expected)

@@ -35,6 +35,9 @@ class ObserverState:
         return np.add(self.y_hat, self.int_u_hat, out=out)
 
 
+SPARSE_FROM = 16  # team size from which messages are summed with a sparse matrix
+
+
 class Messages:
     """Delivers the broadcast ŷ along the graph's edges only.
 
@@ -51,11 +54,21 @@ class Messages:
         # robots that hear someone, and where their incoming edges start in src
         self.rows = np.flatnonzero(self.in_degree > 0)
         self.starts = np.searchsorted(dst, self.rows)
+        # large teams: a sparse adjacency (non-zeros only on the edges) sums the messages
+        # without gathering a copy of every one (N = 100: 142 -> ~20 us a step)
+        self.adjacency = None
+        if n >= SPARSE_FROM and len(self.src):
+            from scipy.sparse import csr_matrix
+
+            self.adjacency = csr_matrix((np.ones(len(self.src)), (dst, self.src)), shape=(n, n))
 
     def neighbour_sum(self, y_hat: np.ndarray) -> np.ndarray:
         """Σ_{j∈Nᵢ} (ʲŷ − ⁱŷ) for every robot i, shape (N, N, n)."""
         out = -self.in_degree[:, None, None] * y_hat
-        if len(self.src):
+        if self.adjacency is not None:
+            n = len(y_hat)
+            out += (self.adjacency @ y_hat.reshape(n, -1)).reshape(y_hat.shape)
+        elif len(self.src):
             received = np.add.reduceat(y_hat[self.src], self.starts, axis=0)
             if len(self.rows) == len(out):
                 out += received
