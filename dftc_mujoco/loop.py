@@ -89,6 +89,7 @@ def team_config(
         phi_low_pass=f.phi_low_pass,
         command_limit=command_limit,
         fdir=f.enabled,
+        compensate=f.compensate,
     )
 
 
@@ -144,6 +145,9 @@ def simulate(
         bias_only[f.robot] &= f.kind == "bias"
     margin = {"healthy": 0.0, "compensated": 0.0}
     settle = 5.0
+    changes = sorted({f.t for f in s.faults} | {f.t + settle for f in s.faults})
+    next_change = 0.0
+    healthy = settled = np.zeros(n, bool)
 
     obs_pos = team.config.obstacle_position
     obs_gap = np.array([o.radius for o in s.obstacles]) + model.footprint_radius
@@ -178,12 +182,15 @@ def simulate(
                 events.add(t, e.pop("kind"), **{k_: v for k_, v in e.items() if k_ != "t"})
             if s.fdir.enabled:
                 ratio = out.residual / out.threshold  # NaN for excluded robots: fmax skips
-                healthy = fault_start > t
+                if t >= next_change:  # the masks change only at fault instants (+ settle)
+                    healthy = fault_start > t
+                    settled = bias_only & (fault_start + settle <= t)
+                    later = [c for c in changes if c > t]
+                    next_change = min(later) if later else math.inf
                 if healthy.any():
                     margin["healthy"] = max(
                         margin["healthy"], float(np.fmax.reduce(ratio[:, healthy], axis=None))
                     )
-                settled = bias_only & (fault_start + settle <= t)
                 if settled.any():
                     margin["compensated"] = max(
                         margin["compensated"], float(np.fmax.reduce(ratio[:, settled], axis=None))

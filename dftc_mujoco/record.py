@@ -15,16 +15,17 @@ from typing import Any
 
 import numpy as np
 
-# name -> (shape after the time axis, in units of N; dtype; fill)
+# name -> (shape after the time axis, in units of N; dtype; fill). The N × N fields are
+# float32 (7 significant digits): at N = 100, 60 s at 50 Hz they take 480 MB, not 960.
 LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
     "t": ("", np.float64, np.nan),
     "x": ("N2", np.float64, np.nan),
-    "x_hat": ("NN2", np.float64, np.nan),
+    "x_hat": ("NN2", np.float32, np.nan),
     "u": ("N2", np.float64, np.nan),
     "phi": ("N2", np.float64, np.nan),
     "phi_hat": ("N2", np.float64, np.nan),
-    "residual": ("NN", np.float64, np.nan),
-    "threshold": ("NN", np.float64, np.nan),
+    "residual": ("NN", np.float32, np.nan),
+    "threshold": ("NN", np.float32, np.nan),
     "reactive": ("N", np.bool_, False),
     "active": ("N", np.bool_, False),
     "sigma_err": ("2", np.float64, np.nan),

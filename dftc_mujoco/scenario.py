@@ -144,6 +144,7 @@ class Fdir:
     excluded_activation_distance: float = 0.45
     phi_low_pass: float = 0.0
     enabled: bool = True
+    compensate: bool = True  # false: φ̂ is estimated and logged but not applied
 
 
 @dataclass(frozen=True, eq=False)
@@ -631,6 +632,7 @@ def _fdir(t: _Table) -> Fdir:
         ),
         phi_low_pass=t.number("phi_low_pass", 0.0, low=0.0, strict_low=False),
         enabled=t.boolean("enabled", True),
+        compensate=t.boolean("compensate", True),
     )
     t.finish()
     return f

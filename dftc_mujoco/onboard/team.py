@@ -54,6 +54,7 @@ class TeamConfig:
     phi_low_pass: float = 0.0
     command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
+    compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
 
 
 @dataclass
@@ -162,6 +163,8 @@ class Team:
         mu = self.thresholds.mu(t)
         if cfg.fdir:
             u_bar = self.estimator.step(x_m, u)  # eqs. 28-31, nominal u (NOTES 2)
+            if not cfg.compensate:
+                u_bar = u
             raised = self.decision.update(r_norm, mu)
             if raised.any():
                 self._report(t, raised, events)

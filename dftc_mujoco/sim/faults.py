@@ -41,6 +41,7 @@ class ActuatorFaults:
         self.stopped = np.zeros(len(actuator), bool)
         self.started = [False] * len(faults)
         self._bias_robots = sorted({f.robot for f in faults if f.kind == "bias"})
+        self._written: np.ndarray | None = None  # bias terms last written
         bias = [f for f in faults if f.kind == "bias"]
         self._b_robot = np.array([f.robot for f in bias], dtype=int)
         self._b_t = np.array([f.t for f in bias])
@@ -61,11 +62,14 @@ class ActuatorFaults:
         phi = self.bias_phi(t)
         ids = self.actuator[self._bias_robots]
         # adapters map the whole team (a wheel offset depends on each robot's heading)
-        offsets = self.adapter.bias(phi)[self._bias_robots]
-        self.model.actuator_biasprm[ids, 0] = self.kv[self._bias_robots] * offsets
-        stop = self.actuator[self.stopped]
-        self.model.actuator_gainprm[stop, 0] = 0.0
-        self.model.actuator_biasprm[stop, 0] = 0.0
+        offsets = self.kv[self._bias_robots] * self.adapter.bias(phi)[self._bias_robots]
+        if self._written is None or not np.array_equal(offsets, self._written):
+            self.model.actuator_biasprm[ids, 0] = offsets
+            self._written = offsets
+        if self.stopped.any():
+            stop = self.actuator[self.stopped]
+            self.model.actuator_gainprm[stop, 0] = 0.0
+            self.model.actuator_biasprm[stop, 0] = 0.0
         return new
 
     def bias_phi(self, t: float) -> np.ndarray:
@@ -98,3 +102,4 @@ class ActuatorFaults:
         self.model.actuator_biasprm[:, 0] = self._bias0
         self.stopped[:] = False
         self.started = [False] * len(self.faults)
+        self._written = None
