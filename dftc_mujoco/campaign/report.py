@@ -1,0 +1,185 @@
+"""Campaign report: ``report.md`` and figures, computed from the result rows alone."""
+
+from __future__ import annotations
+
+import os
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+
+def _pct(a: float | None) -> str:
+    return "n/a" if a is None else f"{100 * a:.1f} %"
+
+
+def _rate(xs: list[bool]) -> float | None:
+    return float(np.mean(xs)) if xs else None
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The campaign's figures of merit (all rates are fractions)."""
+    ok = [r for r in rows if r.get("status") == "ok"]
+    stops = [r for r in ok if r["fault_kind"] == "stop"]
+    biases = [r for r in ok if r["fault_kind"] == "bias"]
+    clean = [r for r in ok if r["fault_kind"] == "none"]
+    delays = [r["delay_first"] for r in ok if r.get("delay_first") is not None]
+    delays_last = [r["delay_last"] for r in ok if r.get("delay_last") is not None]
+    robot_hours = sum(r["robots"] * r["duration"] for r in ok) / 3600.0
+    false_robots = sum(r["false_alarm_robots"] for r in ok)
+    dt_max = max((r["dt_d_max"] for r in ok), default=None)
+    excluded_stop = [r for r in stops if r["excluded_faulty"]]
+    return {
+        "runs": len(rows),
+        "ok": len(ok),
+        "failed": len(rows) - len(ok),
+        "stop_runs": len(stops),
+        "detection_rate": _rate([r["detected"] for r in stops]),
+        "detected_by_all_rate": _rate([r["detected_by"] == r["robots"] for r in stops]),
+        "missed": sum(not r["detected"] for r in stops),
+        "bias_runs": len(biases),
+        "bias_detection_rate": _rate([r["detected"] for r in biases]),
+        "fault_free_runs": len(clean),
+        "false_alarm_rate_per_run": _rate([r["false_alarms"] > 0 for r in ok]),
+        "false_alarm_rate_fault_free": _rate([r["false_alarms"] > 0 for r in clean]),
+        "false_alarms_per_robot_hour": false_robots / robot_hours if robot_hours else None,
+        "wrong_isolations": sum(r["wrong_isolation"] for r in ok),
+        "delay_median": float(np.median(delays)) if delays else None,
+        "delay_p95": float(np.percentile(delays, 95)) if delays else None,
+        "delay_max": float(np.max(delays)) if delays else None,
+        "delay_last_max": float(np.max(delays_last)) if delays_last else None,
+        "dt_d_max": dt_max,
+        "success_after_recovery": _rate([r["success"] for r in excluded_stop]),
+        "success_all": _rate([r["success"] for r in ok]),
+    }
+
+
+def _by(rows: list[dict[str, Any]], *keys: str) -> dict[tuple, list[dict[str, Any]]]:
+    groups: dict[tuple, list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        groups[tuple(r[k] for k in keys)].append(r)
+    return dict(sorted(groups.items()))
+
+
+def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = "") -> Path:
+    """Write ``out/report.md`` and ``out/figures/*.png``; returns the report's path."""
+    s = summarise(rows)
+    figs = out / "figures"
+    figs.mkdir(parents=True, exist_ok=True)
+    ok = [r for r in rows if r.get("status") == "ok"]
+    rph = s["false_alarms_per_robot_hour"]
+    per_hour = "n/a" if rph is None else f"{rph:.3f}"
+    lines = [
+        f"# Campaign {title}",
+        "",
+        description,
+        "",
+        f"{s['runs']} runs: {s['ok']} finished, {s['failed']} failed "
+        "(failed runs keep their error in results.jsonl).",
+        "",
+        "| measure | value |",
+        "|---|---|",
+        f"| stop faults: detection rate (faulty robot flagged by someone) | "
+        f"{_pct(s['detection_rate'])} of {s['stop_runs']} |",
+        f"| stop faults: flagged by every teammate | {_pct(s['detected_by_all_rate'])} |",
+        f"| missed detections (stop faults never flagged) | {s['missed']} |",
+        f"| bias faults: detection rate | {_pct(s['bias_detection_rate'])} of {s['bias_runs']} |",
+        f"| false alarms: runs with any healthy robot flagged | "
+        f"{_pct(s['false_alarm_rate_per_run'])} |",
+        f"| false alarms in fault-free runs | {_pct(s['false_alarm_rate_fault_free'])} of "
+        f"{s['fault_free_runs']} |",
+        f"| false alarms per robot-hour | {per_hour} |",
+        f"| wrong isolations (a healthy robot excluded) | {s['wrong_isolations']} |",
+    ]
+    if s["delay_median"] is not None:
+        lines.append(
+            f"| detection delay, first flag: median / 95th pct / max | "
+            f"{s['delay_median']:.2f} / {s['delay_p95']:.2f} / {s['delay_max']:.2f} s "
+            f"(Δt_d,max = {s['dt_d_max']:g} s) |"
+        )
+        lines.append(f"| detection delay, last flag: max | {s['delay_last_max']:.2f} s |")
+    lines.append(
+        f"| mission success after recovery (final errors < 5 cm) | "
+        f"{_pct(s['success_after_recovery'])} |"
+    )
+    lines.append("")
+    if ok and any(r["delay_first"] is not None for r in ok):
+        d = [r["delay_first"] for r in ok if r["delay_first"] is not None]
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.hist(d, bins=min(30, max(5, len(d) // 2)), color="tab:blue")
+        if s["dt_d_max"]:
+            ax.axvline(s["dt_d_max"], color="k", ls="--", label="Δt_d,max")
+            ax.legend()
+        ax.set_xlabel("first detection − fault [s]")
+        ax.set_ylabel("runs")
+        ax.set_title("Detection delay")
+        _save(fig, figs / "delays.png")
+        lines += ["![detection delays](figures/delays.png)", ""]
+    biases = [r for r in ok if r["fault_kind"] == "bias"]
+    if biases:
+        mags = np.array([r["bias_magnitude"] for r in biases])
+        hit = np.array([r["detected"] for r in biases], float)
+        edges = np.linspace(mags.min(), mags.max() + 1e-9, min(10, len(biases)) + 1)
+        idx = np.clip(np.digitize(mags, edges) - 1, 0, len(edges) - 2)
+        centre = (edges[:-1] + edges[1:]) / 2
+        rate = [hit[idx == b].mean() if (idx == b).any() else np.nan for b in range(len(centre))]
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        ax.plot(centre, rate, "o-")
+        ax.set_xlabel("bias magnitude [m/s]")
+        ax.set_ylabel("detection rate")
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title("Detection against bias magnitude")
+        _save(fig, figs / "bias_detection.png")
+        smallest = mags[hit > 0].min() if hit.any() else None
+        largest_missed = mags[hit == 0].max() if (hit == 0).any() else None
+        lines += [
+            f"Smallest bias detected: {'none' if smallest is None else f'{smallest:.3f} m/s'}; "
+            f"largest bias missed: "
+            f"{'none' if largest_missed is None else f'{largest_missed:.3f} m/s'}.",
+            "",
+            "![bias detection](figures/bias_detection.png)",
+            "",
+        ]
+    groups = _by([r for r in ok if r["fault_kind"] == "stop"], "robots", "graph_family")
+    if len(groups) > 1:
+        lines += [
+            "| N | graph | stop runs | detected | by all | median delay [s] |",
+            "|---|---|---|---|---|---|",
+        ]
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        for fam in sorted({k[1] for k in groups}):
+            ns = sorted(k[0] for k in groups if k[1] == fam)
+            rates = [np.mean([r["detected"] for r in groups[(n, fam)]]) for n in ns]
+            ax.plot(ns, rates, "o-", label=fam)
+        for (n, fam), rs in groups.items():
+            d = [r["delay_first"] for r in rs if r["delay_first"] is not None]
+            lines.append(
+                f"| {n} | {fam} | {len(rs)} | {_pct(_rate([r['detected'] for r in rs]))}"
+                f" | {_pct(_rate([r['detected_by'] == r['robots'] for r in rs]))} | "
+                f"{'n/a' if not d else f'{np.median(d):.2f}'} |"
+            )
+        ax.set_xlabel("N")
+        ax.set_ylabel("stop detection rate")
+        ax.set_ylim(-0.05, 1.05)
+        ax.legend()
+        ax.set_title("Detection against team size and graph")
+        _save(fig, figs / "scale.png")
+        lines += ["", "![scale](figures/scale.png)", ""]
+    path = out / "report.md"
+    tmp = out / ".report.md.tmp"
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def _save(fig, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    os.replace(tmp, path)

@@ -1,0 +1,224 @@
+"""Campaign specs (TOML) and the parameters of each run.
+
+name = "stop_every_robot"
+scenario = "paper_case"          # base scenario: name or path (relative to this file)
+runs = 40
+seed = 7                         # campaign seed: run i draws from (seed, i)
+[set]                            # merged into the base scenario for every run
+duration = 60.0
+[vary]
+seed = true                      # a different scenario seed per run (default)
+fault_kind = ["stop"]            # choices among stop, bias, none
+faulty_robot = "any"             # or a list of robot numbers
+fault_time = [15.0, 45.0]        # uniform range [s]
+bias_magnitude = [0.05, 1.5]     # uniform range [m/s], random direction
+robots = [4, 8, 16]              # choices of N (layout and graph then generated)
+graph_family = ["ring_chords", "random", "knn"]
+eta_bar = [0.0005, 0.002]        # uniform ranges
+xi_bar = [0.002, 0.01]
+[vary.graph]                     # parameters of generated graphs
+chords = [2]
+in_degree = 2
+k = 2
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import scenario as scenario_mod
+from ..errors import ScenarioError
+from ..scenario import _describe, _Table
+
+FAULT_KINDS = ("stop", "bias", "none")
+FAMILIES = ("ring", "ring_chords", "random", "knn")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A validated campaign spec."""
+
+    name: str
+    description: str
+    base: dict[str, Any]  # the base scenario as parsed TOML
+    base_source: str
+    runs: int
+    seed: int
+    set: dict[str, Any] = field(default_factory=dict)
+    vary: dict[str, Any] = field(default_factory=dict)
+    source: str = "<memory>"
+
+
+def load(path: str | Path) -> Spec:
+    """Read and validate a campaign spec; errors name the file and the key."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: no such campaign spec")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    top = _Table(str(path), data, "")
+    name = top.string("name")
+    description = top.string("description", "")
+    base_name = top.string("scenario")
+    candidate = path.parent / base_name
+    base_path = candidate if candidate.suffix == ".toml" and candidate.is_file() else None
+    base_file = scenario_mod.resolve(base_path or base_name)
+    base = tomllib.loads(base_file.read_text())
+    runs = top.integer("runs", low=1)
+    seed = top.integer("seed", 0, low=0)
+    overrides = top.raw("set", {})
+    if not isinstance(overrides, dict):
+        top.fail("set", f"expected a table of scenario keys, got {_describe(overrides)}")
+    vary = _vary(top.table("vary", {}))
+    top.finish()
+    spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
+    for i in range(min(runs, 3)):  # the scenarios it makes must be valid
+        scenario_for(spec, draw(spec, i))
+    return spec
+
+
+def _vary(t: _Table) -> dict[str, Any]:
+    v: dict[str, Any] = {"seed": t.boolean("seed", True)}
+    for key, allowed in (("fault_kind", FAULT_KINDS), ("graph_family", FAMILIES)):
+        if key in t.data:
+            v[key] = _choices(t, key, allowed)
+    robot = t.raw("faulty_robot", "any")
+    if robot != "any" and not (
+        isinstance(robot, list) and robot and all(isinstance(r, int) and r >= 1 for r in robot)
+    ):
+        t.fail("faulty_robot", f'expected "any" or a list of robot numbers, got {_describe(robot)}')
+    v["faulty_robot"] = robot
+    for key in ("fault_time", "bias_magnitude", "eta_bar", "xi_bar"):
+        if key in t.data:
+            lo_hi = t.array(key, (2,), what="a [low, high] range")
+            if lo_hi[0] > lo_hi[1] or lo_hi[0] < 0:
+                t.fail(key, f"expected 0 <= low <= high, got {list(lo_hi)}")
+            v[key] = [float(lo_hi[0]), float(lo_hi[1])]
+    if "robots" in t.data:
+        ns = t.raw("robots")
+        if (
+            not isinstance(ns, list)
+            or not ns
+            or any(not isinstance(n, int) or isinstance(n, bool) or n < 3 for n in ns)
+        ):
+            t.fail("robots", f"expected a list of team sizes >= 3, got {_describe(ns)}")
+        v["robots"] = ns
+    g = t.table("graph", {})
+    v["graph"] = {
+        "chords": g.raw("chords", [2]),
+        "in_degree": g.integer("in_degree", 2, low=1),
+        "k": g.integer("k", 2, low=1),
+    }
+    g.finish()
+    t.finish()
+    return v
+
+
+def _choices(t: _Table, key: str, allowed: tuple[str, ...]) -> list[str]:
+    """A non-empty list whose items are all in ``allowed``."""
+    value = t.raw(key)
+    if not isinstance(value, list) or not value or any(v not in allowed for v in value):
+        t.fail(key, f"expected a list of {', '.join(allowed)}, got {_describe(value)}")
+    return value
+
+
+def draw(spec: Spec, index: int) -> dict[str, Any]:
+    """The parameters of run ``index`` (0-based): drawn from (campaign seed, index) only."""
+    rng = np.random.default_rng([spec.seed, index])
+    v = spec.vary
+    base_team = spec.base.get("team", {})
+    n = int(rng.choice(v["robots"])) if "robots" in v else int(base_team.get("robots", 4))
+    p: dict[str, Any] = {"run": index, "robots": n}
+    p["seed"] = (
+        int(rng.integers(0, 2**31 - 1)) if v.get("seed", True) else int(spec.base.get("seed", 0))
+    )
+    p["graph_family"] = (
+        str(rng.choice(v["graph_family"]))
+        if "graph_family" in v
+        else ("generated" if "robots" in v else "base")
+    )
+    kind = str(rng.choice(v["fault_kind"])) if "fault_kind" in v else "base"
+    p["fault_kind"] = kind
+    if kind in ("stop", "bias"):
+        choices = (
+            list(range(1, n + 1))
+            if v["faulty_robot"] == "any"
+            else [r for r in v["faulty_robot"] if r <= n]
+        )
+        p["faulty_robot"] = int(rng.choice(choices))
+        lo, hi = v.get("fault_time", [10.0, 10.0])
+        p["fault_t"] = round(float(rng.uniform(lo, hi)), 3)
+        if kind == "bias":
+            lo, hi = v.get("bias_magnitude", [0.3, 0.3])
+            p["bias_magnitude"] = round(float(rng.uniform(lo, hi)), 4)
+            p["bias_angle"] = round(float(rng.uniform(0, 2 * np.pi)), 4)
+    for key in ("eta_bar", "xi_bar"):
+        if key in v:
+            p[key] = round(float(rng.uniform(*v[key])), 6)
+    return p
+
+
+def _merge(into: dict[str, Any], extra: dict[str, Any]) -> None:
+    for k, val in extra.items():
+        if isinstance(val, dict) and isinstance(into.get(k), dict):
+            _merge(into[k], val)
+        else:
+            into[k] = copy.deepcopy(val)
+
+
+def scenario_dict(spec: Spec, p: dict[str, Any]) -> dict[str, Any]:
+    """The scenario (as a TOML dict) of one run."""
+    d = copy.deepcopy(spec.base)
+    _merge(d, spec.set)
+    d["seed"] = p["seed"]
+    d["name"] = f"{spec.name}_{p['run']:05d}"
+    team = d.setdefault("team", {})
+    n = p["robots"]
+    g = spec.vary["graph"]
+    family = p["graph_family"]
+    if family not in ("base",):
+        if "robots" in spec.vary or team.get("robots") != n:
+            team["robots"] = n
+            team["initial_positions"] = {"layout": "formation", "jitter": 0.05}
+        if family == "ring":
+            team["graph"] = {"family": "ring_chords", "chords": []}
+        elif family == "ring_chords":
+            team["graph"] = {"family": "ring_chords", "chords": [c for c in g["chords"] if c < n]}
+        elif family == "random":
+            team["graph"] = {"family": "random", "in_degree": g["in_degree"]}
+        elif family == "knn":
+            team["graph"] = {"family": "knn", "k": g["k"]}
+    kind = p["fault_kind"]
+    if kind == "none":
+        d["faults"] = []
+    elif kind == "stop":
+        d["faults"] = [{"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]}]
+    elif kind == "bias":
+        a, m = p["bias_angle"], p["bias_magnitude"]
+        d["faults"] = [
+            {
+                "robot": p["faulty_robot"],
+                "kind": "bias",
+                "t": p["fault_t"],
+                "value": [m * float(np.cos(a)), m * float(np.sin(a))],
+                "time_constant": 0.45,
+            }
+        ]
+    noise = d.setdefault("noise", {})
+    for key in ("eta_bar", "xi_bar"):
+        if key in p:
+            noise[key] = p[key]
+    return d
+
+
+def scenario_for(spec: Spec, p: dict[str, Any]) -> scenario_mod.Scenario:
+    """The validated scenario of one run (errors name the campaign spec and the run)."""
+    return scenario_mod.from_dict(scenario_dict(spec, p), source=f"{spec.source} (run {p['run']})")
