@@ -1,0 +1,111 @@
+"""Scale benchmark: N = 4, 16, 64, 100 on the same kind of scene.
+
+    python benchmarks/bench_scale.py [--n 4 16 64 100] [--duration 20]
+
+For each N, in a fresh process (so peak memory is that run's own): a grid
+formation of 0.5 m spacing, a ring with chords 2 and 5, no cylinders, a stop
+fault at half time. Reports scene build time, the κ/λ computation (part of the
+onboard set-up), µs per control step of the closed loop and of bare
+``mj_step`` on the same compiled scene, their ratio, the real-time factor and
+the peak resident memory of the process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+
+
+def one(n: int, duration: float) -> dict:
+    import mujoco
+
+    from dftc_mujoco import loop, scenario
+    from dftc_mujoco.graph import ring_with_chords
+    from dftc_mujoco.onboard import fdir
+    from dftc_mujoco.sim import robots, scene
+
+    d = {
+        "name": f"scale{n}",
+        "duration": duration,
+        "seed": 1,
+        "physics": {"timestep": 0.002, "control_period": 0.01, "log_rate": 10.0},
+        "team": {
+            "robots": n,
+            "initial_positions": {"layout": "formation", "jitter": 0.05},
+            "graph": {"family": "ring_chords", "chords": [c for c in (2, 5) if c < n]},
+        },
+        "gains": {"kc": 4.0, "ko": 3.0, "K": 3.0, "G": 0.01, "theta": 3.0},
+        "noise": {"eta_bar": 0.001},
+        "mission": {
+            "transient": 2.0,
+            "centroid": {"waypoints": [[0, 0], [20, 0]], "speed": 0.1},
+            "formation": {"shape": "grid", "side": 0.5},
+        },
+        "faults": [{"robot": 1, "kind": "stop", "t": duration / 2}],
+    }
+    s = scenario.from_dict(d, source=f"bench N={n}")
+    t0 = time.perf_counter()
+    sc = scene.build(s, robots.get("disk"))
+    build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    fdir.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
+    kappa = time.perf_counter() - t0
+    steps = round(duration / s.physics.control_period)
+    data = mujoco.MjData(sc.model)
+    data.ctrl[:] = 0.05
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(sc.model, data, nstep=s.physics.substeps)
+    bare = (time.perf_counter() - t0) / steps * 1e6
+    r = loop.simulate(s)
+    loop_us = (r.summary["wall_time"] - r.summary["build_time"]) / steps * 1e6
+    return {
+        "n": n,
+        "build_ms": build * 1e3,
+        "kappa_lambda_s": kappa,
+        "bare_us": bare,
+        "loop_us": loop_us,
+        "ratio": loop_us / bare,
+        "rtf": duration / (r.summary["wall_time"] - r.summary["build_time"]),
+        "setup_s": r.summary["build_time"],
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "detected": [x["by"] for x in r.summary["detections"]],
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--n", type=int, nargs="+", default=[4, 16, 64, 100])
+    p.add_argument("--duration", type=float, default=20.0)
+    p.add_argument("--one", type=int, help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.one:
+        print(json.dumps(one(args.one, args.duration)))
+        return
+    print(f"{os.cpu_count()} cores; {args.duration:g} s of simulated time per N")
+    print(
+        f"{'N':>4} {'build':>9} {'κ/λ':>8} {'setup':>8} {'bare':>10} {'loop':>10} "
+        f"{'ratio':>6} {'RTF':>7} {'peak':>8}"
+    )
+    for n in args.n:
+        out = subprocess.run(
+            [sys.executable, __file__, "--one", str(n), "--duration", str(args.duration)],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        print(
+            f"{r['n']:>4} {r['build_ms']:>7.1f}ms {r['kappa_lambda_s']:>7.2f}s "
+            f"{r['setup_s']:>7.2f}s {r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
+            f"{r['ratio']:>6.1f} {r['rtf']:>6.1f}x {r['peak_mb']:>6.0f}MB"
+        )
+
+
+if __name__ == "__main__":
+    main()
