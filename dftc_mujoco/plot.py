@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .errors import ScenarioError
 from .render import gl
-from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, video_options
+from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, setup_video
 
 
 def load_records(run_dir: Path) -> tuple[dict, dict]:
@@ -62,11 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     wants_gl = not args.no_video or bool(args.still)
     try:
-        if wants_gl:
-            gl.select(args.gl)  # before anything imports mujoco
-        options = video_options(args) if wants_gl else None
-        if options is not None:
-            gl.probe()
+        options = setup_video(args, wants_gl)
         log, summary = load_records(args.run_dir)
         scenario = None
         if options is not None:

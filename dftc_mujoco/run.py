@@ -71,6 +71,20 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def setup_video(args: argparse.Namespace, wanted: bool):
+    """Choose the GL backend (before mujoco is imported), read the video options and probe.
+
+    Returns the VideoOptions, or None when no video is wanted. Raises
+    ScenarioError (bad flags) or RenderError (no backend).
+    """
+    if not wanted:
+        return None
+    gl.select(args.gl)  # before anything imports mujoco
+    options = video_options(args)
+    gl.probe()  # fail before simulating, not after
+    return options
+
+
 def video_options(args: argparse.Namespace):
     """VideoOptions from the command line, or a ScenarioError naming the bad flag."""
     from .render.options import VideoOptions
@@ -175,11 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     progress = not args.no_progress and sys.stderr.isatty()
     try:
-        if not args.no_video:
-            gl.select(args.gl)  # before anything imports mujoco
-        options = None if args.no_video else video_options(args)
-        if options is not None:
-            gl.probe()  # fail before simulating, not after
+        options = setup_video(args, not args.no_video)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INPUT
