@@ -21,7 +21,7 @@ import sys
 import time
 
 
-def one(n: int, duration: float) -> dict:
+def one(n: int, duration: float, log_rate: float = 10.0) -> dict:
     import mujoco
 
     from dftc_mujoco import loop, scenario
@@ -33,7 +33,7 @@ def one(n: int, duration: float) -> dict:
         "name": f"scale{n}",
         "duration": duration,
         "seed": 1,
-        "physics": {"timestep": 0.002, "control_period": 0.01, "log_rate": 10.0},
+        "physics": {"timestep": 0.002, "control_period": 0.01, "log_rate": log_rate},
         "team": {
             "robots": n,
             "initial_positions": {"layout": "formation", "jitter": 0.05},
@@ -82,19 +82,32 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, nargs="+", default=[4, 16, 64, 100])
     p.add_argument("--duration", type=float, default=20.0)
+    p.add_argument("--log-rate", type=float, default=10.0, help="log.npz rate [Hz]")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.one:
-        print(json.dumps(one(args.one, args.duration)))
+        print(json.dumps(one(args.one, args.duration, args.log_rate)))
         return
-    print(f"{os.cpu_count()} cores; {args.duration:g} s of simulated time per N")
+    print(
+        f"{os.cpu_count()} cores; {args.duration:g} s of simulated time per N, "
+        f"log at {args.log_rate:g} Hz"
+    )
     print(
         f"{'N':>4} {'build':>9} {'κ/λ':>8} {'setup':>8} {'bare':>10} {'loop':>10} "
         f"{'ratio':>6} {'RTF':>7} {'peak':>8}"
     )
     for n in args.n:
         out = subprocess.run(
-            [sys.executable, __file__, "--one", str(n), "--duration", str(args.duration)],
+            [
+                sys.executable,
+                __file__,
+                "--one",
+                str(n),
+                "--duration",
+                str(args.duration),
+                "--log-rate",
+                str(args.log_rate),
+            ],
             capture_output=True,
             text=True,
             check=True,

@@ -59,11 +59,15 @@ def _integrate(
     return x
 
 
+@pytest.mark.parametrize("compiled", [False, True])  # numpy path, numba kernel (if installed)
 @pytest.mark.parametrize("n", [4, 12, 20])  # 20: the sparse-message path
-def test_update_of_robot_i_ignores_non_neighbours(n):
+def test_update_of_robot_i_ignores_non_neighbours(n, compiled):
     """Robot i's command, residual, thresholds, flags and next state use only its own
     data and its in-neighbours' messages: changing anything else leaves them bit-identical."""
-    team, x = _team(n)
+    team, x = _team(n, compiled=compiled)
+    from dftc_mujoco.onboard import kernel
+
+    assert (team._kernel is not None) == (compiled and kernel.AVAILABLE)
     x = _integrate(team, x, 50)
     graph = team.config.graph
     c, v = np.array([0.5, 0.0]), np.array([0.1, 0.0])

@@ -162,6 +162,10 @@ class Thresholds:
                 self.kappa * (self.ko * self.eta_bar + np.sqrt(n) * self.xi_bar) / self.lam,
                 np.inf,
             )
+        self._finite = self.lam > 0
+        self._all_finite = bool(self._finite.all())
+        self._start = np.where(self._finite, self.y0 * self.kappa, 0.0)  # finite parts only
+        self._steady_f = np.where(self._finite, self._steady, 0.0)
         # after this long every transient term of eq. 40 is below 1e-12 of its start
         finite = self.lam[self.lam > 0]
         self._settled = self.t0 + (28.0 / finite.min() if len(finite) else np.inf)
@@ -170,9 +174,10 @@ class Thresholds:
     def bracket(self, t: float) -> np.ndarray:
         """‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt}), per k: bounds ‖ỹ*_k(t)‖."""
         decay = np.exp(-self.lam * max(t - self.t0, 0.0))
-        with np.errstate(invalid="ignore"):
-            b = self.y0 * self.kappa * decay + self._steady * (1.0 - decay)
-        return np.where(self.lam > 0, b, np.inf)
+        b = self._start * decay + self._steady_f * (1.0 - decay)
+        if not self._all_finite:
+            b[~self._finite] = np.inf
+        return b
 
     def mu(self, t: float) -> np.ndarray:
         """ⁱμ_k(t) for every observer i (rows) and monitored robot k (columns) (eq. 40).

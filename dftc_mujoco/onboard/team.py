@@ -22,7 +22,7 @@ import numpy as np
 from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
 from ..scenario import Formation
-from . import controller, observer
+from . import controller, kernel, observer
 from .fault_estimator import FaultEstimator
 from .fdir import Decision, Thresholds
 from .supervisor import Supervisor
@@ -53,6 +53,7 @@ class TeamConfig:
     excluded_activation: float = 0.45
     phi_low_pass: float = 0.0
     command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
+    compiled: bool = True  # use the numba kernel (onboard/kernel.py) when it is installed
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
 
@@ -87,7 +88,7 @@ class Team:
         self.config = config
         self.n = n
         self.members = np.arange(n)
-        self.gone = np.zeros(0, dtype=int)  # robots excluded so far
+        self.gone = np.zeros(0, dtype=np.int64)  # robots excluded so far
         self.graph = config.graph
         offsets = formation_offsets(config.formation, n)
         self.plan = FormationPlan.fixed(offsets)
@@ -112,7 +113,21 @@ class Team:
         )
         self.decision = Decision(n, config.detection_window, config.dt)
         self._others = ~np.eye(n, dtype=bool)  # i ≠ k
+        self._nobody = np.full(n, -1)
+        self._nobody.setflags(write=False)
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
+        self._kernel = None
+        self._edges_for = None
+        if (
+            config.compiled
+            and kernel.AVAILABLE
+            and config.fdir
+            and config.compensate
+            and config.phi_low_pass == 0
+        ):
+            self._kernel = kernel.team_step
+            self._kernel_K = np.ascontiguousarray(config.K, dtype=float)
+            self._kernel_g_inv = np.linalg.inv(config.G)
         self.first_detection: dict[int, float] = {}  # robot id -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot id -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
@@ -142,6 +157,8 @@ class Team:
         m = len(mem)
 
         offsets, rates = self.plan.at(t)
+        if self._kernel is not None:
+            return self._compiled_step(t, x_m, c, c_dot, offsets, rates, sensed_bodies, events)
         x_d = c + offsets  # J⁻¹σ_d for the members
         xd_dot = c_dot + rates
         x_hat = self.state.estimate()  # eq. 21
@@ -189,6 +206,88 @@ class Team:
             events=events,
         )
         return out
+
+    def _compiled_step(self, t, x_m, c, c_dot, offsets, rates, sensed, events) -> TeamOutput:
+        """The same period as :meth:`step`, through the numba kernel (onboard/kernel.py)."""
+        cfg = self.config
+        st, est, dec, mem = self.state, self.estimator, self.decision, self.members
+        src, starts = self._kernel_edges
+        x_hat = st.estimate()  # eq. 21, before the update (for the log)
+        mu = self.thresholds.mu(t)
+        before = dec.flag.copy()
+        m = len(mem)
+        u, u_bar, r_norm = np.empty((self.n, 2)), np.empty((self.n, 2)), np.empty((m, m))
+        obs_p, obs_d, obs_a = self._obstacles(sensed)
+        kernel.team_step(
+            t,
+            np.ascontiguousarray(x_m, dtype=float),
+            np.asarray(c, float),
+            np.asarray(c_dot, float),
+            offsets,
+            rates,
+            mem,
+            self.gone,
+            st.y_hat,
+            st.int_u_hat,
+            st.int_u_own,
+            src,
+            starts,
+            self.messages.in_degree,
+            cfg.kc,
+            cfg.ko,
+            cfg.dt,
+            obs_p,
+            obs_d,
+            obs_a,
+            cfg.theta,
+            self.supervisor.release,
+            self.supervisor.active,
+            est.z,
+            est.int_e,
+            est.phi_hat,
+            self._kernel_K,
+            self._kernel_g_inv,
+            est.command_limit,
+            dec.above,
+            dec.below,
+            dec.flag,
+            mu,
+            dec.window,
+            u,
+            u_bar,
+            r_norm,
+        )
+        est.applied[...] = est.phi_hat  # no low-pass on this path: applied = φ̂
+        raised = dec.flag & ~before
+        if raised.any():
+            self._report(t, raised, events)
+        return TeamOutput(
+            u=u,
+            u_bar=u_bar,
+            phi_hat=est.phi_hat.copy(),
+            x_hat=_expand(x_hat, mem, self.n, (2,)),
+            x_d=_expand(c + offsets, mem, self.n, (2,)),
+            residual=_expand(r_norm, mem, self.n),
+            threshold=_expand(mu, mem, self.n),
+            flag=_expand(dec.flag.copy(), mem, self.n, fill=False),
+            flagged=_expand((dec.flag & self._others[:m, :m]).any(axis=0), mem, self.n, fill=False),
+            reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
+            avoiding=self._avoiding(),
+            active=self.active.copy(),
+            events=events,
+        )
+
+    @property
+    def _kernel_edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current graph's edges for the kernel: sources sorted by destination, offsets."""
+        msg = self.messages
+        if self._edges_for is not msg:
+            self._edges_cache = (
+                msg.src.astype(np.int64),
+                np.concatenate([[0], np.cumsum(msg.in_degree)]).astype(np.int64),
+            )
+            self._edges_for = msg
+        return self._edges_cache
 
     # ------------------------------------------------------------------ FDIR
 
@@ -278,8 +377,8 @@ class Team:
         """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
         n_cyl = len(self.config.obstacle_position)
         act = self.supervisor.active
-        if (act < 0).all():
-            return np.full(self.n, -1)
+        if act.max() < 0:
+            return self._nobody  # shared, read-only
         gone = self.gone
         label = np.where(
             act >= n_cyl, n_cyl + gone[np.clip(act - n_cyl, 0, None)] if len(gone) else act, act
@@ -313,5 +412,5 @@ def _expand(
         out[members] = a
     else:
         out = np.full((n, n, *a.shape[2:]), fill, dtype=dtype)
-        out[np.ix_(members, members)] = a.reshape(m, m, *a.shape[2:])
+        out[members[:, None], members[None, :]] = a  # (np.ix_ costs more, every step)
     return out
