@@ -12,7 +12,6 @@ robot numbers, legend) drawn with Pillow.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -348,12 +347,6 @@ def _overlay_events(summary: dict[str, Any]) -> list[tuple[float, str]]:
             ev.append((d["t"], f"robot {d['by']} flags robot {d['robot']} (first detection)"))
     ev += [(e["t"], f"robot {e['robot']} excluded") for e in summary.get("exclusions", [])]
     return sorted(ev)
-
-
-def iter_frames(renderer: FrameRenderer, duration: float) -> Iterator[np.ndarray]:
-    """Frames at the video rate from t = 0 to ``duration``."""
-    for t in frame_times(duration, renderer.options.fps):
-        yield renderer.frame(float(t))
 
 
 def write_video(

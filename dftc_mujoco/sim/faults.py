@@ -16,15 +16,6 @@ import numpy as np
 from ..scenario import Fault
 
 
-def bias_profile(fault: Fault, t: float) -> np.ndarray:
-    """φ(t) = value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f, else 0 (paper §6)."""
-    if t < fault.t:
-        return np.zeros(2)
-    if fault.time_constant <= 0:
-        return np.array(fault.value)
-    return np.asarray(fault.value) * (1.0 - np.exp(-(t - fault.t) / fault.time_constant))
-
-
 class ActuatorFaults:
     """Switches the scenario's faults on in the model's actuator parameters."""
 
@@ -73,7 +64,7 @@ class ActuatorFaults:
         return new
 
     def bias_phi(self, t: float) -> np.ndarray:
-        """Sum of the bias faults on each robot at time ``t``, (N, 2) (profile of bias_profile)."""
+        """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
         phi = np.zeros((len(self.actuator), 2))
         if len(self._b_robot):
             age = t - self._b_t
