@@ -54,6 +54,8 @@ class Messages:
         # robots that hear someone, and where their incoming edges start in src
         self.rows = np.flatnonzero(self.in_degree > 0)
         self.starts = np.searchsorted(dst, self.rows)
+        # edges into robot i are src[first_edge[i]:first_edge[i + 1]] (every robot, for kernels)
+        self.first_edge = np.searchsorted(dst, np.arange(n + 1)).astype(np.intp)
         # large teams: a sparse adjacency (non-zeros only on the edges) sums the messages
         # without gathering a copy of every one (N = 100: 142 -> ~20 us a step)
         self.adjacency = None

@@ -116,18 +116,16 @@ class Team:
         self._nobody = np.full(n, -1)
         self._nobody.setflags(write=False)
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
-        self._kernel = None
-        self._edges_for = None
-        if (
+        # the numba kernel computes the same period when it covers this configuration
+        self.compiled = bool(
             config.compiled
             and kernel.AVAILABLE
             and config.fdir
             and config.compensate
             and config.phi_low_pass == 0
-        ):
-            self._kernel = kernel.team_step
-            self._kernel_K = np.ascontiguousarray(config.K, dtype=float)
-            self._kernel_g_inv = np.linalg.inv(config.G)
+        )
+        self._K = np.ascontiguousarray(config.K, dtype=float)
+        self._g_inv = np.linalg.inv(config.G)
         self.first_detection: dict[int, float] = {}  # robot id -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot id -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
@@ -157,7 +155,7 @@ class Team:
         m = len(mem)
 
         offsets, rates = self.plan.at(t)
-        if self._kernel is not None:
+        if self.compiled:
             return self._compiled_step(t, x_m, c, c_dot, offsets, rates, sensed_bodies, events)
         x_d = c + offsets  # J⁻¹σ_d for the members
         xd_dot = c_dot + rates
@@ -188,30 +186,12 @@ class Team:
         else:
             u_bar = u
 
-        out = TeamOutput(
-            u=u,
-            u_bar=u_bar,
-            phi_hat=self.estimator.phi_hat.copy(),
-            x_hat=_expand(x_hat, mem, self.n, (2,)),
-            x_d=_expand(x_d, mem, self.n, (2,)),
-            residual=_expand(r_norm, mem, self.n),
-            threshold=_expand(mu, mem, self.n),
-            flag=_expand(self.decision.flag, mem, self.n, fill=False),
-            flagged=_expand(
-                (self.decision.flag & self._others[:m, :m]).any(axis=0), mem, self.n, fill=False
-            ),
-            reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
-            avoiding=self._avoiding(),
-            active=self.active.copy(),
-            events=events,
-        )
-        return out
+        return self._output(u, u_bar, x_hat, x_d, r_norm, mu, events)
 
     def _compiled_step(self, t, x_m, c, c_dot, offsets, rates, sensed, events) -> TeamOutput:
         """The same period as :meth:`step`, through the numba kernel (onboard/kernel.py)."""
         cfg = self.config
         st, est, dec, mem = self.state, self.estimator, self.decision, self.members
-        src, starts = self._kernel_edges
         x_hat = st.estimate()  # eq. 21, before the update (for the log)
         mu = self.thresholds.mu(t)
         before = dec.flag.copy()
@@ -230,8 +210,8 @@ class Team:
             st.y_hat,
             st.int_u_hat,
             st.int_u_own,
-            src,
-            starts,
+            self.messages.src,
+            self.messages.first_edge,
             self.messages.in_degree,
             cfg.kc,
             cfg.ko,
@@ -245,8 +225,8 @@ class Team:
             est.z,
             est.int_e,
             est.phi_hat,
-            self._kernel_K,
-            self._kernel_g_inv,
+            self._K,
+            self._g_inv,
             est.command_limit,
             dec.above,
             dec.below,
@@ -261,12 +241,17 @@ class Team:
         raised = dec.flag & ~before
         if raised.any():
             self._report(t, raised, events)
+        return self._output(u, u_bar, x_hat, c + offsets, r_norm, mu, events)
+
+    def _output(self, u, u_bar, x_hat, x_d, r_norm, mu, events) -> TeamOutput:
+        """The period's outputs on the original robot axis (members' arrays expanded)."""
+        mem, m, dec = self.members, len(self.members), self.decision
         return TeamOutput(
             u=u,
             u_bar=u_bar,
-            phi_hat=est.phi_hat.copy(),
+            phi_hat=self.estimator.phi_hat.copy(),
             x_hat=_expand(x_hat, mem, self.n, (2,)),
-            x_d=_expand(c + offsets, mem, self.n, (2,)),
+            x_d=_expand(x_d, mem, self.n, (2,)),
             residual=_expand(r_norm, mem, self.n),
             threshold=_expand(mu, mem, self.n),
             flag=_expand(dec.flag.copy(), mem, self.n, fill=False),
@@ -276,18 +261,6 @@ class Team:
             active=self.active.copy(),
             events=events,
         )
-
-    @property
-    def _kernel_edges(self) -> tuple[np.ndarray, np.ndarray]:
-        """The current graph's edges for the kernel: sources sorted by destination, offsets."""
-        msg = self.messages
-        if self._edges_for is not msg:
-            self._edges_cache = (
-                msg.src.astype(np.int64),
-                np.concatenate([[0], np.cumsum(msg.in_degree)]).astype(np.int64),
-            )
-            self._edges_for = msg
-        return self._edges_cache
 
     # ------------------------------------------------------------------ FDIR
 
