@@ -4,44 +4,37 @@ One control period (DESIGN.md): faults switch on in the actuator model →
 each robot measures its own position → the team's onboard stacks compute
 their inputs → the robot adapter turns them into actuator commands → MuJoCo
 advances by ``control_period`` → the recorder samples at the log rate.
+
+:class:`Simulation` holds one run (MuJoCo model and data, the team, the log)
+and steps it: ``step()`` period by period, ``run()`` to the end. The loop
+keeps only what cannot be derived later (the raw log and the events);
+margins, clearances, reactive spans, fault estimates and task errors are
+computed from the log after the run (:mod:`dftc_mujoco.results`).
 """
 
 from __future__ import annotations
 
-import math
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import mujoco
 import numpy as np
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
+from . import blocks as blocks_mod
 from . import mission
-from .errors import SimulationError
+from .errors import ScenarioError, SimulationError
+from .onboard.block import Block
 from .onboard.team import Team, TeamConfig
 from .record import Events, Log
+from .results import RunResult, summarize
 from .scenario import Scenario
 from .sim import faults as sim_faults
 from .sim import robots, scene
-from .sim.plant import Plant
-
-
-@dataclass
-class RunResult:
-    """What a run leaves: the log, the events, the summary, and the error if it failed."""
-
-    scenario: Scenario
-    log: dict[str, np.ndarray]
-    events: Events
-    summary: dict[str, Any]
-    error: SimulationError | None = None
-    extras: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
+from .sim.plant import NoiseStream, Plant
 
 CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
 
@@ -93,290 +86,370 @@ def team_config(
     )
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """The state of a run after a control period (robots on the original axis, from 0).
+
+    ``x`` true positions, ``x_m`` own measurements, ``x_hat`` (N, N, 2) ⁱx̂
+    (row i: robot i's estimate of every robot), ``u`` nominal and ``u_bar``
+    compensated inputs, ``phi_hat`` fault estimates, ``residual`` and
+    ``threshold`` (N, N) ‖ⁱr_k‖ and ⁱμ_k, ``flag`` (N, N) robot i flags k,
+    ``flagged`` (N,) some teammate flags k, ``reactive`` and ``active`` (N,).
+    Entries of excluded robots are NaN / False. ``events`` happened since the
+    previous snapshot (robots numbered from 1, as in ``summary.json``).
+    """
+
+    t: float
+    x: np.ndarray
+    x_m: np.ndarray
+    x_hat: np.ndarray
+    u: np.ndarray
+    u_bar: np.ndarray
+    phi_hat: np.ndarray
+    residual: np.ndarray
+    threshold: np.ndarray
+    flag: np.ndarray
+    flagged: np.ndarray
+    reactive: np.ndarray
+    active: np.ndarray
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+
+def block_names(s: Scenario, given: Mapping[str, Any] | None) -> dict[str, str]:
+    """The name of each block a run uses: the scenario's, or ``module:Class`` of a given one."""
+    names = {k: getattr(s.onboard, k) for k in blocks_mod.BLOCKS}
+    for k, b in (given or {}).items():
+        cls = type(b)
+        builtin = [n for n, path in blocks_mod.BUILTIN[k].items() if path == _qual(cls)]
+        names[k] = builtin[0] if builtin else _qual(cls)
+    return names
+
+
+def _qual(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}".replace("dftc_mujoco.onboard.", "dftc_mujoco.")
+
+
+def make_blocks(s: Scenario, given: Mapping[str, Block] | None = None) -> dict[str, Block]:
+    """Instances of the six blocks: ``given`` ones as they are, the rest from the scenario."""
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(blocks_mod.BLOCKS))
+    if unknown:
+        raise ScenarioError(
+            f"blocks: unknown block {unknown[0]!r}; expected one of {', '.join(blocks_mod.BLOCKS)}"
+        )
+    out: dict[str, Block] = {}
+    for k in blocks_mod.BLOCKS:
+        if k in given:
+            out[k] = given[k]
+            continue
+        name = getattr(s.onboard, k)
+        out[k] = blocks_mod.create(
+            k,
+            name,
+            s.onboard.params.get(k, {}),
+            search=s.directory,
+            where=f"{s.source}: onboard.{k}",
+        )
+    return out
+
+
+class Simulation:
+    """One run of a scenario on MuJoCo physics, steppable.
+
+    ``blocks`` replaces onboard blocks by instances (``{"controller":
+    MyController(gain=2.0)}``); the others come from the scenario's
+    ``[onboard]`` table. ``hook(t, plant)``, if given, is called after every
+    control period with the plant (for instrumentation or to perturb the
+    physics). Use it as a context manager, or call :meth:`close`::
+
+        with Simulation(load_scenario("paper_case")) as sim:
+            snap = sim.step(100)      # 1 s
+            result = sim.run()        # the rest
+            result.save("renders/mine")
+
+    ``model`` and ``data`` are the MuJoCo ``MjModel`` and ``MjData``.
+    Physics trouble does not raise: the run stops, ``result.ok`` is False and
+    the log up to that instant is kept.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        blocks: Mapping[str, Block] | None = None,
+        hook: Callable[[float, Plant], None] | None = None,
+    ) -> None:
+        wall0 = time.perf_counter()
+        self.scenario = scenario
+        self.hook = hook
+        self._given = dict(blocks or {})
+        self.block_names = block_names(scenario, self._given)
+        self.robot = robots.get(
+            scenario.team.robot_model, where=f"{scenario.source}: team.robot_model"
+        )
+        self.scene = scene.build(scenario, self.robot)
+        self._build_time = time.perf_counter() - wall0
+        self.plant: Plant | None = None
+        self.reset()
+
+    # ------------------------------------------------------------------ life cycle
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model (arena, robots, cylinders)."""
+        return self.scene.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data of the current run."""
+        return self.plant.data
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Restore the model's healthy actuators and drop the run's data."""
+        if self.plant is not None:
+            self.faults.clear()
+            self.plant = None
+
+    def reset(self, seed: int | None = None) -> Snapshot | None:
+        """Start the run again from t = 0 (with another ``seed`` if given)."""
+        wall0 = time.perf_counter()
+        if seed is not None:
+            self.scenario = self.scenario.with_overrides(seed=seed)
+        s, model = self.scenario, self.robot
+        if self.plant is not None:
+            self.faults.clear()
+        sc = self.scene
+        self.rng = np.random.default_rng(s.seed)
+        self.dt = dt = s.physics.control_period
+        self.xi_bar = xi_bar = effective_xi_bar(s, model)
+        # the model's own mismatch already uses part of ξ̄ (eq. 2 bounds their sum)
+        self.plant = plant = Plant(
+            sc, s.noise, dt, self.rng, xi_bar=max(xi_bar - model.mismatch, 0.0)
+        )
+        self.adapter = model.adapter(sc, plant.data)
+        self.faults = sim_faults.ActuatorFaults(sc.model, s.faults, sc.actuator, self.adapter)
+        n = self.n = s.team.robots
+        self.steps = round(s.duration / dt)
+        self.log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
+        obstacles = np.array([[*o.position, o.radius, o.safe_distance] for o in s.obstacles])
+        self.log = Log(
+            self.steps // self.log_every + 1,
+            n,
+            n_act=sc.actuator.shape[1],
+            obstacles=obstacles.reshape(-1, 4),
+        )
+        self.events = Events()
+        if xi_bar < model.mismatch:
+            self.events.add(
+                0.0,
+                "warning",
+                message=(
+                    f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
+                    f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
+                    f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise false alarms"
+                ),
+            )
+        self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
+        limited = sc.model.actuator_ctrllimited[sc.actuator].all()
+        limit = self.adapter.command_limit if limited else np.inf
+        blocks = make_blocks(s, self._given)
+        self.team = Team(team_config(s, model, limit), plant.measure(), self.path.position[0], blocks)
+        self.noise = NoiseStream(plant)
+        self.k = 0  # next control period
+        self.error: SimulationError | None = None
+        self.interrupted = False
+        self._x = np.empty((n, 2))
+        self._x_m = np.empty((n, 2))
+        self._cmd = np.empty((n, 2))
+        self._seen = 0  # events already handed out by step()
+        self._wall = self._build_time + (time.perf_counter() - wall0)
+        self._build_time = 0.0
+        return None
+
+    @property
+    def t(self) -> float:
+        """Time of the next control period [s]."""
+        return self.k * self.dt
+
+    @property
+    def done(self) -> bool:
+        """The run reached its duration or stopped on physics trouble."""
+        return self.k > self.steps or self.error is not None
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self, periods: int = 1) -> Snapshot:
+        """Advance ``periods`` control periods and return the state after the last one."""
+        if self.done:
+            raise RuntimeError("the run is over (duration reached or stopped); call reset()")
+        self._advance(min(self.k + int(periods), self.steps + 1), None)
+        return self.snapshot()
+
+    def run(self, progress: bool | None = None) -> RunResult:
+        """Run to the end (from wherever stepping left off) and return the records.
+
+        ``progress``: show a progress bar (None: when the output is a terminal or a
+        notebook).
+        """
+        if progress is None:
+            progress = sys.stderr.isatty() or "ipykernel" in sys.modules
+        if not self.done:
+            self._advance(self.steps + 1, progress)
+        return self.result()
+
+    def snapshot(self) -> Snapshot:
+        """The state after the last control period (copies)."""
+        out = self.team.outputs()
+        ev = self.events.items[self._seen :]
+        self._seen = len(self.events.items)
+        return Snapshot(
+            t=(self.k - 1) * self.dt,
+            x=self._x.copy(),
+            x_m=self._x_m.copy(),
+            x_hat=out["x_hat"].copy(),
+            u=out["u"].copy(),
+            u_bar=out["u_bar"].copy(),
+            phi_hat=out["phi_hat"].copy(),
+            residual=out["residual"].copy(),
+            threshold=out["threshold"].copy(),
+            flag=out["flag"].copy(),
+            flagged=out["flagged"].copy(),
+            reactive=out["reactive"].copy(),
+            active=out["active"].copy(),
+            events=[dict(e) for e in ev],
+        )
+
+    def _advance(self, k_end: int, progress: bool | None) -> None:
+        """Control periods ``self.k`` .. ``k_end - 1``: the hot loop."""
+        s = self.scenario
+        dt, steps, nsub, log_every = self.dt, self.steps, s.physics.substeps, self.log_every
+        plant, team, faults, adapter, noise = (
+            self.plant,
+            self.team,
+            self.faults,
+            self.adapter,
+            self.noise,
+        )
+        events, log, hook = self.events, self.log, self.hook
+        position, velocity = self.path.position, self.path.velocity
+        last = len(position) - 1
+        x, x_m, cmd = self._x, self._x_m, self._cmd
+        k0 = self.k
+        bar = tqdm(
+            total=k_end - k0,
+            disable=not progress,
+            unit="period",
+            desc=s.name,
+            mininterval=0.5,
+            leave=False,
+        )
+        wall0 = time.perf_counter()
+        k = k0
+        # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual /
+        # threshold; physics trouble is caught explicitly by the plant, not by numpy warnings
+        try:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                for k in range(k0, k_end):
+                    t = k * dt
+                    if t >= faults.due:
+                        for f in faults.apply(t):
+                            events.add(t, "fault", robot=f.robot + 1, fault=f.kind)
+                    plant.positions(out=x)
+                    eta, xi = noise.next()
+                    np.add(x, eta, out=x_m)
+                    j = k if k < last else last
+                    team.step(t, x_m, position[j], velocity[j], x)
+                    if team.events:
+                        for e in team.events:
+                            events.add(e.pop("t"), e.pop("kind"), **e)
+                        team.events.clear()
+                    ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
+                    if k % log_every == 0:
+                        self._sample(t, x, ctrl, position[j])
+                    if k == steps:
+                        k += 1
+                        break
+                    plant.step(ctrl, nsub)
+                    if hook is not None:
+                        hook(plant.time, plant)
+                    if k % 100 == 0:
+                        bar.update(min(100, k_end - k0 - bar.n))
+                else:
+                    k = k_end
+        except SimulationError as exc:
+            self.error = exc
+            k += 1
+            events.add(plant.time, "simulation_error", message=str(exc))
+        finally:
+            self.k = k
+            bar.close()
+            self._wall += time.perf_counter() - wall0
+
+    def _sample(self, t: float, x: np.ndarray, ctrl: np.ndarray, c: np.ndarray) -> None:
+        """One log row: raw values only (everything else is derived after the run)."""
+        team = self.team
+        out = team.outputs()
+        fdir = self.scenario.fdir.enabled
+        self.log.sample(
+            t=t,
+            x=x,
+            x_hat=out["x_hat"],
+            u=out["u"],
+            phi_hat=out["phi_hat"] if fdir else np.nan,
+            residual=out["residual"],
+            threshold=out["threshold"] if fdir else np.nan,
+            reactive=out["reactive"],
+            active=out["active"],
+            x_d=out["x_d"],
+            pose=self.plant.poses(),
+            c_d=c,
+            flagged=out["flagged"],
+            ctrl=ctrl,
+        )
+
+    # ------------------------------------------------------------------ results
+
+    def result(self) -> RunResult:
+        """The records of the run so far (the log, the events and the summary)."""
+        arrays = self.log.arrays()
+        arrays["phi"] = self.faults.phi_series(arrays["t"], arrays["ctrl"], arrays["pose"][..., 2])
+        arrays["sigma_err"] = mission.task_errors(arrays["x"], arrays["x_d"], arrays["active"])
+        summary = summarize(
+            self.scenario,
+            arrays,
+            self.events,
+            xi_bar=self.xi_bar,
+            footprint=self.robot.footprint_radius,
+            obstacle_safe=self.team.config.obstacle_safe,
+            wall=self._wall,
+            error=self.error,
+            sim_time=self.plant.time,
+            finished=self.k > self.steps,
+        )
+        summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}
+        return RunResult(self.scenario, arrays, self.events, summary, self.error)
+
+
 def simulate(
     s: Scenario,
     *,
     progress: bool = False,
     hook: Callable[[float, Plant], None] | None = None,
+    blocks: Mapping[str, Block] | None = None,
 ) -> RunResult:
-    """Run scenario ``s`` on MuJoCo physics and return its records.
+    """Run scenario ``s`` to the end and return its records (a thin wrapper of :class:`Simulation`).
 
-    ``hook(t, plant)``, if given, is called after every control period with
-    the plant (for instrumentation or to perturb the physics).
     Physics trouble does not raise: the result carries the error and the log
     up to that instant (``result.ok`` is False).
     """
-    wall0 = time.perf_counter()
-    model = robots.get(s.team.robot_model, where=f"{s.source}: team.robot_model")
-    sc = scene.build(s, model)
-    rng = np.random.default_rng(s.seed)
-    dt = s.physics.control_period
-    xi_bar = effective_xi_bar(s, model)
-    # the model's own mismatch already uses part of ξ̄ (eq. 2 bounds their sum)
-    plant = Plant(sc, s.noise, dt, rng, xi_bar=max(xi_bar - model.mismatch, 0.0))
-    adapter = model.adapter(sc, plant.data)
-    actuator_faults = sim_faults.ActuatorFaults(sc.model, s.faults, sc.actuator, adapter)
-
-    n = s.team.robots
-    steps = round(s.duration / dt)
-    log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
-    obstacles = np.array([[*o.position, o.radius, o.safe_distance] for o in s.obstacles])
-    log = Log(steps // log_every + 1, n, obstacles=obstacles.reshape(-1, 4))
-    events = Events()
-    if xi_bar < model.mismatch:
-        events.add(
-            0.0,
-            "warning",
-            message=(
-                f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
-                f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate {model.name}; "
-                f"recommended {model.xi_bar:g}): thresholds may raise false alarms"
-            ),
-        )
-
-    path = mission.centroid_table(s.mission.centroid, s.duration, dt)
-    limited = sc.model.actuator_ctrllimited[sc.actuator].all()
-    limit = adapter.command_limit if limited else np.inf
-    team = Team(team_config(s, model, limit), plant.measure(), path.position[0])
-    fault_start = np.full(n, np.inf)  # ground truth, for the margin only
-    bias_only = np.ones(n, bool)
-    for f in s.faults:
-        fault_start[f.robot] = min(fault_start[f.robot], f.t)
-        bias_only[f.robot] &= f.kind == "bias"
-    margin = {"healthy": 0.0, "compensated": 0.0}
-    settle = 5.0
-    changes = sorted({f.t for f in s.faults} | {f.t + settle for f in s.faults})
-    next_change = 0.0
-    healthy = settled = np.zeros(n, bool)
-
-    obs_pos = team.config.obstacle_position
-    obs_gap = np.array([o.radius for o in s.obstacles]) + model.footprint_radius
-    obs_safe = team.config.obstacle_safe
-    min_gap = math.inf
-    min_margin = math.inf
-    reactive_prev = np.zeros(n, bool)
-    reactive_on = np.zeros(n)
-    reactive_spans: list[dict[str, Any]] = []
-    nsub = s.physics.substeps
-    error: SimulationError | None = None
-
-    build_time = time.perf_counter() - wall0
-    bar = tqdm(
-        total=steps, disable=not progress, unit="step", desc=s.name, mininterval=0.5, leave=False
-    )
-    # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual / threshold;
-    # physics trouble is caught explicitly by the plant, not by numpy warnings
-    errstate = np.errstate(invalid="ignore", divide="ignore")
-    errstate.__enter__()
-    try:
-        for k in range(steps + 1):
-            t = k * dt
-            for f in actuator_faults.apply(t):
-                events.add(t, "fault", robot=f.robot, fault=f.kind)
-            x = plant.positions()
-            x_m = plant.measure(x)
-            c, c_dot = path.at(k)
-            out = team.step(t, x_m, c, c_dot, sensed_bodies=x)
-            ctrl = adapter.command(out.u_bar + plant.disturbance())
-            for e in out.events:
-                events.add(t, e.pop("kind"), **{k_: v for k_, v in e.items() if k_ != "t"})
-            if s.fdir.enabled:
-                ratio = out.residual / out.threshold  # NaN for excluded robots: fmax skips
-                if t >= next_change:  # the masks change only at fault instants (+ settle)
-                    healthy = fault_start > t
-                    settled = bias_only & (fault_start + settle <= t)
-                    later = [c for c in changes if c > t]
-                    next_change = min(later) if later else math.inf
-                if healthy.any():
-                    margin["healthy"] = max(
-                        margin["healthy"], float(np.fmax.reduce(ratio[:, healthy], axis=None))
-                    )
-                if settled.any():
-                    margin["compensated"] = max(
-                        margin["compensated"], float(np.fmax.reduce(ratio[:, settled], axis=None))
-                    )
-
-            if len(obs_pos):
-                rel = x[:, None, :] - obs_pos[None]
-                dist = np.sqrt(np.einsum("nok,nok->no", rel, rel))
-                min_gap = min(min_gap, float((dist - obs_gap).min()))
-                min_margin = min(min_margin, float((dist - obs_safe).min()))
-            switched = out.reactive != reactive_prev
-            if switched.any():
-                for i in np.flatnonzero(switched):
-                    if out.reactive[i]:
-                        reactive_on[i] = t
-                        events.add(
-                            t,
-                            "reactive_on",
-                            robot=int(i),
-                            obstacle=_obstacle_label(int(out.avoiding[i]), len(obs_pos)),
-                        )
-                    else:
-                        reactive_spans.append({"robot": int(i), "t_on": reactive_on[i], "t_off": t})
-                        events.add(t, "reactive_off", robot=int(i))
-                reactive_prev = out.reactive.copy()
-
-            if k % log_every == 0:
-                act = out.active
-                err = mission.task_map(x[act] - out.x_d[act])  # σ − σ_d = J (x − x_d)
-                log.sample(
-                    t=t,
-                    x=x,
-                    x_hat=out.x_hat,
-                    u=out.u,
-                    phi=actuator_faults.phi(t, ctrl),
-                    phi_hat=out.phi_hat if s.fdir.enabled else np.nan,
-                    residual=out.residual,
-                    threshold=out.threshold if s.fdir.enabled else np.nan,
-                    reactive=out.reactive,
-                    active=act,
-                    sigma_err=(np.sqrt(err[0] @ err[0]), np.sqrt(np.sum(err[1:] ** 2))),
-                    x_d=out.x_d,
-                    pose=plant.poses(),
-                    c_d=c,
-                    flagged=out.flagged,
-                )
-            if k == steps:
-                break
-            plant.step(ctrl, nsub)
-            if hook is not None:
-                hook(plant.time, plant)
-            if k % 100 == 0:
-                bar.update(min(100, steps - bar.n))
-    except SimulationError as exc:
-        error = exc
-        events.add(plant.time, "simulation_error", message=str(exc))
-    finally:
-        errstate.__exit__(None, None, None)
-        bar.close()
-        actuator_faults.clear()
-
-    for i in np.flatnonzero(reactive_prev):
-        reactive_spans.append({"robot": int(i), "t_on": reactive_on[i], "t_off": None})
-    wall = time.perf_counter() - wall0
-    arrays = log.arrays()
-    summary = _summary(
-        s, xi_bar, arrays, events, reactive_spans, wall, min_gap, min_margin, error, plant.time
-    )
-    summary["build_time"] = build_time
-    if s.fdir.enabled:
-        summary["margin"] = margin["healthy"]
-        summary["margin_compensated"] = (
-            margin["compensated"] if bias_only[np.isfinite(fault_start)].any() else None
-        )
-        summary["fault_estimates"] = _fault_estimates(s, arrays, events, settle)
-    return RunResult(s, arrays, events, summary, error)
+    with Simulation(s, blocks=blocks, hook=hook) as sim:
+        return sim.run(progress=progress)
 
 
-def _fault_estimates(
-    s: Scenario, log: dict[str, np.ndarray], events: Events, settle: float
-) -> list[dict[str, Any]]:
-    """Error of φ̂ against the injected φ per bias fault, from t_f + settle to the next event."""
-    t = log["t"]
-    marks = sorted(
-        {e["t"] for e in events.items if e["kind"] in ("fault", "exclusion", "simulation_error")}
-    )
-    rows = []
-    for f in s.faults:
-        if f.kind != "bias":
-            continue
-        start = f.t + settle
-        end = min([m for m in marks if m > f.t] + [t[-1] + 1e-9 if len(t) else start])
-        win = (t >= start) & (t < end)
-        if win.sum() < 2:
-            continue
-        err = log["phi_hat"][win, f.robot] - log["phi"][win, f.robot]
-        rows.append(
-            {
-                "robot": f.robot + 1,
-                "t": f.t,
-                "window": [start, float(t[win][-1])],
-                "mean_error": np.abs(err.mean(axis=0)).tolist(),
-                "rms_error": np.sqrt((err**2).mean(axis=0)).tolist(),
-            }
-        )
-    return rows
-
-
-def _obstacle_label(index: int, n_cylinders: int) -> str:
-    """'cylinder k' or 'robot k' (1-based) for what a robot's supervisor avoids."""
-    if index < n_cylinders:
-        return f"cylinder {index + 1}"
-    return f"robot {index - n_cylinders + 1}"
-
-
-def _rms(a: np.ndarray) -> float | None:
-    a = a[np.isfinite(a)]
-    return float(np.sqrt(np.mean(a**2))) if len(a) else None
-
-
-def _finite_or_none(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
-
-
-def _summary(
-    s: Scenario,
-    xi_bar_used: float,
-    log: dict[str, np.ndarray],
-    events: Events,
-    reactive: list[dict[str, Any]],
-    wall: float,
-    min_gap: float,
-    min_margin: float,
-    error: SimulationError | None,
-    sim_time: float,
-) -> dict[str, Any]:
-    """The ``summary.json`` contract (robots numbered from 1)."""
-    t = log["t"]
-    window = t >= s.mission.transient
-    err = log["sigma_err"]
-    last = err[-1] if len(err) else (math.nan, math.nan)
-    simulated = float(t[-1]) if len(t) else 0.0
-    return {
-        "scenario": s.name,
-        "seed": s.seed,
-        "duration": s.duration,
-        "robots": s.team.robots,
-        "robot_model": s.team.robot_model,
-        "status": "ok" if error is None else "failed",
-        "error": None if error is None else str(error),
-        "simulated_time": round(sim_time, 9) if error else simulated,
-        "wall_time": wall,
-        "real_time_factor": (sim_time / wall) if wall > 0 else None,
-        "faults": [
-            {"robot": e["robot"] + 1, "kind": e["fault"], "t": e["t"]}
-            for e in events.of_kind("fault")
-        ],
-        "reactive": [
-            {
-                "robot": r["robot"] + 1,
-                "t_on": round(float(r["t_on"]), 6),
-                "t_off": None if r["t_off"] is None else round(float(r["t_off"]), 6),
-            }
-            for r in sorted(reactive, key=lambda r: (r["t_on"], r["robot"]))
-        ],
-        "detections": [
-            {"by": e["by"] + 1, "robot": e["robot"] + 1, "t": e["t"]}
-            for e in events.of_kind("detection")
-        ],
-        "exclusions": [{"robot": e["robot"] + 1, "t": e["t"]} for e in events.of_kind("exclusion")],
-        "errors": {
-            "window": [s.mission.transient, simulated],
-            "centroid_rms": _rms(err[window, 0]),
-            "formation_rms": _rms(err[window, 1]),
-            "final_centroid": _finite_or_none(last[0]),
-            "final_formation": _finite_or_none(last[1]),
-        },
-        "xi_bar": xi_bar_used,
-        "xi_bar_source": "scenario" if s.noise.xi_bar is not None else "robot model",
-        "warnings": [e["message"] for e in events.of_kind("warning")]
-        + [
-            f"t = {e['t']:g} s: after an exclusion the graph of robots "
-            f"{', '.join(str(r + 1) for r in e['robots'])} is not strongly connected; "
-            "some estimates and thresholds are no longer bounded"
-            for e in events.of_kind("graph_not_strongly_connected")
-        ],
-        "min_obstacle_clearance": _finite_or_none(min_gap),
-        "min_safe_distance_margin": _finite_or_none(min_margin),
-    }
+__all__ = ["RunResult", "Simulation", "Snapshot", "effective_xi_bar", "simulate", "team_config"]

@@ -37,6 +37,21 @@ def task_map(x: np.ndarray) -> np.ndarray:
     return sigma
 
 
+def task_errors(x: np.ndarray, x_d: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """‖σ₁ − σ₁,d‖ and ‖σ₂ − σ₂,d‖ (T, 2) of the members over logged samples (eqs. 9-12).
+
+    ``x``, ``x_d`` (T, N, 2) true and desired positions, ``active`` (T, N) membership.
+    """
+    out = np.full((len(x), 2), np.nan)
+    for r in range(len(x)):
+        act = active[r]
+        if not act.any():
+            continue
+        err = task_map(x[r, act] - x_d[r, act])  # σ − σ_d = J (x − x_d)
+        out[r] = (np.sqrt(err[0] @ err[0]), np.sqrt(np.sum(err[1:] ** 2)))
+    return out
+
+
 def task_inverse(sigma: np.ndarray) -> np.ndarray:
     """x = J⁻¹ σ, the inverse of :func:`task_map`, in O(N n)."""
     chain = np.zeros_like(sigma)
@@ -272,14 +287,17 @@ class FormationPlan:
     t0: float = 0.0
     blend: float = 0.0
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_still", np.zeros_like(self.target))  # the rate once settled
+
     @classmethod
     def fixed(cls, offsets: np.ndarray) -> FormationPlan:
         return cls(offsets, offsets)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Offsets (M, 2) and their time derivative at ``t``."""
+        """Offsets (M, 2) and their time derivative at ``t`` (shared arrays: do not modify)."""
         if self.blend <= 0 or t >= self.t0 + self.blend:
-            return self.target, np.zeros_like(self.target)
+            return self.target, self._still
         tau = max(0.0, (t - self.t0) / self.blend)
         s = tau**3 * (10 - 15 * tau + 6 * tau**2)
         ds = 30 * tau**2 * (1 - tau) ** 2 / self.blend

@@ -33,25 +33,31 @@ LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
     "c_d": ("2", np.float64, np.nan),
     "flagged": ("N", np.bool_, False),
     "pose": ("N3", np.float64, np.nan),
+    "ctrl": ("NA", np.float64, np.nan),  # actuator commands (A per robot), for φ of a stop
 }
+# derived from the other fields after the run (results.py), not sampled in the loop
+DERIVED_FIELDS = ("phi", "sigma_err")
 # arrays without a time axis stored beside them in log.npz
 STATIC_FIELDS = ("obstacles",)  # (O, 4): x, y, radius, safe distance d
 
 
-def _shape(code: str, n: int) -> tuple[int, ...]:
-    return tuple(n if c == "N" else int(c) for c in code)
+def _shape(code: str, n: int, n_act: int = 2) -> tuple[int, ...]:
+    return tuple(n if c == "N" else n_act if c == "A" else int(c) for c in code)
 
 
 class Log:
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part."""
 
-    def __init__(self, n_samples: int, n_robots: int, **static: np.ndarray) -> None:
+    def __init__(
+        self, n_samples: int, n_robots: int, n_act: int = 2, **static: np.ndarray
+    ) -> None:
         self.n = n_robots
         self.size = 0
         self.static = static
         self.data = {
-            name: np.full((n_samples, *_shape(code, n_robots)), fill, dtype=dtype)
+            name: np.full((n_samples, *_shape(code, n_robots, n_act)), fill, dtype=dtype)
             for name, (code, dtype, fill) in LOG_FIELDS.items()
+            if name not in DERIVED_FIELDS
         }
 
     def sample(self, **values: Any) -> None:
@@ -68,7 +74,7 @@ class Log:
 
 @dataclass
 class Events:
-    """Time-stamped events of a run; robots are stored 0-based and shown 1-based."""
+    """Time-stamped events of a run; robots are numbered from 1 (as in ``summary.json``)."""
 
     items: list[dict[str, Any]] = field(default_factory=list)
 
@@ -103,6 +109,11 @@ def _atomic_write(path: Path, write) -> None:
 def write_json(path: Path, obj: Any) -> None:
     """Write ``obj`` as indented JSON, atomically."""
     text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
+    _atomic_write(path, lambda fh: fh.write(text.encode()))
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8), atomically."""
     _atomic_write(path, lambda fh: fh.write(text.encode()))
 
 

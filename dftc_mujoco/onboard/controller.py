@@ -1,26 +1,67 @@
-"""Global mission controller on each robot's estimate (eqs. 14-16)."""
+"""Global mission controller on each robot's estimate (eqs. 14-16).
+
+The equations are the compiled :func:`collective_input` and :func:`own_input`;
+:class:`Controller` is the block that calls them.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+from .block import Block, TeamConfig
 
 
-def collective_input(
-    x_hat: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray, kc: float, out: np.ndarray | None = None
-) -> np.ndarray:
-    """ⁱû_g = J⁻¹[σ̇_d + k_c(σ_d − J ⁱx̂)] for every robot i (eq. 15), shape (N, N, n).
+@njit(cache=True)
+def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compiled
+    """ⁱû_g = J⁻¹[σ̇_d + k_c(σ_d − J ⁱx̂)] for every robot i (eq. 15), into ``out`` (M, M, n).
 
-    With J square and invertible (NOTES 11) this equals ẋ_d + k_c(x_d − ⁱx̂),
-    where x_d = J⁻¹σ_d are the desired positions (computed once per step by
-    the mission, which every robot knows).
+    With J square and invertible (NOTES 11) this is ẋ_d + k_c(x_d − ⁱx̂), where
+    x_d = J⁻¹σ_d are the desired positions (the mission, which every robot knows).
     """
-    out = np.subtract(x_d[None], x_hat, out=out)
-    out *= kc
-    out += xd_dot[None]
-    return out
+    m, _, n = x_hat.shape
+    for i in range(m):
+        for k in range(m):
+            for d in range(n):
+                out[i, k, d] = xd_dot[k, d] + kc * (x_d[k, d] - x_hat[i, k, d])
 
 
-def own_input(u_hat_g: np.ndarray) -> np.ndarray:
-    """u_g,i = Γᵢ ⁱû_g: robot i takes its own block of its estimate (eq. 16), shape (N, n)."""
-    idx = np.arange(u_hat_g.shape[0])
-    return u_hat_g[idx, idx]
+@njit(cache=True)
+def own_input(u_hat_g, out):  # pragma: no cover - compiled
+    """u_g,i = Γᵢ ⁱû_g: robot i takes its own block of its estimate (eq. 16), into ``out`` (M, n)."""
+    for i in range(u_hat_g.shape[0]):
+        for d in range(u_hat_g.shape[2]):
+            out[i, d] = u_hat_g[i, i, d]
+
+
+class Controller(Block):
+    """The paper's centroid + formation controller (eqs. 15-16) on every robot.
+
+    Override :meth:`collective_input` (and, rarely, :meth:`own_input`) to try
+    another control law. Robot i's row may use only its own estimate ⁱx̂ and
+    the mission (x_d, ẋ_d), which every robot knows.
+    """
+
+    kind = "controller"
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Read the gain k_c."""
+        self.kc = config.kc
+
+    def collective_input(self, x_hat: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray) -> np.ndarray:
+        """ⁱû_g (M, M, n) of eq. 15 from the estimates ⁱx̂ (M, M, n), x_d (M, n) and ẋ_d (M, n)."""
+        out = np.empty(x_hat.shape)
+        collective_input(
+            np.ascontiguousarray(x_hat, float),
+            np.ascontiguousarray(x_d, float),
+            np.ascontiguousarray(xd_dot, float),
+            self.kc,
+            out,
+        )
+        return out
+
+    def own_input(self, u_hat_g: np.ndarray) -> np.ndarray:
+        """u_g,i (M, n): robot i's own block of ⁱû_g (eq. 16)."""
+        out = np.empty((u_hat_g.shape[0], u_hat_g.shape[2]))
+        own_input(np.ascontiguousarray(u_hat_g, float), out)
+        return out

@@ -2,9 +2,10 @@
 
 * :func:`decay_bound` gives κ, λ of eq. 41 for one monitored robot k, from the
   N×N matrix k_o(L + e_k e_kᵀ) (NOTES 5-6).
-* :class:`Thresholds` evaluates the adaptive thresholds ⁱμ_k(t) of eq. 40.
-* :class:`Decision` raises robot i's flag on robot k when ‖ⁱr_k‖ > ⁱμ_k has
-  held for ``window`` seconds (Remark 5.2), and lowers it after as long below.
+* :class:`Thresholds` (block) evaluates the adaptive thresholds ⁱμ_k(t) of eq. 40.
+* :class:`Decision` (block) raises robot i's flag on robot k when ‖ⁱr_k‖ > ⁱμ_k
+  has held for ``window`` seconds (Remark 5.2), and lowers it after as long
+  below; the rule is the compiled :func:`decide`.
 
 The exclusion protocol (eqs. 42-43) lives in :mod:`dftc_mujoco.onboard.team`,
 which owns the vectors that are resized.
@@ -13,12 +14,12 @@ which owns the vectors that are resized.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-
 import numpy as np
+from numba import njit
 from scipy.linalg import expm
 
 from ..graph import Graph
+from .block import Block, TeamConfig
 
 
 def decay_bound(m: np.ndarray, n_lambda: int = 49) -> tuple[float, float]:
@@ -136,25 +137,47 @@ def _top_singular(a: np.ndarray, v: np.ndarray, iters: int = 30) -> tuple[np.nda
     return np.linalg.norm(np.einsum("kij,kj->ki", a, v), axis=1), v
 
 
-@dataclass
-class Thresholds:
-    """ⁱμ_k(t) of eq. 40 for a team, restarted at ``t0`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``."""
+class Thresholds(Block):
+    """The paper's adaptive thresholds ⁱμ_k(t) (eqs. 40-41) for every robot i and robot k.
 
-    graph: Graph
-    ko: float
-    eta_bar: float
-    xi_bar: float
-    y0: np.ndarray  # (N,)
-    t0: float = 0.0
-    n_dim: int = 2
-    kappa: np.ndarray = field(init=False)
-    lam: np.ndarray = field(init=False)
+    Restarted at each exclusion from a bound valid at that instant, with κ, λ
+    of the new graph (NOTES 7). Override :meth:`mu` (and :meth:`restart`) to try
+    another rule; row i may use only what robot i knows: the graph, the gains,
+    the noise bounds and the time.
+    """
 
-    def __post_init__(self) -> None:
-        self.kappa, self.lam = decay_bounds(self.graph, self.ko)
-        n = self.graph.n
+    kind = "thresholds"
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Start from ‖ỹ*_k(0)‖ ≤ ``initial_error_bound`` for every k."""
+        self.ko, self.eta_bar, self.xi_bar = config.ko, config.eta_bar, config.xi_bar
+        self.n_dim = np.shape(x_m0)[1]
+        self.restart(config.graph, np.full(config.graph.n, config.initial_error_bound), 0.0)
+
+    @classmethod
+    def for_graph(
+        cls,
+        graph: Graph,
+        ko: float,
+        eta_bar: float,
+        xi_bar: float,
+        y0: np.ndarray,
+        t0: float = 0.0,
+        n_dim: int = 2,
+    ) -> Thresholds:
+        """Thresholds of ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team."""
+        th = cls()
+        th.ko, th.eta_bar, th.xi_bar, th.n_dim = ko, eta_bar, xi_bar, n_dim
+        th.restart(graph, np.asarray(y0, float), t0)
+        return th
+
+    def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
+        """Start anew at ``t0`` on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]`` (NOTES 7)."""
+        self.graph, self.y0, self.t0 = graph, y0, t0
+        self.kappa, self.lam = decay_bounds(graph, self.ko)
+        n = graph.n
         eye = np.eye(n)
-        self._coef = np.sqrt(self.n_dim) * self.graph.in_degree()[:, None] + eye  # √n dᵢ + δᵢₖ
+        self._coef = np.sqrt(self.n_dim) * graph.in_degree()[:, None] + eye  # √n dᵢ + δᵢₖ
         self._eta = self.eta_bar * eye  # δᵢₖ η̄
         with np.errstate(divide="ignore", invalid="ignore"):
             self._steady = np.where(
@@ -164,12 +187,18 @@ class Thresholds:
             )
         self._finite = self.lam > 0
         self._all_finite = bool(self._finite.all())
-        self._start = np.where(self._finite, self.y0 * self.kappa, 0.0)  # finite parts only
+        self._start = np.where(self._finite, y0 * self.kappa, 0.0)  # finite parts only
         self._steady_f = np.where(self._finite, self._steady, 0.0)
         # after this long every transient term of eq. 40 is below 1e-12 of its start
         finite = self.lam[self.lam > 0]
-        self._settled = self.t0 + (28.0 / finite.min() if len(finite) else np.inf)
+        self._settled = t0 + (28.0 / finite.min() if len(finite) else np.inf)
         self._mu_steady: np.ndarray | None = None
+        self._mu_buf = np.empty((n, n))
+
+    def drop(self, p: int, graph: Graph, t: float) -> None:
+        """Restart on the reduced graph from the bound ‖ỹ*_k(t)‖ of the robots left."""
+        keep = np.delete(np.arange(self.graph.n), p)
+        self.restart(graph, self.bracket(t)[keep], t)
 
     def bracket(self, t: float) -> np.ndarray:
         """‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt}), per k: bounds ‖ỹ*_k(t)‖."""
@@ -180,14 +209,15 @@ class Thresholds:
         return b
 
     def mu(self, t: float) -> np.ndarray:
-        """ⁱμ_k(t) for every observer i (rows) and monitored robot k (columns) (eq. 40).
+        """ⁱμ_k(t) (M, M) for every observer i (rows) and monitored robot k (columns) (eq. 40).
 
         Where no bound exists (λ_k = 0: the graph is not strongly connected) the
-        threshold is +inf: robot k cannot be judged.
+        threshold is +inf: robot k cannot be judged. The array returned is
+        valid until the next call.
         """
         if t >= self._settled:
             if self._mu_steady is None:
-                self._mu_steady = self._mu(self.bracket(t))
+                self._mu_steady = self._mu(self.bracket(t)).copy()
             return self._mu_steady
         return self._mu(self.bracket(t))
 
@@ -198,39 +228,86 @@ class Thresholds:
                 np.inf,
                 self._coef * np.where(np.isinf(b), 0.0, b)[None, :] + self._eta,
             )
-        return self._coef * b[None, :] + self._eta
+        out = np.multiply(self._coef, b[None, :], out=self._mu_buf)
+        out += self._eta
+        return out
 
 
-@dataclass
-class Decision:
-    """Debounced flags: robot i flags k after ``window`` s above ⁱμ_k (Remark 5.2)."""
+@njit(cache=True)
+def decide(r_norm, mu, above, below, flag, dt, window, raised):  # pragma: no cover - compiled
+    """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
 
-    n: int
-    window: float
-    dt: float
-    above: np.ndarray = field(init=False)
-    below: np.ndarray = field(init=False)
-    flag: np.ndarray = field(init=False)
+    Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
+    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns
+    how many were raised.
+    """
+    count = 0
+    for i in range(r_norm.shape[0]):
+        for k in range(r_norm.shape[1]):
+            raised[i, k] = False
+            if r_norm[i, k] > mu[i, k]:
+                above[i, k] += dt
+                below[i, k] = 0.0
+                if not flag[i, k] and above[i, k] >= window - 1e-9:
+                    flag[i, k] = True
+                    raised[i, k] = True
+                    count += 1
+            else:
+                above[i, k] = 0.0
+                below[i, k] += dt
+                if flag[i, k] and below[i, k] >= window - 1e-9:
+                    flag[i, k] = False
+    return count
 
-    def __post_init__(self) -> None:
-        self.above = np.zeros((self.n, self.n))
-        self.below = np.zeros((self.n, self.n))
-        self.flag = np.zeros((self.n, self.n), bool)
+
+class Decision(Block):
+    """Debounced flags: robot i flags k after ``window`` s above ⁱμ_k (eq. 39, Remark 5.2).
+
+    ``window`` defaults to the scenario's ``fdir.detection_window``. Override
+    :meth:`update` to try another decision rule; row i may use only robot i's
+    own residuals and thresholds.
+    """
+
+    kind = "decision"
+
+    def __init__(self, window: float | None = None) -> None:
+        self.window_param = window
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """All timers at zero, nobody flagged."""
+        self.dt = config.dt
+        self.window = config.detection_window if self.window_param is None else self.window_param
+        n = len(x_m0)
+        self.above = np.zeros((n, n))
+        self.below = np.zeros((n, n))
+        self.flag = np.zeros((n, n), bool)
+        self._raised = np.zeros((n, n), bool)
+
+    @classmethod
+    def standalone(cls, n: int, window: float, dt: float) -> Decision:
+        """A decision block for ``n`` robots outside any team."""
+        d = cls(window)
+        d.dt, d.window = dt, window
+        d.above, d.below = np.zeros((n, n)), np.zeros((n, n))
+        d.flag, d._raised = np.zeros((n, n), bool), np.zeros((n, n), bool)
+        return d
 
     def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
-        """Feed ‖ⁱr_k‖ and ⁱμ_k (N, N); return the flags raised at this instant (eq. 39)."""
-        over = r_norm > mu
-        self.above = np.where(over, self.above + self.dt, 0.0)
-        self.below = np.where(over, 0.0, self.below + self.dt)
-        eps = 1e-9
-        raised = ~self.flag & over & (self.above >= self.window - eps)
-        lowered = self.flag & ~over & (self.below >= self.window - eps)
-        self.flag = (self.flag | raised) & ~lowered
-        return raised
+        """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
+        decide(
+            np.ascontiguousarray(r_norm, float),
+            np.ascontiguousarray(mu, float),
+            self.above,
+            self.below,
+            self.flag,
+            self.dt,
+            self.window,
+            self._raised,
+        )
+        return self._raised
 
-    def drop(self, p: int) -> None:
+    def drop(self, p: int, graph: Graph, t: float) -> None:
         """Forget robot at position ``p`` (vectors resized after an exclusion)."""
-        for name in ("above", "below", "flag"):
+        for name in ("above", "below", "flag", "_raised"):
             a = getattr(self, name)
             setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))
-        self.n -= 1

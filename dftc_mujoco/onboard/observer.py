@@ -3,47 +3,86 @@
 Every robot i keeps ⁱŷ (its estimate of the auxiliary collective variable
 y = x − ∫u, eq. 20) and ∫(ⁱû_g + Γᵢᵀ Δuᵢ); its estimate of the whole team is
 ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) (eq. 21). Eq. 19 is then d/dt ⁱŷ = k_o ⁱr with
-ⁱr the residual of eq. 35 (NOTES 1). Arrays carry a leading robot axis:
-``y_hat[i]`` is robot i's ⁱŷ, of shape (N, n), and is the message it broadcasts.
+ⁱr the residual of eq. 35 (NOTES 1). Arrays carry a leading robot axis (the
+members of the team): ``y_hat[i]`` is robot i's ⁱŷ, of shape (M, n), and is
+the message it broadcasts.
+
+The equations are the compiled functions :func:`estimate`, :func:`residual`
+and :func:`update`; :class:`Observer` is the block that holds the state and
+calls them, and the compiled team period (:mod:`.period`) calls the same
+functions.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+from numba import njit
+
+from ..graph import Graph
+from .block import Block, TeamConfig
 
 
-@dataclass
-class ObserverState:
-    """Per-robot observer state; updated in place by :func:`update`."""
-
-    y_hat: np.ndarray  # (N, N, n): ⁱŷ, the messages
-    int_u_hat: np.ndarray  # (N, N, n): ∫(ⁱû_g + Γᵢᵀ Δuᵢ)
-    int_u_own: np.ndarray  # (N, n): ∫uᵢ, robot i's own nominal input
-
-    @classmethod
-    def initial(cls, x_m0: np.ndarray, prior: np.ndarray) -> ObserverState:
-        """Start with ⁱx̂(0) = the prior (the planned slots) except ⁱx̂ᵢ(0) = x_m,i(0)."""
-        n = len(x_m0)
-        y_hat = np.repeat(prior[None].astype(float), n, axis=0)
-        y_hat[np.arange(n), np.arange(n)] = x_m0
-        return cls(y_hat, np.zeros_like(y_hat), np.zeros_like(x_m0, dtype=float))
-
-    def estimate(self, out: np.ndarray | None = None) -> np.ndarray:
-        """ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) for every robot (eq. 21), shape (N, N, n)."""
-        return np.add(self.y_hat, self.int_u_hat, out=out)
+@njit(cache=True)
+def estimate(y_hat, int_u_hat, out):  # pragma: no cover - compiled
+    """ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) for every robot (eq. 21), into ``out`` (M, M, n)."""
+    m, _, n = y_hat.shape
+    for i in range(m):
+        for k in range(m):
+            for d in range(n):
+                out[i, k, d] = y_hat[i, k, d] + int_u_hat[i, k, d]
 
 
-SPARSE_FROM = 16  # team size from which messages are summed with a sparse matrix
+@njit(cache=True)
+def residual(y_hat, int_u_own, x_m, src, first_edge, in_degree, r, r_norm):  # pragma: no cover
+    """ⁱr = Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m − ⁱŷ) (eq. 35) into ``r`` (M, M, n), ‖ⁱr_k‖ into ``r_norm``.
+
+    Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
+    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2).
+    """
+    m, _, n = y_hat.shape
+    for i in range(m):
+        for k in range(m):
+            for d in range(n):
+                acc = -in_degree[i] * y_hat[i, k, d]
+                for e in range(first_edge[i], first_edge[i + 1]):
+                    acc += y_hat[src[e], k, d]
+                r[i, k, d] = acc
+        for d in range(n):
+            r[i, i, d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
+        for k in range(m):
+            acc = 0.0
+            for d in range(n):
+                acc += r[i, k, d] ** 2
+            r_norm[i, k] = np.sqrt(acc)
+
+
+@njit(cache=True)
+def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt):  # pragma: no cover
+    """Advance every robot's observer by one control period, in place (eqs. 19-21, Euler).
+
+    ``u_hat_g`` (M, M, n) is ⁱû_g, ``delta_u`` (M, n) is Δuᵢ (eq. 22) and ``u``
+    (M, n) the nominal input uᵢ of eq. 8 each robot applied.
+    """
+    m, _, n = y_hat.shape
+    for i in range(m):
+        for k in range(m):
+            for d in range(n):
+                int_u_hat[i, k, d] += dt * u_hat_g[i, k, d]  # ∫ ⁱû_g
+        for d in range(n):
+            int_u_hat[i, i, d] += dt * delta_u[i, d]  # ∫ Γᵢᵀ Δuᵢ
+            int_u_own[i, d] += dt * u[i, d]  # ∫ uᵢ, for y_m (eq. 21)
+    for i in range(m):
+        for k in range(m):
+            for d in range(n):
+                y_hat[i, k, d] += ko * dt * r[i, k, d]  # d/dt ⁱŷ = k_o ⁱr (eq. 19, y-form)
 
 
 class Messages:
-    """Delivers the broadcast ŷ along the graph's edges only.
+    """Who hears whom: the broadcast ŷ travels along the graph's edges only.
 
-    ``neighbour_sum(y_hat)[i] = Σ_{j∈Nᵢ} (ʲŷ − ⁱŷ)`` is computed from the
-    messages on edges into i, so robot i's result cannot depend on a robot
-    that is not its in-neighbour.
+    The edges into robot i are ``src[first_edge[i]:first_edge[i + 1]]``, so a
+    function that sums over them cannot read a robot that is not i's
+    in-neighbour.
     """
 
     def __init__(self, edges: tuple[tuple[int, int], ...], n: int):
@@ -51,61 +90,91 @@ class Messages:
         self.src = np.array([j for j, _ in order], dtype=np.intp)
         dst = np.array([i for _, i in order], dtype=np.intp)
         self.in_degree = np.bincount(dst, minlength=n).astype(float)
-        # robots that hear someone, and where their incoming edges start in src
-        self.rows = np.flatnonzero(self.in_degree > 0)
-        self.starts = np.searchsorted(dst, self.rows)
-        # edges into robot i are src[first_edge[i]:first_edge[i + 1]] (every robot, for kernels)
         self.first_edge = np.searchsorted(dst, np.arange(n + 1)).astype(np.intp)
-        # large teams: a sparse adjacency (non-zeros only on the edges) sums the messages
-        # without gathering a copy of every one (N = 100: 142 -> ~20 us a step)
-        self.adjacency = None
-        if n >= SPARSE_FROM and len(self.src):
-            from scipy.sparse import csr_matrix
-
-            self.adjacency = csr_matrix((np.ones(len(self.src)), (dst, self.src)), shape=(n, n))
 
     def neighbour_sum(self, y_hat: np.ndarray) -> np.ndarray:
-        """Σ_{j∈Nᵢ} (ʲŷ − ⁱŷ) for every robot i, shape (N, N, n)."""
-        out = -self.in_degree[:, None, None] * y_hat
-        if self.adjacency is not None:
-            n = len(y_hat)
-            out += (self.adjacency @ y_hat.reshape(n, -1)).reshape(y_hat.shape)
-        elif len(self.src):
-            received = np.add.reduceat(y_hat[self.src], self.starts, axis=0)
-            if len(self.rows) == len(out):
-                out += received
-            else:
-                out[self.rows] += received
-        return out
+        """Σ_{j∈Nᵢ} (ʲŷ − ⁱŷ) for every robot i, shape (M, M, n) (the consensus part of eq. 35)."""
+        m = len(y_hat)
+        r, r_norm = np.empty_like(y_hat), np.empty((m, m))
+        own = np.zeros((m, y_hat.shape[2]))
+        diag = y_hat[np.arange(m), np.arange(m)]
+        residual(y_hat, own, diag, self.src, self.first_edge, self.in_degree, r, r_norm)
+        return r
 
 
-def residual(state: ObserverState, messages: Messages, x_m: np.ndarray) -> np.ndarray:
-    """ⁱr = Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m − ⁱŷ) for every robot (eq. 35), shape (N, N, n).
+class Observer(Block):
+    """The paper's consensus observer (eqs. 19-21) and residual (eq. 35) on every robot.
 
-    Πᵢ y_m uses only robot i's own data: y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2).
+    State, updated in place: ``y_hat`` (M, M, n) ⁱŷ, the messages each robot
+    broadcasts; ``int_u_hat`` (M, M, n) ∫(ⁱû_g + Γᵢᵀ Δuᵢ); ``int_u_own``
+    (M, n) ∫uᵢ. Every robot starts believing its teammates are at their planned
+    slots (``prior``) and itself where it measures itself.
+
+    Override :meth:`estimate`, :meth:`residual` and :meth:`update` to try
+    another observer; row i of what they return may use only robot i's own
+    row of the state, its own measurement and inputs, and the rows of
+    ``y_hat`` of its in-neighbours (``self.messages``).
     """
-    r = messages.neighbour_sum(state.y_hat)
-    idx = np.arange(len(x_m))
-    r[idx, idx] += x_m - state.int_u_own - state.y_hat[idx, idx]
-    return r
 
+    kind = "observer"
 
-def update(
-    state: ObserverState,
-    r: np.ndarray,
-    u_hat_g: np.ndarray,
-    delta_u: np.ndarray,
-    u: np.ndarray,
-    ko: float,
-    dt: float,
-) -> None:
-    """Advance the observer by one control period, in place (eqs. 19-21, forward Euler).
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Start every robot's estimate: ⁱx̂(0) = ``prior`` except ⁱx̂ᵢ(0) = x_m,i(0)."""
+        n = len(x_m0)
+        self.ko, self.dt = config.ko, config.dt
+        self.y_hat = np.repeat(np.asarray(prior, float)[None], n, axis=0)
+        self.y_hat[np.arange(n), np.arange(n)] = x_m0
+        self.int_u_hat = np.zeros_like(self.y_hat)
+        self.int_u_own = np.zeros((n, self.y_hat.shape[2]))
+        self._connect(config.graph)
 
-    ``u_hat_g`` (N, N, n) is ⁱû_g, ``delta_u`` (N, n) is Δuᵢ (eq. 22) and
-    ``u`` (N, n) the nominal input uᵢ of eq. 8 each robot applied.
-    """
-    idx = np.arange(len(u))
-    state.y_hat += (ko * dt) * r  # d/dt ⁱŷ = k_o ⁱr (eq. 19 in y-form)
-    state.int_u_hat += dt * u_hat_g  # ∫ ⁱû_g
-    state.int_u_hat[idx, idx] += dt * delta_u  # ∫ Γᵢᵀ Δuᵢ
-    state.int_u_own += dt * u  # ∫ uᵢ, for y_m (eq. 21)
+    def _connect(self, graph: Graph) -> None:
+        self.messages = Messages(graph.edges, graph.n)
+        m, n = self.y_hat.shape[0], self.y_hat.shape[2]
+        self._x_hat = np.empty_like(self.y_hat)
+        self._r = np.empty_like(self.y_hat)
+        self._r_norm = np.empty((m, m))
+
+    def drop(self, p: int, graph: Graph, t: float) -> None:
+        """Robot at team position ``p`` leaves: every collective vector shrinks (§5.2.2)."""
+        keep = np.delete(np.arange(len(self.y_hat)), p)
+        self.y_hat = self.y_hat[np.ix_(keep, keep)]
+        self.int_u_hat = self.int_u_hat[np.ix_(keep, keep)]
+        self.int_u_own = self.int_u_own[keep]
+        self._connect(graph)
+
+    def estimate(self) -> np.ndarray:
+        """ⁱx̂ of every robot (eq. 21), shape (M, M, n); valid until the next call."""
+        estimate(self.y_hat, self.int_u_hat, self._x_hat)
+        return self._x_hat
+
+    def residual(self, x_m: np.ndarray) -> np.ndarray:
+        """ⁱr of every robot (eq. 35), shape (M, M, n), from the members' own ``x_m`` (M, n)."""
+        msg = self.messages
+        residual(
+            self.y_hat,
+            self.int_u_own,
+            np.ascontiguousarray(x_m, dtype=float),
+            msg.src,
+            msg.first_edge,
+            msg.in_degree,
+            self._r,
+            self._r_norm,
+        )
+        return self._r
+
+    def update(
+        self, r: np.ndarray, u_hat_g: np.ndarray, delta_u: np.ndarray, u: np.ndarray
+    ) -> None:
+        """Advance by one control period (eqs. 19-21) with the period's residual and inputs."""
+        update(
+            self.y_hat,
+            self.int_u_hat,
+            self.int_u_own,
+            np.ascontiguousarray(r, dtype=float),
+            np.ascontiguousarray(u_hat_g, dtype=float),
+            np.ascontiguousarray(delta_u, dtype=float),
+            np.ascontiguousarray(u, dtype=float),
+            self.ko,
+            self.dt,
+        )

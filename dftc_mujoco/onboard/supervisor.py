@@ -3,36 +3,90 @@
 Each robot decides alone, from its own measured position and the obstacles
 its sensors report, whether to switch from the global input u_g,i to the
 avoidance input of eq. 18. Only one behaviour is active at a time (eq. 8).
+The equation is the compiled :func:`supervise`; :class:`Supervisor` is the
+block that calls it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
+from numba import njit
+
+from .block import Block, TeamConfig
 
 
-@dataclass
-class Supervisor:
-    """Switching state of every robot's supervisor (leading robot axis).
+@njit(cache=True)
+def supervise(x, u_g, obs, safe, act, theta, release, active, u, delta_u):  # pragma: no cover
+    """Nominal inputs uᵢ (eq. 8) and Δuᵢ = uᵢ − u_g,i (eq. 22) into ``u``, ``delta_u`` (M, n).
+
+    ``x`` (M, n) are the robots' own measured positions, ``obs`` (O, n) the
+    sensed obstacle centres with safe distances d (O,) and activation
+    distances (O,); ``active[i]`` (updated) is the obstacle robot i avoids or
+    -1. Returns True when some robot switched behaviour.
+
+    Within an obstacle's activation distance avoidance switches on when the
+    global input would approach it faster than eq. 17's primary task allows,
+    r̂ᵀu_g,i < θ(d − ‖xᵢ − x_o‖), and off when r̂ᵀu_g,i exceeds that by
+    ``release``; at the switch eq. 18 and u_g,i coincide (NOTES 12).
+    """
+    changed = False
+    for i in range(x.shape[0]):
+        best = -1
+        best_m = 1e300
+        r0 = 0.0
+        r1 = 0.0
+        bar = 0.0
+        rad = 0.0
+        for o in range(obs.shape[0]):
+            e0 = x[i, 0] - obs[o, 0]
+            e1 = x[i, 1] - obs[o, 1]
+            dist = np.sqrt(e0 * e0 + e1 * e1)
+            if dist >= act[o]:
+                continue
+            h0 = e0 / max(dist, 1e-9)  # r̂: obstacle-to-robot unit vector, Jₗ = r̂ᵀ
+            h1 = e1 / max(dist, 1e-9)
+            radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]  # r̂ᵀ u_g,i
+            barrier = theta * (safe[o] - dist)  # θ (d − ‖xᵢ − x_o‖), eq. 17
+            rel = release if active[i] == o else 0.0
+            if radial < barrier + rel and dist - safe[o] < best_m:
+                best, best_m, r0, r1, bar, rad = o, dist - safe[o], h0, h1, barrier, radial
+        if active[i] != best:
+            changed = True
+        active[i] = best
+        # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
+        du0 = (bar - rad) * r0 if best >= 0 else 0.0
+        du1 = (bar - rad) * r1 if best >= 0 else 0.0
+        delta_u[i, 0] = du0
+        delta_u[i, 1] = du1
+        u[i, 0] = u_g[i, 0] + du0
+        u[i, 1] = u_g[i, 1] + du1
+    return changed
+
+
+class Supervisor(Block):
+    """The paper's local supervisor (eqs. 8, 17-18, 22) on every robot.
 
     ``active[i]`` is the obstacle robot i is avoiding, or -1 when it follows
-    the global mission (α of eq. 8). Within an obstacle's activation distance
-    (its sensing range) avoidance switches on when the global input would
-    approach the obstacle faster than eq. 17's primary task allows, i.e. when
-    r̂ᵀu_g,i < θ(d − ‖xᵢ − x_o‖), and off when r̂ᵀu_g,i exceeds that by
-    ``release`` m/s. At the switching condition eq. 18 and u_g,i coincide, so
-    the command does not jump (NOTES 12); ``release`` only keeps measurement
-    noise from toggling the behaviour.
+    the global mission (α of eq. 8). ``release`` [m/s] only keeps measurement
+    noise from toggling the behaviour. Override :meth:`step` to try other
+    reactive behaviours; robot i's row may use only its own measured position,
+    its own global input and what its own sensors report.
     """
 
-    n_robots: int
-    theta: float
-    release: float = 0.01
-    active: np.ndarray = field(init=False)
+    kind = "supervisor"
 
-    def __post_init__(self) -> None:
-        self.active = np.full(self.n_robots, -1, dtype=np.intp)
+    def __init__(self, release: float = 0.01) -> None:
+        self.release = float(release)
+        self.active = np.zeros(0, dtype=np.intp)
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Every robot starts on the global mission."""
+        self.theta = config.theta
+        self.active = np.full(len(x_m0), -1, dtype=np.intp)
+
+    def drop(self, p, graph, t) -> None:
+        """Forget the excluded robot's behaviour."""
+        self.active = np.delete(self.active, p)
 
     def step(
         self,
@@ -42,39 +96,27 @@ class Supervisor:
         safe: np.ndarray,
         activation: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Nominal inputs uᵢ (eq. 8) and Δuᵢ (eq. 22), each (N, n).
+        """Nominal inputs uᵢ (eq. 8) and Δuᵢ (eq. 22), each (M, n).
 
-        ``x`` (N, n) are the robots' own measured positions, ``u_g`` (N, n)
-        their global inputs u_g,i, ``obstacles`` (O, n) the sensed obstacle
-        centres with safe distances d (O,) and activation distances (O,).
+        ``x`` (M, n) own measured positions, ``u_g`` (M, n) global inputs,
+        ``obstacles`` (O, n) sensed centres, ``safe`` d (O,), ``activation`` (O,).
         """
-        n = len(x)
-        if len(obstacles) == 0:
-            self.active[:] = -1
-            return u_g.copy(), np.zeros_like(u_g)
-        rel = x[:, None, :] - obstacles[None, :, :]
-        dist = np.sqrt(np.einsum("nok,nok->no", rel, rel))
-        if not (dist < activation[None, :]).any():  # nobody near anything: the global input
-            self.active[:] = -1
-            return u_g.copy(), np.zeros_like(u_g)
-        r_hat = rel / np.maximum(dist, 1e-9)[..., None]  # obstacle-to-robot unit vector
-        radial = np.einsum("nok,nk->no", r_hat, u_g)  # r̂ᵀ u_g,i
-        barrier = self.theta * (safe[None, :] - dist)  # θ (d − ‖xᵢ − x_o‖), eq. 17
-        current = self.active[:, None] == np.arange(len(obstacles))[None, :]
-        needed = radial < barrier + self.release * current
-        margin = np.where(needed & (dist < activation[None, :]), dist - safe[None, :], np.inf)
-        best = np.argmin(margin, axis=1)
-        rows = np.arange(n)
-        on = np.isfinite(margin[rows, best])
-        self.active = np.where(on, best, -1)
-
-        r = r_hat[rows, best]  # Jₗ = r̂ᵀ, Jₗ† = r̂
-        # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i
-        u_l = (barrier[rows, best] - radial[rows, best])[:, None] * r + u_g
-        u = np.where(on[:, None], u_l, u_g)
-        return u, u - u_g  # Δuᵢ = uᵢ − u_g,i (eq. 22 with one active behaviour)
+        u, du = np.empty(np.shape(u_g)), np.empty(np.shape(u_g))
+        supervise(
+            np.ascontiguousarray(x, float),
+            np.ascontiguousarray(u_g, float),
+            np.ascontiguousarray(obstacles, float).reshape(-1, 2),
+            np.ascontiguousarray(safe, float),
+            np.ascontiguousarray(activation, float),
+            self.theta,
+            self.release,
+            self.active,
+            u,
+            du,
+        )
+        return u, du
 
     @property
     def reactive(self) -> np.ndarray:
-        """Which robots are currently on a reactive behaviour, (N,) bool."""
+        """Which robots are currently on a reactive behaviour, (M,) bool."""
         return self.active >= 0

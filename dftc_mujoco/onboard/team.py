@@ -1,134 +1,137 @@
 """The N onboard DFTC stacks of Fig. 1, batched on a leading robot axis.
 
 Row i of every array belongs to robot i and is computed from robot i's own
-measurement and inputs, the messages ʲŷ of its in-neighbours j (delivered by
-:class:`~dftc_mujoco.onboard.observer.Messages` along the graph's edges), its
-own sensing of obstacles and the mission every robot is given.
+measurement and inputs, the messages ʲŷ of its in-neighbours j (delivered
+along the graph's edges only, :class:`~dftc_mujoco.onboard.observer.Messages`),
+its own sensing of obstacles and the mission every robot is given.
 
-Robots are identified by their index in the original team (0-based). The
-*members* are those still in the team; collective vectors (ⁱŷ, ⁱx̂, ⁱr, the
-thresholds, the flags) are sized by the members and shrink at an exclusion
-(eqs. 42-43). The local fault estimator is a per-robot block and keeps
-running on every robot, member or not.
+A team composes six blocks (observer, controller, supervisor, fault
+estimator, thresholds, decision): the paper's (:mod:`dftc_mujoco.blocks.paper`)
+by default, or a user's. With the paper's blocks the period runs as one
+compiled call (:mod:`.period`) built from the blocks' own compiled functions;
+with a user's block the team calls the blocks' Python methods in the same
+order (the *general* path). Both paths compute the same thing.
+
+Robots are identified by their index in the original team (0-based inside,
+1-based in events). The *members* are those still in the team; collective
+vectors (ⁱŷ, ⁱx̂, ⁱr, the thresholds, the flags) are sized by the members and
+shrink at an exclusion (eqs. 42-43). The local fault estimator is a per-robot
+block and keeps running on every robot, member or not.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
-from ..scenario import Formation
-from . import controller, kernel, observer
+from .block import Block, TeamConfig
+from .controller import Controller
 from .fault_estimator import FaultEstimator
 from .fdir import Decision, Thresholds
+from .observer import Observer
+from .period import RAISED, SWITCHED, team_period
 from .supervisor import Supervisor
 
+__all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
-@dataclass(frozen=True)
-class TeamConfig:
-    """Everything the onboard stacks are configured with (no simulator state)."""
-
-    graph: Graph
-    kc: float
-    ko: float
-    K: np.ndarray
-    G: np.ndarray
-    theta: float
-    dt: float  # control period
-    eta_bar: float
-    xi_bar: float
-    formation: Formation
-    obstacle_position: np.ndarray  # (O, 2) what the robots' sensors report
-    obstacle_safe: np.ndarray  # (O,) d of eq. 17
-    obstacle_activation: np.ndarray  # (O,)
-    detection_window: float = 0.2
-    dt_d_max: float = 5.0
-    initial_error_bound: float = 1.0
-    replan_time: float = 4.0
-    excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)
-    excluded_activation: float = 0.45
-    phi_low_pass: float = 0.0
-    command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
-    compiled: bool = True  # use the numba kernel (onboard/kernel.py) when it is installed
-    fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
-    compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
-
-
-@dataclass
-class TeamOutput:
-    """One control period of the whole team, on the *original* robot axis (N).
-
-    Entries of robots that are no longer members are NaN (or False / 0).
-    """
-
-    u: np.ndarray  # (N, 2) nominal input uᵢ of eq. 8 (0 once excluded)
-    u_bar: np.ndarray  # (N, 2) input sent to the actuators, ūᵢ = uᵢ − φ̂ᵢ (eq. 28)
-    phi_hat: np.ndarray  # (N, 2)
-    x_hat: np.ndarray  # (N, N, 2) ⁱx̂ at this instant (before the update)
-    x_d: np.ndarray  # (N, 2) desired positions of the members
-    residual: np.ndarray  # (N, N) ‖ⁱr_k‖ (eq. 35)
-    threshold: np.ndarray  # (N, N) ⁱμ_k (eq. 40)
-    flag: np.ndarray  # (N, N) robot i currently flags robot k
-    flagged: np.ndarray  # (N,) bool: some teammate (i ≠ k) currently flags robot k
-    reactive: np.ndarray  # (N,) bool
-    avoiding: np.ndarray  # (N,) int: cylinder index, O + robot id for an excluded robot, or -1
-    active: np.ndarray  # (N,) bool: member of the team
-    events: list[dict[str, Any]] = field(default_factory=list)
+#: the paper's block classes, by plug-in point
+PAPER_BLOCKS: dict[str, type[Block]] = {
+    "observer": Observer,
+    "controller": Controller,
+    "supervisor": Supervisor,
+    "fault_estimator": FaultEstimator,
+    "thresholds": Thresholds,
+    "decision": Decision,
+}
+# the blocks the compiled period contains (thresholds enter it as an array)
+_COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision")
 
 
 class Team:
-    """The team's onboard computers; :meth:`step` advances all of them by one period."""
+    """The team's onboard computers; :meth:`step` advances all of them by one period.
 
-    def __init__(self, config: TeamConfig, x_m0: np.ndarray, centroid0: np.ndarray) -> None:
+    After a step the period's outputs are attributes: ``u`` and ``u_bar`` (N, 2)
+    on the original robot axis (nominal input of eq. 8 and the compensated one
+    sent to the actuators, eq. 28); ``x_hat`` (M, M, 2) the estimates before the
+    update, ``x_d`` (M, 2), ``r_norm`` and ``mu`` (M, M) on the members' axis.
+    Events (1-based robots) accumulate in ``events`` until the caller takes them.
+    """
+
+    def __init__(
+        self,
+        config: TeamConfig,
+        x_m0: np.ndarray,
+        centroid0: np.ndarray,
+        blocks: Mapping[str, Block] | None = None,
+    ) -> None:
+        unknown = set(blocks or {}) - set(PAPER_BLOCKS)
+        if unknown:
+            raise ValueError(f"unknown blocks {sorted(unknown)}; expected {list(PAPER_BLOCKS)}")
+        chosen = {k: (blocks or {}).get(k) or cls() for k, cls in PAPER_BLOCKS.items()}
         n = config.graph.n
         self.config = config
         self.n = n
+        self.blocks = chosen
+        self.observer = chosen["observer"]
+        self.controller = chosen["controller"]
+        self.supervisor = chosen["supervisor"]
+        self.estimator = chosen["fault_estimator"]
+        self.thresholds = chosen["thresholds"]
+        self.decision = chosen["decision"]
         self.members = np.arange(n)
         self.gone = np.zeros(0, dtype=np.int64)  # robots excluded so far
         self.graph = config.graph
         offsets = formation_offsets(config.formation, n)
         self.plan = FormationPlan.fixed(offsets)
-        self.messages = observer.Messages(self.graph.edges, n)
-        # every robot starts believing its teammates are at their planned slots
-        self.state = observer.ObserverState.initial(x_m0, prior=centroid0 + offsets)
-        self.supervisor = Supervisor(n, config.theta)
-        self.estimator = FaultEstimator(
-            config.K,
-            config.G,
-            config.dt,
-            x_m0,
-            command_limit=config.command_limit,
-            low_pass=config.phi_low_pass,
-        )
-        self.thresholds = Thresholds(
-            self.graph,
-            config.ko,
-            config.eta_bar,
-            config.xi_bar,
-            np.full(n, config.initial_error_bound),
-        )
-        self.decision = Decision(n, config.detection_window, config.dt)
-        self._others = ~np.eye(n, dtype=bool)  # i ≠ k
-        self._nobody = np.full(n, -1)
-        self._nobody.setflags(write=False)
-        self.active = np.ones(n, bool)  # member of the team, on the original robot axis
-        # the numba kernel computes the same period when it covers this configuration
+        x_m0 = np.asarray(x_m0, dtype=float)
+        prior = centroid0 + offsets  # every robot starts believing its teammates are at their slots
+        for b in chosen.values():
+            b.reset(config, x_m0, prior)
+        # the compiled period contains the paper's blocks, not subclasses of them
         self.compiled = bool(
-            config.compiled
-            and kernel.AVAILABLE
-            and config.fdir
-            and config.compensate
-            and config.phi_low_pass == 0
+            config.compiled and all(type(chosen[k]) is PAPER_BLOCKS[k] for k in _COMPILED)
         )
-        self._K = np.ascontiguousarray(config.K, dtype=float)
-        self._g_inv = np.linalg.inv(config.G)
-        self.first_detection: dict[int, float] = {}  # robot id -> earliest flag by anyone
-        self.pending: dict[int, float] = {}  # robot id -> exclusion instant t_r (eq. 43)
+        self.active = np.ones(n, bool)  # member of the team, on the original robot axis
+        self.u = np.zeros((n, 2))
+        self.u_bar = np.zeros((n, 2))
+        self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
+        self._zero = np.zeros(2)
+        self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
+        self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
+        self.events: list[dict[str, Any]] = []
+        self._resize()
+
+    @property
+    def path(self) -> str:
+        """Which path runs the period: ``"compiled"`` or ``"general"``."""
+        return "compiled" if self.compiled else "general"
+
+    def _resize(self) -> None:
+        """Buffers on the members' axis (allocated at the start and at exclusions only)."""
+        m = len(self.members)
+        self.x_own = np.empty((m, 2))
+        self.x_d = np.empty((m, 2))
+        self.xd_dot = np.empty((m, 2))
+        self.x_hat = np.empty((m, m, 2))
+        self._u_hat_g = np.empty((m, m, 2))
+        self._u_g = np.empty((m, 2))
+        self._u_mem = np.empty((m, 2))
+        self._du = np.empty((m, 2))
+        self._r = np.empty((m, m, 2))
+        self.r_norm = np.empty((m, m))
+        self._raised = np.zeros((m, m), bool)
+        self.mu = np.full((m, m), np.inf)
+        cfg, gone = self.config, len(self.gone)
+        self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
+        self._obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
+        self._obs_a = np.concatenate(
+            [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
+        )
 
     # ------------------------------------------------------------------ one period
 
@@ -139,219 +142,157 @@ class Team:
         c: np.ndarray,
         c_dot: np.ndarray,
         sensed_bodies: np.ndarray | None = None,
-    ) -> TeamOutput:
-        """One control period for every robot.
+    ) -> int:
+        """One control period for every robot; returns RAISED | SWITCHED bits.
 
         ``x_m`` (N, 2): each robot's own noisy position; ``c``, ``c_dot``: the
         desired centroid and its velocity (σ₁,d, σ̇₁,d); ``sensed_bodies``
         (N, 2): where each robot's range sensor sees every robot (used only
         for robots that were excluded, which become obstacles).
         """
-        cfg = self.config
-        events: list[dict[str, Any]] = []
         if self.pending:
-            self._exclusions_due(t, events)
-        mem = self.members
-        m = len(mem)
-
+            self._exclusions_due(t)
+        if len(self.gone) and sensed_bodies is not None:
+            self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
         offsets, rates = self.plan.at(t)
+        self.mu = self.thresholds.mu(t)
         if self.compiled:
-            return self._compiled_step(t, x_m, c, c_dot, offsets, rates, sensed_bodies, events)
-        x_d = c + offsets  # J⁻¹σ_d for the members
-        xd_dot = c_dot + rates
-        x_hat = self.state.estimate()  # eq. 21
-        u_hat_g = controller.collective_input(x_hat, x_d, xd_dot, cfg.kc)  # eq. 15
-        u_g = controller.own_input(u_hat_g)  # eq. 16
-        whole = m == self.n
-        x_own = x_m if whole else x_m[mem]
-        obs_p, obs_d, obs_a = self._obstacles(sensed_bodies)
-        u_mem, delta_u = self.supervisor.step(x_own, u_g, obs_p, obs_d, obs_a)
-        r = observer.residual(self.state, self.messages, x_own)  # eq. 35
-        observer.update(self.state, r, u_hat_g, delta_u, u_mem, cfg.ko, cfg.dt)
-
-        if whole:
-            u = u_mem
+            code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
-            u = np.zeros((self.n, 2))
-            u[mem] = u_mem  # an excluded robot is told to stay where it is
-        r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
-        mu = self.thresholds.mu(t)
-        if cfg.fdir:
-            u_bar = self.estimator.step(x_m, u)  # eqs. 28-31, nominal u (NOTES 2)
-            if not cfg.compensate:
-                u_bar = u
-            raised = self.decision.update(r_norm, mu)
-            if raised.any():
-                self._report(t, raised, events)
-        else:
-            u_bar = u
+            code = self._general(x_m, c, c_dot, offsets, rates)
+        if code & RAISED:
+            self._report(t, self._raised)
+        if code & SWITCHED:
+            self._switches(t)
+        return code
 
-        return self._output(u, u_bar, x_hat, x_d, r_norm, mu, events)
-
-    def _compiled_step(self, t, x_m, c, c_dot, offsets, rates, sensed, events) -> TeamOutput:
-        """The same period as :meth:`step`, through the numba kernel (onboard/kernel.py)."""
-        cfg = self.config
-        st, est, dec, mem = self.state, self.estimator, self.decision, self.members
-        x_hat = st.estimate()  # eq. 21, before the update (for the log)
-        mu = self.thresholds.mu(t)
-        before = dec.flag.copy()
-        m = len(mem)
-        u, u_bar, r_norm = np.empty((self.n, 2)), np.empty((self.n, 2)), np.empty((m, m))
-        obs_p, obs_d, obs_a = self._obstacles(sensed)
-        kernel.team_step(
-            t,
-            np.ascontiguousarray(x_m, dtype=float),
-            np.asarray(c, float),
-            np.asarray(c_dot, float),
+    def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
+        cfg, ob, sup = self.config, self.observer, self.supervisor
+        est, dec = self.estimator, self.decision
+        msg = ob.messages
+        return team_period(
+            x_m,
+            self.members,
+            c,
+            c_dot,
             offsets,
             rates,
-            mem,
-            self.gone,
-            st.y_hat,
-            st.int_u_hat,
-            st.int_u_own,
-            self.messages.src,
-            self.messages.first_edge,
-            self.messages.in_degree,
-            cfg.kc,
-            cfg.ko,
-            cfg.dt,
-            obs_p,
-            obs_d,
-            obs_a,
-            cfg.theta,
-            self.supervisor.release,
-            self.supervisor.active,
+            self.controller.kc,
+            ob.ko,
+            ob.dt,
+            ob.y_hat,
+            ob.int_u_hat,
+            ob.int_u_own,
+            msg.src,
+            msg.first_edge,
+            msg.in_degree,
+            self._obs_p,
+            self._obs_d,
+            self._obs_a,
+            sup.theta,
+            sup.release,
+            sup.active,
+            cfg.fdir,
+            cfg.compensate,
             est.z,
             est.int_e,
             est.phi_hat,
-            self._K,
-            self._g_inv,
+            est.applied,
+            est.K,
+            est.g_inv,
             est.command_limit,
+            est.alpha,
+            self.mu,
             dec.above,
             dec.below,
             dec.flag,
-            mu,
             dec.window,
-            u,
-            u_bar,
-            r_norm,
-        )
-        est.applied[...] = est.phi_hat  # no low-pass on this path: applied = φ̂
-        raised = dec.flag & ~before
-        if raised.any():
-            self._report(t, raised, events)
-        return self._output(u, u_bar, x_hat, c + offsets, r_norm, mu, events)
-
-    def _output(self, u, u_bar, x_hat, x_d, r_norm, mu, events) -> TeamOutput:
-        """The period's outputs on the original robot axis (members' arrays expanded)."""
-        mem, m, dec = self.members, len(self.members), self.decision
-        return TeamOutput(
-            u=u,
-            u_bar=u_bar,
-            phi_hat=self.estimator.phi_hat.copy(),
-            x_hat=_expand(x_hat, mem, self.n, (2,)),
-            x_d=_expand(x_d, mem, self.n, (2,)),
-            residual=_expand(r_norm, mem, self.n),
-            threshold=_expand(mu, mem, self.n),
-            flag=_expand(dec.flag.copy(), mem, self.n, fill=False),
-            flagged=_expand((dec.flag & self._others[:m, :m]).any(axis=0), mem, self.n, fill=False),
-            reactive=_expand(self.supervisor.reactive, mem, self.n, fill=False),
-            avoiding=self._avoiding(),
-            active=self.active.copy(),
-            events=events,
+            self.x_own,
+            self.x_d,
+            self.xd_dot,
+            self.x_hat,
+            self._u_hat_g,
+            self._u_g,
+            self._u_mem,
+            self._du,
+            self._r,
+            self.r_norm,
+            self._raised,
+            self.u,
+            self.u_bar,
         )
 
-    # ------------------------------------------------------------------ FDIR
+    def _general(self, x_m, c, c_dot, offsets, rates) -> int:
+        """The same period through the blocks' Python methods (any block set)."""
+        cfg, mem = self.config, self.members
+        whole = len(mem) == self.n
+        x_own = x_m if whole else x_m[mem]
+        np.add(c, offsets, out=self.x_d)  # J⁻¹σ_d, the mission (eq. 14)
+        np.add(c_dot, rates, out=self.xd_dot)
+        before = np.array(self.supervisor.active, copy=True)
+        x_hat = self.observer.estimate()  # eq. 21
+        self.x_hat = np.array(x_hat, dtype=float)
+        u_hat_g = self.controller.collective_input(x_hat, self.x_d, self.xd_dot)  # eq. 15
+        u_g = self.controller.own_input(u_hat_g)  # eq. 16
+        u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
+        r = self.observer.residual(x_own)  # eq. 35
+        self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
+        self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
+        if not whole:
+            self.u[:] = 0.0  # an excluded robot is told to stay where it is
+        self.u[mem] = u_mem
+        code = SWITCHED if not np.array_equal(before, self.supervisor.active) else 0
+        if cfg.fdir:
+            u_bar = self.estimator.step(x_m, self.u)  # eqs. 28-31, nominal u (NOTES 2)
+            self.u_bar[:] = u_bar if cfg.compensate else self.u
+            self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)  # eq. 39
+            if self._raised.any():
+                code |= RAISED
+        else:
+            self.u_bar[:] = self.u
+        return code
 
-    def _report(self, t: float, raised: np.ndarray, events: list[dict[str, Any]]) -> None:
-        """Detection events for first flags; schedule exclusions (eq. 43)."""
-        for pi, pk in zip(*np.nonzero(raised), strict=True):
-            by, robot = int(self.members[pi]), int(self.members[pk])
-            if (by, robot) in self.detected:
-                continue
-            self.detected.add((by, robot))
-            events.append({"kind": "detection", "t": t, "by": by, "robot": robot})
-            if robot not in self.first_detection:
-                self.first_detection[robot] = t
-                self.pending[robot] = t + self.config.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
-                events.append(
-                    {
-                        "kind": "exclusion_scheduled",
-                        "t": t,
-                        "robot": robot,
-                        "t_r": t + self.config.dt_d_max,
-                    }
-                )
+    # ------------------------------------------------------------------ outputs
 
-    def _exclusions_due(self, t: float, events: list[dict[str, Any]]) -> None:
-        """At t_r, drop a robot that some teammate still flags (NOTES 10)."""
-        for robot, t_r in sorted(self.pending.items(), key=lambda kv: kv[1]):
-            if t + 1e-9 < t_r:
-                continue
-            del self.pending[robot]
-            self.first_detection.pop(robot, None)
-            p = int(np.flatnonzero(self.members == robot)[0])
-            flaggers = [int(self.members[i]) for i in np.flatnonzero(self.decision.flag[:, p])]
-            detectors = sorted(by for by, k in self.detected if k == robot)
-            if not flaggers:
-                events.append(
-                    {
-                        "kind": "exclusion_cancelled",
-                        "t": t,
-                        "robot": robot,
-                        "detected_by": detectors,
-                    }
-                )
-                self.detected = {(b, k) for b, k in self.detected if k != robot}
-                continue
-            self._exclude(t, p)
-            events.append(
-                {
-                    "kind": "exclusion",
-                    "t": t,
-                    "robot": robot,
-                    "flagged_by": flaggers,
-                    "detected_by": detectors,
-                }
-            )
-            if not self.graph.is_strongly_connected():
-                events.append(
-                    {
-                        "kind": "graph_not_strongly_connected",
-                        "t": t,
-                        "robots": [int(k) for k in self.members],
-                    }
-                )
+    @property
+    def flag(self) -> np.ndarray:
+        """(M, M) robot i currently flags robot k."""
+        return self.decision.flag
 
-    def _exclude(self, t: float, p: int) -> None:
-        """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
-        keep = np.delete(np.arange(len(self.members)), p)
-        bound = self.thresholds.bracket(t)[keep]  # ‖ỹ*_k(t_r)‖ for the remaining k
-        old_offsets, _ = self.plan.at(t)
-        self.gone = np.append(self.gone, self.members[p])
-        self.active[self.members[p]] = False
-        self.members = self.members[keep]
-        self.graph = self.graph.without(p)
-        s = self.state
-        s.y_hat = s.y_hat[np.ix_(keep, keep)]
-        s.int_u_hat = s.int_u_hat[np.ix_(keep, keep)]
-        s.int_u_own = s.int_u_own[keep]
-        self.messages = observer.Messages(self.graph.edges, len(keep))
-        self.supervisor.active = self.supervisor.active[keep]
-        self.supervisor.n_robots = len(keep)
-        self.decision.drop(p)
-        cfg = self.config
-        self.thresholds = Thresholds(self.graph, cfg.ko, cfg.eta_bar, cfg.xi_bar, bound, t0=t)
-        target = replan(cfg.formation, old_offsets[keep])
-        self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+    @property
+    def reactive(self) -> np.ndarray:
+        """(M,) which members are on a reactive behaviour."""
+        return np.asarray(self.supervisor.active) >= 0
 
-    def _avoiding(self) -> np.ndarray:
+    @property
+    def phi_hat(self) -> np.ndarray:
+        """(N, 2) every robot's fault estimate φ̂."""
+        return self.estimator.phi_hat
+
+    def outputs(self) -> dict[str, np.ndarray]:
+        """The period's outputs on the original robot axis (NaN / False for non-members)."""
+        mem, n = self.members, self.n
+        m = len(mem)
+        flag = np.asarray(self.flag, bool)
+        others = ~np.eye(m, dtype=bool)
+        return {
+            "u": self.u,
+            "u_bar": self.u_bar,
+            "phi_hat": self.phi_hat,
+            "x_hat": _expand(self.x_hat, mem, n, square=True),
+            "x_d": _expand(self.x_d, mem, n),
+            "residual": _expand(self.r_norm, mem, n, square=True),
+            "threshold": _expand(self.mu, mem, n, square=True),
+            "flag": _expand(flag, mem, n, square=True, fill=False),
+            "flagged": _expand((flag & others).any(axis=0), mem, n, fill=False),
+            "reactive": _expand(self.reactive, mem, n, fill=False),
+            "active": self.active,
+        }
+
+    def avoiding(self) -> np.ndarray:
         """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
         n_cyl = len(self.config.obstacle_position)
-        act = self.supervisor.active
-        if act.max() < 0:
-            return self._nobody  # shared, read-only
+        act = np.asarray(self.supervisor.active)
         gone = self.gone
         label = np.where(
             act >= n_cyl, n_cyl + gone[np.clip(act - n_cyl, 0, None)] if len(gone) else act, act
@@ -360,30 +301,121 @@ class Team:
         out[self.members] = label
         return out
 
-    def _obstacles(self, sensed: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    # ------------------------------------------------------------------ events
+
+    def _switches(self, t: float) -> None:
+        """reactive_on / reactive_off events for the robots whose behaviour changed."""
+        now = _expand(self.reactive, self.members, self.n, fill=False)
+        changed = np.flatnonzero(now != self._reactive)
+        if not len(changed):
+            return
+        avoiding = self.avoiding()
+        n_cyl = len(self.config.obstacle_position)
+        for i in changed:
+            if now[i]:
+                self.events.append(
+                    {
+                        "t": t,
+                        "kind": "reactive_on",
+                        "robot": int(i) + 1,
+                        "obstacle": _obstacle_label(int(avoiding[i]), n_cyl),
+                    }
+                )
+            else:
+                self.events.append({"t": t, "kind": "reactive_off", "robot": int(i) + 1})
+        self._reactive = np.array(now, copy=True)
+
+    def _report(self, t: float, raised: np.ndarray) -> None:
+        """Detection events for first flags; schedule exclusions (eq. 43)."""
+        for pi, pk in zip(*np.nonzero(raised), strict=True):
+            by, robot = int(self.members[pi]), int(self.members[pk])
+            if (by, robot) in self.detected:
+                continue
+            self.detected.add((by, robot))
+            self.events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
+            if robot not in self.first_detection:
+                t_r = t + self.config.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
+                self.first_detection[robot] = t
+                self.pending[robot] = t_r
+                self.events.append(
+                    {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
+                )
+
+    def _exclusions_due(self, t: float) -> None:
+        """At t_r, drop a robot that some teammate still flags (NOTES 10)."""
+        for robot, t_r in sorted(self.pending.items(), key=lambda kv: kv[1]):
+            if t + 1e-9 < t_r:
+                continue
+            del self.pending[robot]
+            self.first_detection.pop(robot, None)
+            p = int(np.flatnonzero(self.members == robot)[0])
+            flag = np.asarray(self.flag, bool)
+            flaggers = [int(self.members[i]) + 1 for i in np.flatnonzero(flag[:, p])]
+            detectors = sorted(by + 1 for by, k in self.detected if k == robot)
+            if not flaggers:
+                self.events.append(
+                    {
+                        "t": t,
+                        "kind": "exclusion_cancelled",
+                        "robot": robot + 1,
+                        "detected_by": detectors,
+                    }
+                )
+                self.detected = {(b, k) for b, k in self.detected if k != robot}
+                continue
+            self._exclude(t, p)
+            self.events.append(
+                {
+                    "t": t,
+                    "kind": "exclusion",
+                    "robot": robot + 1,
+                    "flagged_by": flaggers,
+                    "detected_by": detectors,
+                }
+            )
+            if not self.graph.is_strongly_connected():
+                self.events.append(
+                    {
+                        "t": t,
+                        "kind": "graph_not_strongly_connected",
+                        "robots": [int(k) + 1 for k in self.members],
+                    }
+                )
+
+    def _exclude(self, t: float, p: int) -> None:
+        """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
+        keep = np.delete(np.arange(len(self.members)), p)
+        old_offsets, _ = self.plan.at(t)
+        self.gone = np.append(self.gone, self.members[p])
+        self.active[self.members[p]] = False
+        self.members = self.members[keep]
+        self.graph = self.graph.without(p)
+        for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
+            self.blocks[name].drop(p, self.graph, t)
+        self._resize()
         cfg = self.config
-        gone = self.gone
-        if sensed is None or len(gone) == 0:
-            return cfg.obstacle_position, cfg.obstacle_safe, cfg.obstacle_activation
-        return (
-            np.vstack([cfg.obstacle_position, sensed[gone]]),
-            np.concatenate([cfg.obstacle_safe, np.full(len(gone), cfg.excluded_safe)]),
-            np.concatenate([cfg.obstacle_activation, np.full(len(gone), cfg.excluded_activation)]),
-        )
+        target = replan(cfg.formation, old_offsets[keep])
+        self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+
+
+def _obstacle_label(index: int, n_cylinders: int) -> str:
+    """'cylinder k' or 'robot k' (1-based) for what a robot's supervisor avoids."""
+    if index < n_cylinders:
+        return f"cylinder {index + 1}"
+    return f"robot {index - n_cylinders + 1}"
 
 
 def _expand(
-    a: np.ndarray, members: np.ndarray, n: int, tail: tuple[int, ...] = (), fill: Any = np.nan
+    a: np.ndarray, members: np.ndarray, n: int, square: bool = False, fill: Any = np.nan
 ) -> np.ndarray:
-    """Place a members-indexed array on the original robot axis (and axes)."""
-    m = len(members)
-    if m == n:
+    """Place a members-indexed array on the original robot axis (both first axes if ``square``)."""
+    if len(members) == n:
         return a  # the whole team: no copy (callers copy what they keep)
     dtype = bool if fill is False else float
-    if a.ndim - len(tail) == 1:
+    if square:
+        out = np.full((n, n, *a.shape[2:]), fill, dtype=dtype)
+        out[members[:, None], members[None, :]] = a
+    else:
         out = np.full((n, *a.shape[1:]), fill, dtype=dtype)
         out[members] = a
-    else:
-        out = np.full((n, n, *a.shape[2:]), fill, dtype=dtype)
-        out[members[:, None], members[None, :]] = a  # (np.ix_ costs more, every step)
     return out

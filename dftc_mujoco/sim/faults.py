@@ -38,6 +38,9 @@ class ActuatorFaults:
         self._b_t = np.array([f.t for f in bias])
         self._b_tau = np.array([f.time_constant for f in bias])
         self._b_value = np.array([f.value for f in bias]).reshape(-1, 2)
+        # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
+        self._b_settled = self._b_t + 40.0 * self._b_tau
+        self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
 
     def apply(self, t: float) -> list[Fault]:
         """Write the actuator parameters for time ``t``; returns the faults that start now."""
@@ -61,7 +64,19 @@ class ActuatorFaults:
             stop = self.actuator[self.stopped]
             self.model.actuator_gainprm[stop, 0] = 0.0
             self.model.actuator_biasprm[stop, 0] = 0.0
+        self.due = self._next_due(t)
         return new
+
+    def _next_due(self, t: float) -> float:
+        """When :meth:`apply` next has something to write: every period while a bias profile
+        moves (or while the adapter maps a bias through the robot's pose), else the next start."""
+        pending = [f.t for k, f in enumerate(self.faults) if not self.started[k]]
+        started = self._b_t <= t
+        if started.any() and (
+            getattr(self.adapter, "pose_dependent", False) or (self._b_settled[started] > t).any()
+        ):
+            return -np.inf
+        return min(pending, default=np.inf)
 
     def bias_phi(self, t: float) -> np.ndarray:
         """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
@@ -72,6 +87,28 @@ class ActuatorFaults:
                 shape = np.where(self._b_tau > 0, 1.0 - np.exp(-age / self._b_tau), 1.0)
             shape = np.where(age >= 0, shape, 0.0)
             np.add.at(phi, self._b_robot, shape[:, None] * self._b_value)
+        return phi
+
+    def phi_series(self, t: np.ndarray, ctrl: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """φ (T, N, 2) at logged instants ``t`` (T,) from the logged commands ``ctrl``
+        (T, N, A) and headings (T, N): what :meth:`phi` gave at those instants, derived
+        after the run instead of inside it."""
+        phi = np.zeros((len(t), len(self.actuator), 2))
+        if len(self._b_robot):
+            age = t[:, None] - self._b_t[None, :]
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                shape = np.where(self._b_tau > 0, 1.0 - np.exp(-age / self._b_tau), 1.0)
+            shape = np.where(age >= 0, shape, 0.0)
+            for j, robot in enumerate(self._b_robot):
+                phi[:, robot] += shape[:, j, None] * self._b_value[j]
+        lo, hi = self.model.actuator_ctrlrange[self.actuator].transpose(2, 0, 1)
+        for f in self.faults:
+            if f.kind != "stop":
+                continue
+            rows = np.flatnonzero(t >= f.t)
+            for r in rows:
+                clamped = np.clip(ctrl[r], lo, hi)
+                phi[r, f.robot] = -self.adapter.planar(clamped, heading[r])[f.robot]
         return phi
 
     def phi(self, t: float, ctrl: np.ndarray) -> np.ndarray:
@@ -94,3 +131,4 @@ class ActuatorFaults:
         self.stopped[:] = False
         self.started = [False] * len(self.faults)
         self._written = None
+        self.due = min((f.t for f in self.faults), default=np.inf)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+from numba import njit
 
 from ..errors import SimulationError
 from ..scenario import Noise
@@ -25,6 +26,65 @@ def _disk_sample(rng: np.random.Generator, n: int, radius: float, at_bound: bool
     out[:, 0] = mag * np.cos(ang)
     out[:, 1] = mag * np.sin(ang)
     return out
+
+
+@njit(cache=True)
+def _low_pass(w, alpha, state, at_bound, bound, out):  # pragma: no cover - compiled
+    """ξ_k = α ξ_{k−1} + (1 − α) w_k for a chunk of periods w (C, N, 2), in place of ``state``."""
+    for c in range(w.shape[0]):
+        for i in range(w.shape[1]):
+            for d in range(2):
+                state[i, d] = alpha * state[i, d] + (1.0 - alpha) * w[c, i, d]
+            if at_bound:
+                norm = max(np.sqrt(state[i, 0] ** 2 + state[i, 1] ** 2), 1e-12)
+                out[c, i, 0] = bound * state[i, 0] / norm
+                out[c, i, 1] = bound * state[i, 1] / norm
+            else:
+                out[c, i, 0] = state[i, 0]
+                out[c, i, 1] = state[i, 1]
+
+
+def _disk_chunk(r: np.ndarray, radius: float, at_bound: bool) -> np.ndarray:
+    """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N), as :func:`_disk_sample`."""
+    ang = (2.0 * np.pi) * r[:, 0]
+    mag = radius if at_bound else radius * np.sqrt(r[:, 1])
+    out = np.empty((len(r), r.shape[2], 2))
+    out[:, :, 0] = mag * np.cos(ang)
+    out[:, :, 1] = mag * np.sin(ang)
+    return out
+
+
+class NoiseStream:
+    """η and ξ of every control period, drawn ahead in chunks from the run's generator.
+
+    The draws are the same, in the same order, as one η then one ξ per period
+    (the generator fills a chunk in order), so the numbers do not depend on
+    the chunk size; drawing ahead only removes per-period work from the loop.
+    """
+
+    def __init__(self, plant: Plant, chunk: int = 512) -> None:
+        self.plant = plant
+        self.chunk = chunk
+        self.k = chunk  # next row to hand out
+        n = plant.n
+        self.eta = np.empty((chunk, n, 2))
+        self.xi = np.empty((chunk, n, 2))
+
+    def next(self) -> tuple[np.ndarray, np.ndarray]:
+        """(η, ξ) of the next control period, each (N, 2): views valid for one period."""
+        if self.k == self.chunk:
+            self._refill()
+        k = self.k
+        self.k += 1
+        return self.eta[k], self.xi[k]
+
+    def _refill(self) -> None:
+        p = self.plant
+        r = p.rng.random((self.chunk, 2, 2, p.n))  # per period: η's (2, N), then ξ's (2, N)
+        self.eta[:] = _disk_chunk(r[:, 0], p.noise.eta_bar, p.at_bound)
+        w = _disk_chunk(r[:, 1], p.xi_bar, False)
+        _low_pass(w, p._alpha, p._xi_state, p.at_bound, p.xi_bar, self.xi)
+        self.k = 0
 
 
 class Plant:
@@ -60,14 +120,22 @@ class Plant:
         self.xi = np.zeros((self.n, 2))
         self._ctrl_index = scene.actuator.ravel()
         mujoco.mj_forward(self.model, self.data)
+        # views into MjData's own memory, taken once (the hot loop reads and writes them)
+        self._site_xpos = self.data.site_xpos
+        self._ctrl = self.data.ctrl
+        self._warnings = self.data.warning.number
 
     @property
     def time(self) -> float:
         return float(self.data.time)
 
-    def positions(self) -> np.ndarray:
+    def positions(self, out: np.ndarray | None = None) -> np.ndarray:
         """True planar positions (N, 2) from the robots' sites (world frame, NOTES 13)."""
-        return self.data.site_xpos[self.scene.site, :2].copy()
+        xy = self._site_xpos[self.scene.site, :2]
+        if out is None:
+            return xy
+        out[:] = xy
+        return out
 
     def poses(self) -> np.ndarray:
         """Each robot base's planar pose (N, 3): x, y, heading [rad]."""
@@ -105,13 +173,14 @@ class Plant:
 
     def step(self, ctrl: np.ndarray, nsub: int) -> None:
         """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
-        self.data.ctrl[self._ctrl_index] = ctrl.ravel()
+        self._ctrl[self._ctrl_index] = ctrl.ravel()
         mujoco.mj_step(self.model, self.data, nstep=nsub)
-        self.check()
+        if self._warnings.any():
+            self.check()
 
     def check(self) -> None:
         """Raise :class:`SimulationError` on any MuJoCo warning (non-finite states included)."""
-        counts = self.data.warning.number
+        counts = self._warnings
         if counts.any():
             idx, name = next((i, nm) for i, nm in _WARNINGS if counts[i])
             info = self.data.warning[idx].lastinfo

@@ -40,8 +40,9 @@ class Adapter(Protocol):
         """Actuator offsets (N, A), in command units, that shift the velocity by ``phi`` (N, 2)."""
         ...
 
-    def planar(self, ctrl: np.ndarray) -> np.ndarray:
-        """The planar velocity (N, 2) that actuator commands ``ctrl`` (N, A) ask for."""
+    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        """The planar velocity (N, 2) that actuator commands ``ctrl`` (N, A) ask for, with
+        the robots' headings (N,) [rad] if given, else their current ones."""
         ...
 
 
@@ -84,6 +85,7 @@ class HolonomicAdapter:
     """Robots on x/y slide joints: actuators ``vx`` and ``vy`` take the planar velocity as is."""
 
     actuators = ("vx", "vy")
+    pose_dependent = False  # commands do not depend on the robot's heading
 
     def __init__(self, robot: RobotModel, scene: Any, data: mujoco.MjData) -> None:
         rng = scene.model.actuator_ctrlrange[scene.actuator]
@@ -95,7 +97,7 @@ class HolonomicAdapter:
     def bias(self, phi: np.ndarray) -> np.ndarray:
         return phi
 
-    def planar(self, ctrl: np.ndarray) -> np.ndarray:
+    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
         return ctrl
 
 
@@ -111,6 +113,7 @@ class DiffDriveAdapter:
     """
 
     actuators = ("wheel_l", "wheel_r")
+    pose_dependent = True  # wheel commands depend on the robot's heading
 
     def __init__(self, robot: RobotModel, scene: Any, data: mujoco.MjData) -> None:
         self.r = robot.params["wheel_radius"]
@@ -142,8 +145,8 @@ class DiffDriveAdapter:
     def bias(self, phi: np.ndarray) -> np.ndarray:
         return self._wheels(phi)
 
-    def planar(self, ctrl: np.ndarray) -> np.ndarray:
-        c, s = self._heading()
+    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        c, s = self._heading() if heading is None else (np.cos(heading), np.sin(heading))
         v = self.r * (ctrl[:, 0] + ctrl[:, 1]) / 2
         w = self.r * (ctrl[:, 1] - ctrl[:, 0]) / (2 * self.half)
         return np.stack([c * v - self.b * s * w, s * v + self.b * c * w], axis=1)

@@ -1,0 +1,97 @@
+"""Plug-in points for the six onboard blocks of the paper's Fig. 1.
+
+A block is selected by a built-in name (``"paper"``) or by an import path
+``"module:attribute"`` naming a class (or a factory) that returns a block
+instance; keyword parameters come from ``[onboard.params.<block>]``. The
+paper's blocks are :mod:`dftc_mujoco.blocks.paper`. Block classes are imported
+where the run executes (CLI process, campaign worker, Ray worker), so a user's
+module only has to be importable there: on ``sys.path``, or beside the
+scenario file that names it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import ScenarioError
+
+#: the six plug-in points, in the order a control period uses them
+BLOCKS = ("observer", "controller", "supervisor", "fault_estimator", "thresholds", "decision")
+
+#: built-in names per block -> "module:attribute"
+BUILTIN: dict[str, dict[str, str]] = {
+    "observer": {"paper": "dftc_mujoco.blocks.paper:Observer"},
+    "controller": {"paper": "dftc_mujoco.blocks.paper:Controller"},
+    "supervisor": {"paper": "dftc_mujoco.blocks.paper:Supervisor"},
+    "fault_estimator": {"paper": "dftc_mujoco.blocks.paper:FaultEstimator"},
+    "thresholds": {"paper": "dftc_mujoco.blocks.paper:Thresholds"},
+    "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
+}
+
+_IMPORT_PATH = re.compile(r"^[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*:[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*$")
+
+
+def check_name(block: str, name: Any) -> str | None:
+    """Why ``name`` cannot select ``block`` (a message), or None when it is well formed.
+
+    Only the form is checked here (a built-in name or ``module:attribute``);
+    the import happens where the run executes (:func:`create`).
+    """
+    if not isinstance(name, str):
+        return f"expected a string, got {type(name).__name__} {name!r}"
+    if name in BUILTIN[block] or _IMPORT_PATH.match(name):
+        return None
+    names = ", ".join(repr(n) for n in BUILTIN[block])
+    return f'expected a built-in name ({names}) or an import path "module:Class", got {name!r}'
+
+
+def load_class(block: str, name: str, search: Path | None = None, where: str = "") -> Any:
+    """The class (or factory) ``name`` selects for ``block``; ``search`` is tried after sys.path."""
+    where = where or f"onboard.{block}"
+    target = BUILTIN[block].get(name, name)
+    module_name, _, attr = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if search is None or exc.name is None or not module_name.startswith(exc.name):
+            raise ScenarioError(f"{where}: cannot import {module_name!r}: {exc}") from None
+        sys.path.append(str(search))  # a module beside the scenario file
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc2:
+            raise ScenarioError(
+                f"{where}: cannot import {module_name!r} (searched sys.path and {search}): {exc2}"
+            ) from None
+        finally:
+            sys.path.remove(str(search))
+    except Exception as exc:  # the user's module failed while importing
+        raise ScenarioError(
+            f"{where}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
+        ) from None
+    obj: Any = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise ScenarioError(f"{where}: module {module_name!r} has no attribute {attr!r}")
+        obj = getattr(obj, part)
+    return obj
+
+
+def create(
+    block: str,
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    search: Path | None = None,
+    where: str = "",
+) -> Any:
+    """A new block instance: ``load_class(...)(**params)``; errors name the scenario key."""
+    where = where or f"onboard.{block}"
+    cls = load_class(block, name, search, where)
+    try:
+        return cls(**dict(params or {}))
+    except TypeError as exc:
+        raise ScenarioError(f"{where}: cannot create {name!r} with onboard.params.{block}: {exc}")

@@ -1,0 +1,72 @@
+"""What every onboard block shares: the team's configuration and the block interface.
+
+A block is one concept of the paper's Fig. 1 (observer, controller,
+supervisor, fault estimator, thresholds, decision) for the whole team at once:
+its arrays carry a leading axis over the team's members, and row i is robot
+i's onboard computation. Row i may use only what robot i knows: its own
+measurement, inputs and state, the messages of its in-neighbours, what its
+own sensors see and the mission every robot is given
+(:func:`dftc_mujoco.onboard.locality.check` tests a block set for it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..graph import Graph
+from ..scenario import Formation
+
+
+@dataclass(frozen=True)
+class TeamConfig:
+    """Everything the onboard stacks are configured with (no simulator state)."""
+
+    graph: Graph
+    kc: float
+    ko: float
+    K: np.ndarray
+    G: np.ndarray
+    theta: float
+    dt: float  # control period
+    eta_bar: float
+    xi_bar: float
+    formation: Formation
+    obstacle_position: np.ndarray  # (O, 2) what the robots' sensors report
+    obstacle_safe: np.ndarray  # (O,) d of eq. 17
+    obstacle_activation: np.ndarray  # (O,)
+    detection_window: float = 0.2
+    dt_d_max: float = 5.0
+    initial_error_bound: float = 1.0
+    replan_time: float = 4.0
+    excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)
+    excluded_activation: float = 0.45
+    phi_low_pass: float = 0.0
+    command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
+    compiled: bool = True  # compose the paper's blocks in one compiled period when possible
+    fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
+    compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
+
+
+class Block:
+    """Base of the six onboard blocks.
+
+    A block is created with its own keyword parameters (``[onboard.params.X]``
+    in a scenario), then :meth:`reset` gives it the team (at the start of every
+    run) and :meth:`drop` tells it a robot left the team (an exclusion,
+    eq. 43). Subclass one of :mod:`dftc_mujoco.blocks.paper` and override its
+    documented methods to try your own.
+    """
+
+    kind: str = ""  # which of the six plug-in points this block fills
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Start a run: ``config`` of the team, members' first measurements ``x_m0`` (N, n)
+        and the planned slots ``prior`` (N, n) every robot is given."""
+
+    def drop(self, p: int, graph: Graph, t: float) -> None:
+        """The member at team position ``p`` was excluded at ``t``; ``graph`` is the new one."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__module__}.{type(self).__qualname__}()"

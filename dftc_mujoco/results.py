@@ -1,0 +1,279 @@
+"""What a run leaves, and everything derived from its raw log after the run.
+
+The loop records raw samples (positions, estimates, inputs, residuals,
+thresholds, commands) and events; the summary's margins, obstacle
+clearances, reactive spans, fault-estimate errors and task errors are
+computed here from those records, so the hot loop does none of it. A saved
+run (``summary.json``, ``log.npz``, ``scenario.toml``) is read back by
+:func:`open_run`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .errors import ScenarioError, SimulationError
+from .record import Events, write_json, write_npz, write_text
+
+if TYPE_CHECKING:
+    from .scenario import Scenario
+
+SETTLE = 5.0  # s after a bias fault before its compensation is judged settled
+
+
+@dataclass
+class RunResult:
+    """What a run leaves: the log, the events, the summary, and the error if it failed.
+
+    Events number robots from 1, like ``summary.json`` and the campaign tables.
+    """
+
+    scenario: Scenario
+    log: dict[str, np.ndarray]
+    events: Events
+    summary: dict[str, Any]
+    error: SimulationError | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when the physics ran to the end without trouble."""
+        return self.error is None
+
+    def save(self, out: str | Path) -> Path:
+        """Write ``log.npz``, ``scenario.toml`` and then ``summary.json`` into ``out``.
+
+        Exactly what ``python -m dftc_mujoco.run`` writes before its figures and
+        video; each file is written atomically, the summary last.
+        """
+        out = Path(out)
+        write_npz(out / "log.npz", self.log)
+        write_text(out / "scenario.toml", self.scenario.to_toml())
+        write_json(out / "summary.json", self.summary)
+        return out
+
+    def figures(self) -> dict[str, Any]:
+        """The paper's figures of this run as matplotlib Figures, by name (nothing saved)."""
+        from .render import figures
+
+        return figures.make_all(self.log, self.summary)
+
+
+def open_run(folder: str | Path) -> RunResult:
+    """Read a saved run folder (``summary.json``, ``log.npz``, ``scenario.toml``).
+
+    Raises ScenarioError naming the file when something is missing or unreadable.
+    """
+    from .scenario import from_dict
+
+    folder = Path(folder)
+    files = {name: folder / name for name in ("summary.json", "log.npz", "scenario.toml")}
+    for name, path in files.items():
+        if not path.is_file():
+            raise ScenarioError(f"{path}: missing: {folder} is not a complete run folder")
+    try:
+        summary = json.loads(files["summary.json"].read_text())
+    except (OSError, ValueError) as exc:
+        raise ScenarioError(f"{files['summary.json']}: unreadable: {exc}") from None
+    try:
+        with np.load(files["log.npz"]) as npz:
+            log = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise ScenarioError(f"{files['log.npz']}: unreadable: {exc}") from None
+    try:
+        data = tomllib.loads(files["scenario.toml"].read_text())
+    except (OSError, ValueError) as exc:
+        raise ScenarioError(f"{files['scenario.toml']}: unreadable: {exc}") from None
+    scenario = from_dict(data, source=str(files["scenario.toml"]))
+    events = Events([dict(e) for e in summary.get("events", [])])
+    error = SimulationError(summary["error"]) if summary.get("status") == "failed" else None
+    return RunResult(scenario, log, events, summary, error)
+
+
+# --------------------------------------------------------------------------- derived values
+
+
+def _rms(a: np.ndarray) -> float | None:
+    a = a[np.isfinite(a)]
+    return float(np.sqrt(np.mean(a**2))) if len(a) else None
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+def fault_masks(s: Scenario, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per logged instant (T, N): robots still healthy, and biased robots whose
+    compensation has settled; plus each robot's first fault time (N,)."""
+    n = s.team.robots
+    start = np.full(n, np.inf)
+    bias_only = np.ones(n, bool)
+    for f in s.faults:
+        start[f.robot] = min(start[f.robot], f.t)
+        bias_only[f.robot] &= f.kind == "bias"
+    healthy = start[None, :] > t[:, None]
+    settled = bias_only[None, :] & (start[None, :] + SETTLE <= t[:, None])
+    return healthy, settled, start
+
+
+def peak_ratio(residual: np.ndarray, threshold: np.ndarray, columns: np.ndarray) -> float:
+    """max ‖ⁱr_k‖ / ⁱμ_k over samples and observers i, for the robots k selected per sample
+    by ``columns`` (T, N); 0 when none is selected. Excluded robots (NaN) are skipped."""
+    best = 0.0
+    for a in range(0, len(residual), 256):  # chunks: bounded memory at large N
+        cols = columns[a : a + 256]
+        if not cols.any():
+            continue
+        ratio = residual[a : a + 256].astype(float) / threshold[a : a + 256]
+        ratio = np.where(cols[:, None, :], ratio, np.nan)
+        if np.isfinite(ratio).any():
+            best = max(best, float(np.nanmax(np.where(np.isfinite(ratio), ratio, np.nan))))
+    return best
+
+
+def reactive_spans(events: Events) -> list[dict[str, Any]]:
+    """Obstacle-avoidance spans per robot (1-based), from the reactive events."""
+    on: dict[int, float] = {}
+    spans = []
+    for e in events.items:
+        if e["kind"] == "reactive_on":
+            on[e["robot"]] = e["t"]
+        elif e["kind"] == "reactive_off" and e["robot"] in on:
+            spans.append({"robot": e["robot"], "t_on": on.pop(e["robot"]), "t_off": e["t"]})
+    spans += [{"robot": r, "t_on": t, "t_off": None} for r, t in on.items()]
+    return sorted(spans, key=lambda r: (r["t_on"], r["robot"]))
+
+
+def fault_estimates(s: Scenario, log: dict[str, np.ndarray], events: Events) -> list[dict]:
+    """Error of φ̂ against the injected φ per bias fault, from t_f + settle to the next event."""
+    t = log["t"]
+    marks = sorted(
+        {e["t"] for e in events.items if e["kind"] in ("fault", "exclusion", "simulation_error")}
+    )
+    rows = []
+    for f in s.faults:
+        if f.kind != "bias":
+            continue
+        start = f.t + SETTLE
+        end = min([m for m in marks if m > f.t] + [t[-1] + 1e-9 if len(t) else start])
+        win = (t >= start) & (t < end)
+        if win.sum() < 2:
+            continue
+        err = log["phi_hat"][win, f.robot] - log["phi"][win, f.robot]
+        rows.append(
+            {
+                "robot": f.robot + 1,
+                "t": f.t,
+                "window": [start, float(t[win][-1])],
+                "mean_error": np.abs(err.mean(axis=0)).tolist(),
+                "rms_error": np.sqrt((err**2).mean(axis=0)).tolist(),
+            }
+        )
+    return rows
+
+
+def obstacle_clearance(
+    log: dict[str, np.ndarray], footprint: float, safe: np.ndarray
+) -> tuple[float, float]:
+    """Smallest hull-to-cylinder gap and smallest distance beyond d over the logged samples."""
+    obs = log["obstacles"]
+    x = log["x"]
+    if not len(obs) or not len(x):
+        return math.inf, math.inf
+    rel = x[:, :, None, :] - obs[None, None, :, :2]
+    dist = np.sqrt(np.einsum("tnok,tnok->tno", rel, rel))
+    gap = float(np.nanmin(dist - (obs[:, 2] + footprint)))
+    margin = float(np.nanmin(dist - safe))
+    return gap, margin
+
+
+def summarize(
+    s: Scenario,
+    log: dict[str, np.ndarray],
+    events: Events,
+    *,
+    xi_bar: float,
+    footprint: float,
+    obstacle_safe: np.ndarray,
+    wall: float,
+    error: SimulationError | None,
+    sim_time: float,
+    finished: bool = True,
+) -> dict[str, Any]:
+    """The ``summary.json`` contract (robots numbered from 1), from the raw records."""
+    t = log["t"]
+    window = t >= s.mission.transient
+    err = log["sigma_err"]
+    last = err[-1] if len(err) else (math.nan, math.nan)
+    simulated = float(t[-1]) if len(t) else 0.0
+    gap, margin_d = obstacle_clearance(log, footprint, obstacle_safe)
+    status = "ok" if error is None else "failed"
+    if error is None and not finished:
+        status = "incomplete"
+    summary: dict[str, Any] = {
+        "scenario": s.name,
+        "seed": s.seed,
+        "duration": s.duration,
+        "robots": s.team.robots,
+        "robot_model": s.team.robot_model,
+        "status": status,
+        "error": None if error is None else str(error),
+        "simulated_time": round(sim_time, 9) if error else simulated,
+        "wall_time": wall,
+        "real_time_factor": (simulated / wall) if wall > 0 else None,
+        "faults": [
+            {"robot": e["robot"], "kind": e["fault"], "t": e["t"]} for e in events.of_kind("fault")
+        ],
+        "reactive": reactive_spans(events),
+        "detections": [
+            {"by": e["by"], "robot": e["robot"], "t": e["t"]} for e in events.of_kind("detection")
+        ],
+        "exclusions": [{"robot": e["robot"], "t": e["t"]} for e in events.of_kind("exclusion")],
+        "errors": {
+            "window": [s.mission.transient, simulated],
+            "centroid_rms": _rms(err[window, 0]),
+            "formation_rms": _rms(err[window, 1]),
+            "final_centroid": _finite_or_none(last[0]),
+            "final_formation": _finite_or_none(last[1]),
+        },
+        "xi_bar": xi_bar,
+        "xi_bar_source": "scenario" if s.noise.xi_bar is not None else "robot model",
+        "warnings": [e["message"] for e in events.of_kind("warning")]
+        + [
+            f"t = {e['t']:g} s: after an exclusion the graph of robots "
+            f"{', '.join(str(r) for r in e['robots'])} is not strongly connected; "
+            "some estimates and thresholds are no longer bounded"
+            for e in events.of_kind("graph_not_strongly_connected")
+        ],
+        "min_obstacle_clearance": _finite_or_none(gap),
+        "min_safe_distance_margin": _finite_or_none(margin_d),
+    }
+    if s.fdir.enabled:
+        healthy, settled, _ = fault_masks(s, t)
+        summary["margin"] = peak_ratio(log["residual"], log["threshold"], healthy)
+        summary["margin_compensated"] = (
+            peak_ratio(log["residual"], log["threshold"], settled)
+            if _bias_faulty(s).any()
+            else None
+        )
+        summary["fault_estimates"] = fault_estimates(s, log, events)
+    summary["events"] = events.ordered()
+    return summary
+
+
+def _bias_faulty(s: Scenario) -> np.ndarray:
+    """Robots whose only faults are biases (N,) bool."""
+    n = s.team.robots
+    has = np.zeros(n, bool)
+    only = np.ones(n, bool)
+    for f in s.faults:
+        has[f.robot] = True
+        only[f.robot] &= f.kind == "bias"
+    return has & only
