@@ -4,10 +4,12 @@
 
 For each N, in a fresh process (so peak memory is that run's own): a grid
 formation of 0.5 m spacing, a ring with chords 2 and 5, no cylinders, a stop
-fault at half time. Reports scene build time, the κ/λ computation (part of the
-onboard set-up), µs per control step of the closed loop and of bare
-``mj_step`` on the same compiled scene, their ratio, the real-time factor and
-the peak resident memory of the process.
+fault at half time. Reports the κ/λ computation (part of the onboard
+set-up), the whole set-up of a Simulation, µs per control period of the
+closed loop and of bare ``mj_step`` replaying the run's own commands (median
+of ``--repeat``, numba's cache loaded before timing: see ``replay.py``), their
+ratio, the real-time factor of the loop alone and with set-up and post-run
+derivation, and the peak resident memory of the process.
 """
 
 from __future__ import annotations
@@ -19,15 +21,15 @@ import resource
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 
-def one(n: int, duration: float, log_rate: float = 10.0) -> dict:
-    import mujoco
+def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dict:
+    from replay import measure
 
-    from dftc_mujoco import loop, scenario
+    from dftc_mujoco import scenario
     from dftc_mujoco.graph import ring_with_chords
     from dftc_mujoco.onboard import fdir
-    from dftc_mujoco.sim import robots, scene
 
     d = {
         "name": f"scale{n}",
@@ -50,32 +52,27 @@ def one(n: int, duration: float, log_rate: float = 10.0) -> dict:
     }
     s = scenario.from_dict(d, source=f"bench N={n}")
     t0 = time.perf_counter()
-    sc = scene.build(s, robots.get("disk"))
-    build = time.perf_counter() - t0
-    t0 = time.perf_counter()
     fdir.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
     kappa = time.perf_counter() - t0
-    steps = round(duration / s.physics.control_period)
-    data = mujoco.MjData(sc.model)
-    data.ctrl[:] = 0.05
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(sc.model, data, nstep=s.physics.substeps)
-    bare = (time.perf_counter() - t0) / steps * 1e6
-    r = loop.simulate(s)
-    loop_us = (r.summary["wall_time"] - r.summary["build_time"]) / steps * 1e6
+    r = measure(s, repeat)
+    loop_s = r["loop_us"] * (r["periods"] + 1) * 1e-6
     return {
         "n": n,
-        "build_ms": build * 1e3,
         "kappa_lambda_s": kappa,
-        "bare_us": bare,
-        "loop_us": loop_us,
-        "ratio": loop_us / bare,
-        "rtf": duration / (r.summary["wall_time"] - r.summary["build_time"]),
-        "setup_s": r.summary["build_time"],
+        "bare_us": r["bare_us"],
+        "loop_us": r["loop_us"],
+        "ratio": r["ratio"],
+        "rtf": duration / loop_s,
+        "rtf_with_setup": duration / (loop_s + r["setup_s"] + r["derive_s"]),
+        "setup_s": r["setup_s"],
+        "derive_s": r["derive_s"],
+        "path": r["path"],
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "detected": [x["by"] for x in r.summary["detections"]],
+        "detected": [x["by"] for x in r["summary"]["detections"]],
     }
+
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # replay.py beside this file
 
 
 def main() -> None:
@@ -83,18 +80,19 @@ def main() -> None:
     p.add_argument("--n", type=int, nargs="+", default=[4, 16, 64, 100])
     p.add_argument("--duration", type=float, default=20.0)
     p.add_argument("--log-rate", type=float, default=10.0, help="log.npz rate [Hz]")
+    p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.one:
-        print(json.dumps(one(args.one, args.duration, args.log_rate)))
+        print(json.dumps(one(args.one, args.duration, args.log_rate, args.repeat)))
         return
     print(
         f"{os.cpu_count()} cores; {args.duration:g} s of simulated time per N, "
         f"log at {args.log_rate:g} Hz"
     )
     print(
-        f"{'N':>4} {'build':>9} {'κ/λ':>8} {'setup':>8} {'bare':>10} {'loop':>10} "
-        f"{'ratio':>6} {'RTF':>7} {'peak':>8}"
+        f"{'N':>4} {'κ/λ':>8} {'setup':>8} {'bare':>10} {'loop':>10} "
+        f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8}"
     )
     for n in args.n:
         out = subprocess.run(
@@ -107,6 +105,8 @@ def main() -> None:
                 str(args.duration),
                 "--log-rate",
                 str(args.log_rate),
+                "--repeat",
+                str(args.repeat),
             ],
             capture_output=True,
             text=True,
@@ -114,9 +114,10 @@ def main() -> None:
         )
         r = json.loads(out.stdout.strip().splitlines()[-1])
         print(
-            f"{r['n']:>4} {r['build_ms']:>7.1f}ms {r['kappa_lambda_s']:>7.2f}s "
+            f"{r['n']:>4} {r['kappa_lambda_s']:>7.2f}s "
             f"{r['setup_s']:>7.2f}s {r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
-            f"{r['ratio']:>6.1f} {r['rtf']:>6.1f}x {r['peak_mb']:>6.0f}MB"
+            f"{r['ratio']:>6.2f} {r['rtf']:>6.1f}x {r['rtf_with_setup']:>9.1f}x "
+            f"{r['peak_mb']:>6.0f}MB"
         )
 
 

@@ -1,12 +1,10 @@
-"""Speed baseline: µs per control step of the whole closed loop vs bare ``mj_step``.
+"""Speed of the closed loop as a ratio to bare ``mj_step`` replaying the run's own commands.
 
-    python benchmarks/bench_step.py [SCENARIO] [--repeat R]
+    python benchmarks/bench_step.py [SCENARIO] [--repeat R] [--general]
 
-Both are measured on the same compiled scene: "bare" holds constant actuator
-commands and calls ``mj_step(model, data, nstep=substeps)`` once per control
-period; "loop" is :func:`dftc_mujoco.loop.simulate` (faults, sensing, the N
-onboard stacks, logging at 50 Hz) minus its scene build time. The best of R
-repeats is reported.
+See ``benchmarks/replay.py`` for what is timed. ``--general`` forces the
+general path (the blocks' Python methods, as with a user's block) instead of
+the compiled period. Target for paper_case: ratio <= 3.
 """
 
 from __future__ import annotations
@@ -14,41 +12,13 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 
-import mujoco
 import numpy as np
 
-from dftc_mujoco import loop, scenario
-from dftc_mujoco.sim import robots, scene
+from dftc_mujoco import load_scenario
+from dftc_mujoco.onboard import team as team_mod
 
-
-def bare_step_us(s: scenario.Scenario, repeat: int) -> tuple[float, float]:
-    """µs per control period of bare mj_step, and scene build time [s]."""
-    t0 = time.perf_counter()
-    sc = scene.build(s, robots.get(s.team.robot_model))
-    build = time.perf_counter() - t0
-    nsub = s.physics.substeps
-    steps = round(s.duration / s.physics.control_period)
-    best = np.inf
-    for _ in range(repeat):
-        data = mujoco.MjData(sc.model)
-        data.ctrl[:] = 0.1
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            mujoco.mj_step(sc.model, data, nstep=nsub)
-        best = min(best, time.perf_counter() - t0)
-    return best / steps * 1e6, build
-
-
-def loop_step_us(s: scenario.Scenario, repeat: int) -> tuple[float, float]:
-    """µs per control period of the closed loop, and the run's real-time factor."""
-    steps = round(s.duration / s.physics.control_period)
-    best = np.inf
-    for _ in range(repeat):
-        r = loop.simulate(s)
-        best = min(best, r.summary["wall_time"] - r.summary["build_time"])
-    return best / steps * 1e6, s.duration / best
+from replay import measure
 
 
 def cpu_name() -> str:
@@ -60,31 +30,32 @@ def cpu_name() -> str:
                     return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    return platform.processor() or "unknown CPU"
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenario", nargs="?", default="paper_case")
-    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--general", action="store_true", help="force the general (Python) path")
     args = p.parse_args()
-    s = scenario.load(args.scenario)
-    bare, build = bare_step_us(s, args.repeat)
-    full, rtf = loop_step_us(s, args.repeat)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    s = load_scenario(args.scenario)
+    if args.general:
+        team_mod.COMPILED_ALLOWED = False
+    r = measure(s, args.repeat)
+    print(f"{cpu_name()}, {os.cpu_count()} cores, numpy {np.__version__}")
     print(
-        f"machine: {cpu_name()}, {os.cpu_count()} cores, {platform.system()}, "
-        f"python {platform.python_version()}, mujoco {mujoco.__version__}, "
-        f"numpy {np.__version__}"
+        f"{s.name}: N = {s.team.robots}, {r['periods']} control periods, path {r['path']}, "
+        f"{args.repeat} repeats (median, best)"
     )
+    print(f"  loop  {r['loop_us']:7.1f} us  {r['loop_best_us']:7.1f} us per control period")
+    print(f"  bare  {r['bare_us']:7.1f} us  {r['bare_best_us']:7.1f} us (mj_step replaying the run)")
+    print(f"  ratio {r['ratio']:7.2f}")
     print(
-        f"scenario: {s.name}, N = {s.team.robots}, {s.duration:g} s, control period "
-        f"{s.physics.control_period * 1e3:g} ms = {s.physics.substeps} x mj_step"
+        f"  set-up {r['setup_s'] * 1e3:.0f} ms, post-run derivation {r['derive_s'] * 1e3:.0f} ms, "
+        f"real time x{s.duration / (r['loop_us'] * r['periods'] * 1e-6):.0f} (loop only)"
     )
-    print(f"{'scene build':>24}: {build * 1e3:8.1f} ms")
-    print(f"{'bare mj_step':>24}: {bare:8.1f} us per control step")
-    print(f"{'closed loop':>24}: {full:8.1f} us per control step")
-    print(f"{'ratio loop / bare':>24}: {full / bare:8.1f}")
-    print(f"{'real-time factor':>24}: {rtf:8.1f} x")
 
 
 if __name__ == "__main__":

@@ -3,6 +3,15 @@
 Implements Arrichiello, Marino & Pierri (2017), *Distributed Fault-Tolerant
 Control for Networked Robots in the Presence of Recoverable/Unrecoverable
 Faults and Reactive Behaviors*, Frontiers in Robotics and AI.
+
+The public API (imported lazily, so ``import dftc_mujoco`` stays cheap and
+the OpenGL backend can still be chosen before MuJoCo is imported):
+
+* :func:`load_scenario`, :class:`Scenario` - scenarios from TOML, dicts or code;
+* :class:`Simulation`, :class:`Snapshot`, :func:`simulate` - run and step;
+* :class:`RunResult`, :func:`open_run` - records of a run, saved or in memory;
+* :mod:`dftc_mujoco.blocks.paper` - the paper's onboard blocks, to subclass;
+* :func:`check_locality` - does a block set use only what each robot may know?
 """
 
 import os as _os
@@ -13,4 +22,29 @@ _os.environ.setdefault("MUJOCO_GL", "egl")
 if _os.environ["MUJOCO_GL"].lower() == "egl":
     _os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
+
+_API = {
+    "load_scenario": "scenario",
+    "Scenario": "scenario",
+    "Simulation": "loop",
+    "Snapshot": "loop",
+    "simulate": "loop",
+    "RunResult": "results",
+    "open_run": "results",
+    "check_locality": "onboard.locality",
+}
+
+__all__ = [*_API, "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_API[name]}", __name__), name)
+    raise AttributeError(f"module 'dftc_mujoco' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

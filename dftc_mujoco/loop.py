@@ -393,25 +393,15 @@ class Simulation:
 
     def _sample(self, t: float, x: np.ndarray, ctrl: np.ndarray, c: np.ndarray) -> None:
         """One log row: raw values only (everything else is derived after the run)."""
-        team = self.team
-        out = team.outputs()
-        fdir = self.scenario.fdir.enabled
-        self.log.sample(
-            t=t,
-            x=x,
-            x_hat=out["x_hat"],
-            u=out["u"],
-            phi_hat=out["phi_hat"] if fdir else np.nan,
-            residual=out["residual"],
-            threshold=out["threshold"] if fdir else np.nan,
-            reactive=out["reactive"],
-            active=out["active"],
-            x_d=out["x_d"],
-            pose=self.plant.poses(),
-            c_d=c,
-            flagged=out["flagged"],
-            ctrl=ctrl,
-        )
+        log = self.log
+        row, d = log.size, log.data
+        d["t"][row] = t
+        d["x"][row] = x
+        d["c_d"][row] = c
+        d["ctrl"][row] = ctrl
+        self.plant.poses(out=d["pose"][row])
+        self.team.write_row(d, row, self.scenario.fdir.enabled)
+        log.size += 1
 
     # ------------------------------------------------------------------ results
 

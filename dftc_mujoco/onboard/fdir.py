@@ -137,6 +137,25 @@ def _top_singular(a: np.ndarray, v: np.ndarray, iters: int = 30) -> tuple[np.nda
     return np.linalg.norm(np.einsum("kij,kj->ki", a, v), axis=1), v
 
 
+@njit(cache=True)
+def eq40(start, steady, lam, elapsed, coef, eta, out):  # pragma: no cover - compiled
+    """ⁱμ_k(t) = (√n dᵢ + δᵢₖ)·‖ỹ*_k‖-bound + δᵢₖ η̄ into ``out`` (M, M) (eq. 40).
+
+    The bound of ‖ỹ*_k(t)‖ is ‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt})
+    with ``start`` = κ‖ỹ*_k(0)‖ and ``steady`` = κ(k_o η̄ + √N ξ̄)/λ; where λ_k = 0
+    (no bound: the graph is not strongly connected) the threshold is +inf.
+    """
+    for k in range(out.shape[1]):
+        if lam[k] > 0:
+            decay = np.exp(-lam[k] * elapsed)
+            b = start[k] * decay + steady[k] * (1.0 - decay)
+            for i in range(out.shape[0]):
+                out[i, k] = coef[i, k] * b + eta[i, k]
+        else:
+            for i in range(out.shape[0]):
+                out[i, k] = np.inf
+
+
 class Thresholds(Block):
     """The paper's adaptive thresholds ⁱμ_k(t) (eqs. 40-41) for every robot i and robot k.
 
@@ -217,20 +236,14 @@ class Thresholds(Block):
         """
         if t >= self._settled:
             if self._mu_steady is None:
-                self._mu_steady = self._mu(self.bracket(t)).copy()
+                self._mu_steady = self._mu(t).copy()
             return self._mu_steady
-        return self._mu(self.bracket(t))
+        return self._mu(t)
 
-    def _mu(self, b: np.ndarray) -> np.ndarray:
-        if np.isinf(b).any():
-            return np.where(
-                np.isinf(b)[None, :],
-                np.inf,
-                self._coef * np.where(np.isinf(b), 0.0, b)[None, :] + self._eta,
-            )
-        out = np.multiply(self._coef, b[None, :], out=self._mu_buf)
-        out += self._eta
-        return out
+    def _mu(self, t: float) -> np.ndarray:
+        elapsed = max(t - self.t0, 0.0)
+        eq40(self._start, self._steady_f, self.lam, elapsed, self._coef, self._eta, self._mu_buf)
+        return self._mu_buf
 
 
 @njit(cache=True)

@@ -25,8 +25,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from numba import njit
 
-from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
 from .block import Block, TeamConfig
 from .controller import Controller
@@ -49,6 +49,7 @@ PAPER_BLOCKS: dict[str, type[Block]] = {
 }
 # the blocks the compiled period contains (thresholds enter it as an array)
 _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision")
+COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 
 
 class Team:
@@ -93,7 +94,9 @@ class Team:
             b.reset(config, x_m0, prior)
         # the compiled period contains the paper's blocks, not subclasses of them
         self.compiled = bool(
-            config.compiled and all(type(chosen[k]) is PAPER_BLOCKS[k] for k in _COMPILED)
+            config.compiled
+            and COMPILED_ALLOWED
+            and all(type(chosen[k]) is PAPER_BLOCKS[k] for k in _COMPILED)
         )
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
         self.u = np.zeros((n, 2))
@@ -289,6 +292,28 @@ class Team:
             "active": self.active,
         }
 
+    def write_row(self, log: dict[str, np.ndarray], row: int, fdir: bool = True) -> None:
+        """Write the period's outputs into row ``row`` of preallocated log arrays
+        (original robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``)."""
+        if len(self.members) < self.n:  # after an exclusion: expand to the original axis
+            out = self.outputs()
+            for name in ("u", "x_hat", "x_d", "residual", "flagged", "reactive", "active"):
+                log[name][row] = out[name]
+            if fdir:
+                log["phi_hat"][row] = out["phi_hat"]
+                log["threshold"][row] = out["threshold"]
+            return
+        log["u"][row] = self.u
+        log["x_hat"][row] = self.x_hat
+        log["x_d"][row] = self.x_d
+        log["residual"][row] = self.r_norm
+        log["active"][row] = self.active
+        np.greater_equal(self.supervisor.active, 0, out=log["reactive"][row])
+        flagged_by_teammates(np.asarray(self.flag, bool), log["flagged"][row])
+        if fdir:
+            log["phi_hat"][row] = self.phi_hat
+            log["threshold"][row] = self.mu
+
     def avoiding(self) -> np.ndarray:
         """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
         n_cyl = len(self.config.obstacle_position)
@@ -396,6 +421,16 @@ class Team:
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+
+
+@njit(cache=True)
+def flagged_by_teammates(flag, out):  # pragma: no cover - compiled
+    """out[k] = some robot i ≠ k flags robot k."""
+    for k in range(flag.shape[1]):
+        out[k] = False
+        for i in range(flag.shape[0]):
+            if i != k and flag[i, k]:
+                out[k] = True
 
 
 def _obstacle_label(index: int, n_cylinders: int) -> str:

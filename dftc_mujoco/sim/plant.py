@@ -44,6 +44,24 @@ def _low_pass(w, alpha, state, at_bound, bound, out):  # pragma: no cover - comp
                 out[c, i, 1] = state[i, 1]
 
 
+@njit(cache=True)
+def _gather_xy(src, idx, out):  # pragma: no cover - compiled
+    """out[i] = src[idx[i], :2] (planar part of MuJoCo positions)."""
+    for i in range(idx.shape[0]):
+        out[i, 0] = src[idx[i], 0]
+        out[i, 1] = src[idx[i], 1]
+
+
+@njit(cache=True)
+def _gather_pose(xpos, xmat, idx, out):  # pragma: no cover - compiled
+    """out[i] = (x, y, heading) of body idx[i] from MuJoCo's xpos and row-major xmat."""
+    for i in range(idx.shape[0]):
+        b = idx[i]
+        out[i, 0] = xpos[b, 0]
+        out[i, 1] = xpos[b, 1]
+        out[i, 2] = np.arctan2(xmat[b, 3], xmat[b, 0])
+
+
 def _disk_chunk(r: np.ndarray, radius: float, at_bound: bool) -> np.ndarray:
     """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N), as :func:`_disk_sample`."""
     ang = (2.0 * np.pi) * r[:, 0]
@@ -122,8 +140,12 @@ class Plant:
         mujoco.mj_forward(self.model, self.data)
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
         self._site_xpos = self.data.site_xpos
+        self._xpos = self.data.xpos
+        self._xmat = self.data.xmat
         self._ctrl = self.data.ctrl
         self._warnings = self.data.warning.number
+        self._site = np.ascontiguousarray(scene.site, dtype=np.intp)
+        self._body = np.ascontiguousarray(scene.body, dtype=np.intp)
 
     @property
     def time(self) -> float:
@@ -131,17 +153,17 @@ class Plant:
 
     def positions(self, out: np.ndarray | None = None) -> np.ndarray:
         """True planar positions (N, 2) from the robots' sites (world frame, NOTES 13)."""
-        xy = self._site_xpos[self.scene.site, :2]
         if out is None:
-            return xy
-        out[:] = xy
+            out = np.empty((self.n, 2))
+        _gather_xy(self._site_xpos, self._site, out)
         return out
 
-    def poses(self) -> np.ndarray:
+    def poses(self, out: np.ndarray | None = None) -> np.ndarray:
         """Each robot base's planar pose (N, 3): x, y, heading [rad]."""
-        mat = self.data.xmat[self.scene.body]
-        pos = self.data.xpos[self.scene.body, :2]
-        return np.column_stack([pos, np.arctan2(mat[:, 3], mat[:, 0])])
+        if out is None:
+            out = np.empty((self.n, 3))
+        _gather_pose(self._xpos, self._xmat, self._body, out)
+        return out
 
     def velocities(self) -> np.ndarray:
         """True planar velocities (N, 2) of the robots' bases."""
@@ -175,7 +197,7 @@ class Plant:
         """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
         self._ctrl[self._ctrl_index] = ctrl.ravel()
         mujoco.mj_step(self.model, self.data, nstep=nsub)
-        if self._warnings.any():
+        if np.count_nonzero(self._warnings):
             self.check()
 
     def check(self) -> None:

@@ -1,0 +1,72 @@
+"""Loop cost as a ratio to bare ``mj_step`` replaying the run's own commands.
+
+Shared by ``bench_step.py`` and ``bench_scale.py``. For one scenario, in this
+process:
+
+1. a warm-up :class:`~dftc_mujoco.loop.Simulation` of a few periods compiles
+   (or loads from numba's cache) every compiled function, so that cost is not
+   counted as loop time;
+2. one recording run stores the actuator commands of every control period;
+3. ``repeat`` times, interleaved: the closed loop (``Simulation.step`` to the
+   end: faults, sensing, the onboard stacks, commands, logging) and the bare
+   replay (the recorded commands written to ``data.ctrl`` and
+   ``mj_step(model, data, nstep=substeps)``, nothing else) on the same model.
+
+Reported: the median and best of each, µs per control period, and their
+ratio (median / median), plus the set-up and post-run derivation times.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import mujoco
+import numpy as np
+
+from dftc_mujoco.loop import Simulation
+from dftc_mujoco.scenario import Scenario
+
+
+def measure(s: Scenario, repeat: int = 5) -> dict:
+    """Loop and bare µs per control period for scenario ``s`` (see the module docstring)."""
+    with Simulation(s) as warm:  # compile / load the numba cache outside the timings
+        warm.step(3)
+    commands: list[np.ndarray] = []
+    with Simulation(s, hook=lambda t, plant: commands.append(plant.data.ctrl.copy())) as sim:
+        sim.run(progress=False)
+    periods = len(commands)
+    loop_us, bare_us, setup_s, derive_s = [], [], [], []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        sim = Simulation(s)
+        t1 = time.perf_counter()
+        sim.step(periods + 1)
+        t2 = time.perf_counter()
+        result = sim.result()
+        t3 = time.perf_counter()
+        sim.close()
+        setup_s.append(t1 - t0)
+        loop_us.append((t2 - t1) / (periods + 1) * 1e6)
+        derive_s.append(t3 - t2)
+        model, data = sim.scene.model, mujoco.MjData(sim.scene.model)
+        nsub = s.physics.substeps
+        ctrl = data.ctrl
+        t0 = time.perf_counter()
+        for c in commands:
+            ctrl[:] = c
+            mujoco.mj_step(model, data, nstep=nsub)
+        bare_us.append((time.perf_counter() - t0) / periods * 1e6)
+    loop_med, bare_med = statistics.median(loop_us), statistics.median(bare_us)
+    return {
+        "periods": periods,
+        "loop_us": loop_med,
+        "loop_best_us": min(loop_us),
+        "bare_us": bare_med,
+        "bare_best_us": min(bare_us),
+        "ratio": loop_med / bare_med,
+        "setup_s": statistics.median(setup_s),
+        "derive_s": statistics.median(derive_s),
+        "path": result.summary["onboard"]["path"],
+        "summary": result.summary,
+    }
