@@ -16,10 +16,16 @@ robots = [4, 8, 16]              # choices of N (layout and graph then generated
 graph_family = ["ring_chords", "random", "knn"]
 eta_bar = [0.0005, 0.002]        # uniform ranges
 xi_bar = [0.002, 0.01]
+"gains.ko" = [3.0, 6.0]          # any scenario key by dotted path (quoted): a list
+"onboard.thresholds" = ["paper", "mylab.fdi:Mine"]   # of choices, one drawn per run
 [vary.graph]                     # parameters of generated graphs
 chords = [2]
 in_degree = 2
 k = 2
+
+Dotted keys are drawn after every other parameter (so adding one does not
+change the other draws of a campaign), recorded in the run's parameters under
+the dotted key and applied last, with :func:`dftc_mujoco.scenario.apply_overrides`.
 """
 
 from __future__ import annotations
@@ -80,13 +86,35 @@ def load(path: str | Path) -> Spec:
     vary = _vary(top.table("vary", {}))
     top.finish()
     spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
-    for i in range(min(runs, 3)):  # the scenarios it makes must be valid
+    scenario_for(spec, draw(spec, 0))  # the scenarios it makes must be valid
+    _check_choices(spec)
+    for i in range(1, min(runs, 3)):
         scenario_for(spec, draw(spec, i))
     return spec
 
 
+def _check_choices(spec: Spec) -> None:
+    """Every choice of a dotted ``[vary]`` key must give a valid scenario (with run 0's draws)."""
+    first = draw(spec, 0)
+    for key, choices in spec.vary.get("scenario_keys", {}).items():
+        for choice in choices:
+            label = f'{spec.source} (vary."{key}" = {choice!r})'
+            d = scenario_dict(spec, {**first, key: choice}, where=label)
+            scenario_mod.from_dict(d, source=label)
+
+
 def _vary(t: _Table) -> dict[str, Any]:
     v: dict[str, Any] = {"seed": t.boolean("seed", True)}
+    dotted: dict[str, list[Any]] = {}
+    for key in t.data:
+        if "." in key:
+            choices = t.raw(key)
+            if not isinstance(choices, list) or not choices:
+                t.fail(
+                    f'"{key}"',
+                    f"expected a non-empty list of choices, got {_describe(choices)}",
+                )
+            dotted[key] = choices
     for key, allowed in (("fault_kind", FAULT_KINDS), ("graph_family", FAMILIES)):
         if key in t.data:
             v[key] = _choices(t, key, allowed)
@@ -119,6 +147,8 @@ def _vary(t: _Table) -> dict[str, Any]:
     }
     g.finish()
     t.finish()
+    if dotted:
+        v["scenario_keys"] = dotted
     return v
 
 
@@ -163,6 +193,8 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
     for key in ("eta_bar", "xi_bar"):
         if key in v:
             p[key] = round(float(rng.uniform(*v[key])), 6)
+    for key, choices in v.get("scenario_keys", {}).items():  # after the draws above
+        p[key] = copy.deepcopy(choices[int(rng.integers(len(choices)))])
     return p
 
 
@@ -174,8 +206,19 @@ def _merge(into: dict[str, Any], extra: dict[str, Any]) -> None:
             into[k] = copy.deepcopy(val)
 
 
-def scenario_dict(spec: Spec, p: dict[str, Any]) -> dict[str, Any]:
-    """The scenario (as a TOML dict) of one run."""
+def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, Any]:
+    """The scenario (as a TOML dict) of one run.
+
+    Args:
+        spec: The campaign.
+        p: The run's parameters (:func:`draw`).
+        where: What errors in dotted ``[vary]`` keys name as the file (default:
+            the spec and the run).
+
+    Returns:
+        The base scenario with ``[set]``, the drawn parameters and, last, the
+        drawn dotted scenario keys applied.
+    """
     d = copy.deepcopy(spec.base)
     _merge(d, spec.set)
     d["seed"] = p["seed"]
@@ -216,6 +259,11 @@ def scenario_dict(spec: Spec, p: dict[str, Any]) -> dict[str, Any]:
     for key in ("eta_bar", "xi_bar"):
         if key in p:
             noise[key] = p[key]
+    dotted = {key: p[key] for key in spec.vary.get("scenario_keys", {}) if key in p}
+    if dotted:
+        d = scenario_mod.apply_overrides(
+            d, dotted, where=where or f"{spec.source} (run {p['run']}, [vary])"
+        )
     return d
 
 
