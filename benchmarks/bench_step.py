@@ -14,11 +14,10 @@ import os
 import platform
 
 import numpy as np
+from replay import measure
 
 from dftc_mujoco import load_scenario
 from dftc_mujoco.onboard import team as team_mod
-
-from replay import measure
 
 
 def cpu_name() -> str:
@@ -50,7 +49,9 @@ def main() -> None:
         f"{args.repeat} repeats (median, best)"
     )
     print(f"  loop  {r['loop_us']:7.1f} us  {r['loop_best_us']:7.1f} us per control period")
-    print(f"  bare  {r['bare_us']:7.1f} us  {r['bare_best_us']:7.1f} us (mj_step replaying the run)")
+    print(
+        f"  bare  {r['bare_us']:7.1f} us  {r['bare_best_us']:7.1f} us (mj_step replaying the run)"
+    )
     print(f"  ratio {r['ratio']:7.2f}")
     print(
         f"  set-up {r['setup_s'] * 1e3:.0f} ms, post-run derivation {r['derive_s'] * 1e3:.0f} ms, "

@@ -252,14 +252,17 @@ class Simulation:
                 message=(
                     f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
                     f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
-                    f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise false alarms"
+                    f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise "
+                    "false alarms"
                 ),
             )
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
         limited = sc.model.actuator_ctrllimited[sc.actuator].all()
         limit = self.adapter.command_limit if limited else np.inf
         blocks = make_blocks(s, self._given)
-        self.team = Team(team_config(s, model, limit), plant.measure(), self.path.position[0], blocks)
+        self.team = Team(
+            team_config(s, model, limit), plant.measure(), self.path.position[0], blocks
+        )
         self.noise = NoiseStream(plant)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
@@ -268,7 +271,8 @@ class Simulation:
         self._x_m = np.empty((n, 2))
         self._cmd = np.empty((n, 2))
         self._seen = 0  # events already handed out by step()
-        self._wall = self._build_time + (time.perf_counter() - wall0)
+        self._build = self._build_time + (time.perf_counter() - wall0)
+        self._wall = self._build
         self._build_time = 0.0
         return None
 
@@ -336,7 +340,7 @@ class Simulation:
             self.adapter,
             self.noise,
         )
-        events, log, hook = self.events, self.log, self.hook
+        events, hook = self.events, self.hook
         position, velocity = self.path.position, self.path.velocity
         last = len(position) - 1
         x, x_m, cmd = self._x, self._x_m, self._cmd
@@ -422,6 +426,7 @@ class Simulation:
             sim_time=self.plant.time,
             finished=self.k > self.steps,
         )
+        summary["build_time"] = self._build
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}
         return RunResult(self.scenario, arrays, self.events, summary, self.error)
 

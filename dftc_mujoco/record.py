@@ -48,9 +48,7 @@ def _shape(code: str, n: int, n_act: int = 2) -> tuple[int, ...]:
 class Log:
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part."""
 
-    def __init__(
-        self, n_samples: int, n_robots: int, n_act: int = 2, **static: np.ndarray
-    ) -> None:
+    def __init__(self, n_samples: int, n_robots: int, n_act: int = 2, **static: np.ndarray) -> None:
         self.n = n_robots
         self.size = 0
         self.static = static

@@ -75,7 +75,7 @@ def open_run(folder: str | Path) -> RunResult:
 
     folder = Path(folder)
     files = {name: folder / name for name in ("summary.json", "log.npz", "scenario.toml")}
-    for name, path in files.items():
+    for path in files.values():
         if not path.is_file():
             raise ScenarioError(f"{path}: missing: {folder} is not a complete run folder")
     try:

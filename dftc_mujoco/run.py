@@ -1,11 +1,12 @@
 """``python -m dftc_mujoco.run SCENARIO``: run a scenario and write its records.
 
-Writes ``summary.json``, ``log.npz``, a copy of the scenario, the paper's
-figures and (unless ``--no-video``) ``video.mp4`` to ``renders/<name>/`` (or
-``--out``), and prints a short table of the run. Exit codes: 0 success, 2 bad
-input (scenario file or command line), 3 the physics failed (the records
-written so far are kept and ``summary.json`` says what went wrong), 4 no
-OpenGL backend for the video.
+Writes ``summary.json``, ``log.npz``, the scenario that ran (``scenario.toml``,
+overrides applied), the paper's figures and (unless ``--no-video``)
+``video.mp4`` to ``renders/<name>/`` (or ``--out``), and prints a short table
+of the run. ``--viewer`` also shows the run live in MuJoCo's viewer. Exit
+codes: 0 success, 2 bad input (scenario file or command line), 3 the physics
+failed (the records written so far are kept and ``summary.json`` says what
+went wrong), 4 no OpenGL backend for the video.
 
 MuJoCo reads ``MUJOCO_GL`` when it is imported, so this module imports the
 simulator only after ``--gl`` has been applied.
@@ -14,17 +15,18 @@ simulator only after ``--gl`` has been applied.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
+import tomllib
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+from . import __version__
 from .errors import ScenarioError
 from .paths import RENDERS
 from .render import gl
 
 if TYPE_CHECKING:
-    from .loop import RunResult
+    from .results import RunResult
 
 EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER = 0, 2, 3, 4
 
@@ -36,7 +38,17 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run a DFTC scenario on MuJoCo physics.",
     )
     p.add_argument("scenario", help="scenario name (scenarios/NAME.toml) or path to a .toml file")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     p.add_argument("--out", type=Path, help="output folder (default: renders/<name>/)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key by dotted path, value in TOML syntax "
+        "(e.g. --set gains.ko=3 --set onboard.thresholds=paper); repeatable",
+    )
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument(
         "--duration",
@@ -45,6 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
         "would start after the new end are dropped (and listed)",
     )
     p.add_argument("--robot", metavar="MODEL", help="override team.robot_model")
+    p.add_argument(
+        "--viewer",
+        action="store_true",
+        help="also show the run live in MuJoCo's viewer (needs a display)",
+    )
     add_video_options(p)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     return p
@@ -102,9 +119,30 @@ def video_options(args: argparse.Namespace):
     return VideoOptions(width=w, height=h, fps=args.fps, quality=args.quality)
 
 
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` pairs into dotted overrides; VALUE is TOML (a bare word is a string)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ScenarioError(f"--set {item}: expected KEY=VALUE, e.g. gains.ko=3")
+        try:
+            value = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text  # a bare word: a string
+        out[key.strip()] = value
+    return out
+
+
+def print_error(exc: Exception) -> None:
+    """One ``error:`` line per problem the exception reports."""
+    for line in str(exc).splitlines() or [type(exc).__name__]:
+        print(f"error: {line}", file=sys.stderr)
+
+
 def _fmt_event(e: dict) -> str:
     k = e["kind"]
-    r = e.get("robot", -1) + 1
+    r = e.get("robot", 0)
     if k == "fault":
         return f"fault: {e['fault']} on robot {r}"
     if k == "reactive_on":
@@ -112,16 +150,16 @@ def _fmt_event(e: dict) -> str:
     if k == "reactive_off":
         return f"robot {r} back to the global mission"
     if k == "detection":
-        return f"robot {e['by'] + 1} flags robot {r}"
+        return f"robot {e['by']} flags robot {r}"
     if k == "exclusion_scheduled":
         return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
     if k == "exclusion":
-        by = ", ".join(str(b + 1) for b in e["flagged_by"])
+        by = ", ".join(str(b) for b in e["flagged_by"])
         return f"robot {r} excluded from the team (still flagged by {by})"
     if k == "exclusion_cancelled":
         return f"robot {r} kept: nobody flags it any more at t_r"
     if k == "graph_not_strongly_connected":
-        left = ", ".join(str(b + 1) for b in e["robots"])
+        left = ", ".join(str(b) for b in e["robots"])
         return (
             f"WARNING: the graph of robots {left} is not strongly connected: "
             "estimates and thresholds of some robots are no longer bounded"
@@ -169,19 +207,19 @@ def report(result: RunResult, out: Path) -> str:
             f"fault estimate on robot {f['robot']} (from {f['window'][0]:g} s): "
             f"mean error [{mean}] m/s"
         )
+    o = s.get("onboard", {})
+    custom = {k: v for k, v in o.get("blocks", {}).items() if v != "paper"}
+    lines.append(
+        f"onboard: {o.get('path', '?')} path"
+        + (f", blocks {', '.join(f'{k} = {v}' for k, v in custom.items())}" if custom else "")
+    )
     lines.append(f"records: {out / 'summary.json'}, {out / 'log.npz'}")
     return "\n".join(lines)
 
 
 def write_records(result: RunResult, out: Path) -> None:
-    """Write ``log.npz``, the scenario copy, then ``summary.json`` (atomically) into ``out``."""
-    from .record import write_json, write_npz
-
-    write_npz(out / "log.npz", result.log)
-    src = Path(result.scenario.source)
-    if src.is_file() and src.resolve() != (out / "scenario.toml").resolve():
-        shutil.copyfile(src, out / "scenario.toml")
-    write_json(out / "summary.json", result.summary)
+    """Write ``log.npz``, ``scenario.toml`` then ``summary.json`` (atomically) into ``out``."""
+    result.save(out)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -191,18 +229,19 @@ def main(argv: list[str] | None = None) -> int:
     try:
         options = setup_video(args, not args.no_video)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print_error(exc)
         return EXIT_INPUT
     except gl.RenderError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print_error(exc)
         return EXIT_RENDER
 
     from . import scenario as scenario_mod
-    from .loop import simulate
+    from .loop import Simulation
     from .sim import robots
 
     try:
-        original = scenario_mod.load(args.scenario)
+        overrides = parse_overrides(args.overrides)
+        original = scenario_mod.load_scenario(args.scenario, overrides)
         if args.robot is not None:
             robots.get(args.robot, where="--robot")
         s = original.with_overrides(seed=args.seed, duration=args.duration, robot_model=args.robot)
@@ -212,9 +251,17 @@ def main(argv: list[str] | None = None) -> int:
                 f"--duration {s.duration:g} s and will not happen",
                 file=sys.stderr,
             )
-        result = simulate(s, progress=progress)
+        with Simulation(s) as sim:
+            if args.viewer:
+                from .render.viewer import ViewerUnavailable, watch
+
+                try:
+                    watch(sim)
+                except ViewerUnavailable as exc:
+                    print(f"note: {exc}; running without the viewer", file=sys.stderr)
+            result = sim.run(progress=progress)
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print_error(exc)
         return EXIT_INPUT
     out = args.out if args.out is not None else RENDERS / s.name
     try:

@@ -147,7 +147,7 @@ def test_excluded_robot_is_avoided_as_an_obstacle():
     out = r.summary
     assert [e["robot"] for e in out["exclusions"]] == [1]
     avoided = [e for e in r.events.of_kind("reactive_on") if e["obstacle"] == "robot 1"]
-    assert {e["robot"] for e in avoided} == {1, 2, 3}  # all three survivors went round it
+    assert {e["robot"] for e in avoided} == {2, 3, 4}  # all three survivors went round it
     log, t_r = r.log, out["exclusions"][0]["t"]
     after = log["t"] >= t_r
     gap = np.linalg.norm(log["x"][after, 1:] - log["x"][after, :1], axis=2)

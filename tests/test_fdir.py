@@ -1,4 +1,4 @@
-"""FDIR blocks in pure numpy: κ/λ of eq. 41, thresholds (eq. 40), decisions, exclusion."""
+"""FDIR blocks: κ/λ of eq. 41, thresholds (eq. 40), decisions, exclusion."""
 
 import numpy as np
 import pytest
@@ -46,16 +46,16 @@ def test_paper_graph_values_match_notes():
 def test_not_strongly_connected_gives_infinite_thresholds():
     ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
     assert fdir.decay_bound(fdir.observer_matrix(ring_without_1, 6.0, 1)) == (np.inf, 0.0)
-    th = fdir.Thresholds(ring_without_1, 6.0, 0.001, 0.005, np.ones(3))
+    th = fdir.Thresholds.for_graph(ring_without_1, 6.0, 0.001, 0.005, np.ones(3))
     mu = th.mu(10.0)
     assert not np.isnan(mu).any()
     assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
 
 
 def test_threshold_formula_eq40():
-    th = fdir.Thresholds(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8))
+    th = fdir.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8))
     d = PAPER.in_degree()
-    mu0 = th.mu(0.0)
+    mu0 = th.mu(0.0).copy()
     for i in range(4):
         for k in range(4):
             coef = np.sqrt(2) * d[i] + (i == k)
@@ -64,12 +64,12 @@ def test_threshold_formula_eq40():
     mu_inf = th.mu(1e4)
     assert mu_inf[0, 2] == pytest.approx(np.sqrt(2) * 1 * steady[2])
     # restarted thresholds count time from t0
-    late = fdir.Thresholds(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8), t0=30.0)
+    late = fdir.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8), t0=30.0)
     assert np.allclose(late.mu(30.0), mu0)
 
 
 def test_decision_window_and_release():
-    dec = fdir.Decision(2, window=0.2, dt=0.01)
+    dec = fdir.Decision.standalone(2, window=0.2, dt=0.01)
     mu = np.ones((2, 2))
     high = np.array([[0.0, 2.0], [0.0, 0.0]])
     raised_at = []
@@ -95,20 +95,21 @@ def test_team_excludes_a_stopped_robot_and_forms_a_triangle():
     x = _integrate(team, x, 1000)  # 10 s healthy
     events = []
 
-    def stop_robot_1(t, out):
-        events.extend(out.events)
+    def stop_robot_1(t, team):
+        events.extend(team.events)
+        team.events.clear()
         phi = np.zeros((4, 2))
-        phi[0] = -out.u_bar[0]  # φ₁ = −ū₁: robot 1 does not move
+        phi[0] = -team.u_bar[0]  # φ₁ = −ū₁: robot 1 does not move
         return phi
 
     x = _integrate(team, x, 2500, t0=10.0, fault=stop_robot_1)
     detections = [e for e in events if e["kind"] == "detection"]
-    assert detections and all(e["robot"] == 0 for e in detections)
+    assert detections and all(e["robot"] == 1 for e in detections)  # events count from 1
     first = min(e["t"] for e in detections)
     (excl,) = [e for e in events if e["kind"] == "exclusion"]
-    assert excl["robot"] == 0 and excl["t"] == pytest.approx(first + 2.0)  # eq. 43
+    assert excl["robot"] == 1 and excl["t"] == pytest.approx(first + 2.0)  # eq. 43
     assert list(team.members) == [1, 2, 3]
-    assert team.state.y_hat.shape == (3, 3, 2) and team.decision.flag.shape == (3, 3)
+    assert team.observer.y_hat.shape == (3, 3, 2) and team.decision.flag.shape == (3, 3)
     tri = x[1:]
     sides = np.linalg.norm(tri - np.roll(tri, -1, axis=0), axis=1)
     assert np.allclose(sides, 0.5, atol=0.005)
@@ -120,16 +121,17 @@ def test_exclusion_cancelled_when_nobody_flags_at_t_r():
     x = _integrate(team, x, 1000)
     events = []
 
-    def burst(t, out):
-        events.extend(out.events)
+    def burst(t, team):
+        events.extend(team.events)
+        team.events.clear()
         phi = np.zeros((4, 2))
         if t < 11.5:  # for 1.5 s robot 3 slips: its actuators ignore the compensation
-            phi[2] = [0.6, 0.0] + out.phi_hat[2]
+            phi[2] = [0.6, 0.0] + team.phi_hat[2]
         return phi
 
     _integrate(team, x, 800, t0=10.0, fault=burst)
     kinds = [e["kind"] for e in events]
-    assert {e["robot"] for e in events if e["kind"] == "detection"} == {2}
+    assert {e["robot"] for e in events if e["kind"] == "detection"} == {3}
     assert "exclusion_cancelled" in kinds and "exclusion" not in kinds
     assert list(team.members) == [0, 1, 2, 3]
 

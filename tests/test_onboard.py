@@ -1,16 +1,17 @@
-"""The onboard blocks in pure numpy: locality, convergence, eq. 18's properties."""
+"""The onboard blocks: locality, convergence, eq. 18's properties, both paths identical."""
 
 import copy
 
 import numpy as np
 import pytest
 
+from dftc_mujoco import check_locality
+from dftc_mujoco.blocks import paper
 from dftc_mujoco.graph import Graph
 from dftc_mujoco.mission import polygon_offsets
 from dftc_mujoco.onboard import observer
-from dftc_mujoco.onboard.supervisor import Supervisor
-from dftc_mujoco.onboard.team import Team, TeamConfig
-from dftc_mujoco.scenario import Formation
+from dftc_mujoco.onboard import team as team_mod
+from dftc_mujoco.onboard.locality import demo_team, integrate
 from tests.conftest import ring_with_chords
 
 PAPER_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1))
@@ -22,92 +23,47 @@ def _graph(n: int) -> Graph:
     return Graph(n, tuple((a - 1, b - 1) for a, b in ring_with_chords(n)))
 
 
-def _team(n: int, obstacles: bool = False, **changes) -> tuple[Team, np.ndarray]:
-    rng = np.random.default_rng(n)
-    offsets = polygon_offsets(n, 0.5)
-    pos = np.array([[0.0, 0.6]]) if obstacles else np.zeros((0, 2))
-    settings = dict(
-        graph=_graph(n),
-        kc=4.0,
-        ko=6.0,
-        K=3.0 * np.eye(2),
-        G=0.01 * np.eye(2),
-        theta=3.0,
-        dt=0.01,
-        eta_bar=0.001,
-        xi_bar=0.005,
-        formation=Formation("polygon", 0.5),
-        obstacle_position=pos,
-        obstacle_safe=np.full(len(pos), 0.37),
-        obstacle_activation=np.full(len(pos), 0.45),
-    )
-    settings.update(changes)
-    x = offsets + rng.normal(scale=0.1, size=offsets.shape)
-    return Team(TeamConfig(**settings), x, np.zeros(2)), x
+def _team(n: int, obstacles: bool = False, blocks=None, **changes):
+    return demo_team(n, blocks, _graph(n), obstacles, seed=n, **changes)
 
 
-def _integrate(
-    team: Team, x: np.ndarray, steps: int, velocity=(0.1, 0.0), t0: float = 0.0, fault=None
-):
-    """Closed loop with an ideal integrator plant ẋ = ū + φ (eq. 1 with ξ = η = 0)."""
-    v = np.array(velocity)
-    for k in range(steps):
-        t = t0 + k * team.config.dt
-        out = team.step(t, x.copy(), v * t, v)
-        phi = fault(t, out) if fault else 0.0
-        x = x + team.config.dt * (out.u_bar + phi)
-    return x
+def _integrate(team, x, steps, velocity=(0.1, 0.0), t0=0.0, fault=None):
+    return integrate(team, x, steps, velocity, t0, fault)
 
 
-@pytest.mark.parametrize("compiled", [False, True])  # numpy path, numba kernel (if installed)
-@pytest.mark.parametrize("n", [4, 12, 20])  # 20: the sparse-message path
-def test_update_of_robot_i_ignores_non_neighbours(n, compiled):
+@pytest.fixture(params=["compiled", "general"])
+def path(request, monkeypatch):
+    """Run a test on the compiled period and on the blocks' Python methods."""
+    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", request.param == "compiled")
+    return request.param
+
+
+@pytest.mark.parametrize("n", [4, 12, 20])
+def test_update_of_robot_i_ignores_non_neighbours(n, path):
     """Robot i's command, residual, thresholds, flags and next state use only its own
-    data and its in-neighbours' messages: changing anything else leaves them bit-identical."""
-    team, x = _team(n, compiled=compiled)
-    from dftc_mujoco.onboard import kernel
-
-    assert team.compiled == (compiled and kernel.AVAILABLE)
-    x = _integrate(team, x, 50)
-    graph = team.config.graph
-    c, v = np.array([0.5, 0.0]), np.array([0.1, 0.0])
-
-    def robot_view(tm, out, i):
-        return (
-            out.u_bar[i],
-            out.phi_hat[i],
-            out.residual[i],
-            out.threshold[i],
-            out.flag[i],
-            tm.state.y_hat[i],
-            tm.state.int_u_hat[i],
-            tm.state.int_u_own[i],
-        )
-
-    for i in range(n):
-        heard = set(graph.in_neighbours(i)) | {i}
-        base = copy.deepcopy(team)
-        ref = [a.copy() for a in robot_view(base, base.step(0.5, x.copy(), c, v), i)]
-        for k in range(n):
-            other = copy.deepcopy(team)
-            other.state.y_hat[k] += 0.37  # robot k broadcasts a different ŷ
-            x_m = x.copy()
-            if k != i:
-                x_m[k] += 0.21  # and measures something else
-            got = robot_view(other, other.step(0.5, x_m, c, v), i)
-            same = all(np.array_equal(a, b) for a, b in zip(ref, got, strict=True))
-            if k in heard:
-                assert not same, f"robot {i + 1} must react to robot {k + 1}'s message"
-            else:
-                assert same, f"robot {i + 1} used robot {k + 1}'s data without a link"
+    data and its in-neighbours' messages: changing anything else leaves them bit-identical,
+    and changing an in-neighbour's message changes them."""
+    team, _ = _team(n)
+    assert team.path == path
+    assert check_locality(n=n, graph=_graph(n), require_reaction=True) == []
 
 
-@pytest.mark.parametrize("n", [12, observer.SPARSE_FROM, 40])
-def test_messages_sum_matches_laplacian(n):
-    """Both paths (gather and sparse matrix) compute −(L ⊗ I) ŷ."""
-    g = _graph(n)
+class _Peeking(paper.Controller):
+    """A controller that (wrongly) averages every robot's estimate of the team."""
+
+    def collective_input(self, x_hat, x_d, xd_dot):
+        shared = np.broadcast_to(x_hat.mean(axis=0), x_hat.shape)  # rows of other robots!
+        return super().collective_input(shared, x_d, xd_dot)
+
+
+def test_locality_check_catches_a_block_that_reads_other_robots():
+    problems = check_locality({"controller": _Peeking()}, n=6)
+    assert problems and "without a link" in problems[0]
+
+
+def test_messages_sum_matches_laplacian():
+    g = _graph(12)
     msg = observer.Messages(g.edges, g.n)
-    assert (msg.adjacency is not None) == (n >= observer.SPARSE_FROM)
     y = np.random.default_rng(0).normal(size=(g.n, g.n, 2))
     expected = -np.einsum("ij,jkd->ikd", g.laplacian(), y)
     assert np.allclose(msg.neighbour_sum(y), expected)
@@ -120,7 +76,7 @@ def test_observer_and_formation_converge_on_an_ideal_plant(n):
     t_end = 15.0 - 0.01
     target = polygon_offsets(n, 0.5) + np.array([0.1 * t_end, 0.0])
     assert np.abs(x - target).max() < 0.01
-    x_hat = team.state.estimate()
+    x_hat = team.observer.estimate()
     assert np.abs(x_hat - x[None]).max() < 0.01  # every robot knows the whole team
 
 
@@ -130,16 +86,24 @@ def test_reactive_input_does_not_disturb_the_estimates():
     any_reactive = False
     v = np.array([0.0, 0.1])
     for k in range(1200):
-        out = team2.step(k * 0.01, x2.copy(), v * k * 0.01, v)
-        any_reactive |= out.reactive.any()
-        x2 = x2 + 0.01 * out.u_bar
+        team2.step(k * 0.01, x2.copy(), v * k * 0.01, v)
+        any_reactive |= team2.reactive.any()
+        x2 = x2 + 0.01 * team2.u_bar
     assert any_reactive
-    y_err = np.abs(team2.state.y_hat - (x2 - team2.state.int_u_own)[None]).max()
+    ob = team2.observer
+    y_err = np.abs(ob.y_hat - (x2 - ob.int_u_own)[None]).max()
     assert y_err < 1e-3  # ỹ* converges whatever the inputs (Theorem 1)
 
 
+def _supervisor():
+    sup = paper.Supervisor()
+    cfg, _ = _team(4)
+    sup.reset(cfg.config, np.zeros((1, 2)), np.zeros((1, 2)))
+    return sup
+
+
 def test_supervisor_eq18_and_continuity():
-    sup = Supervisor(1, theta=3.0)
+    sup = _supervisor()
     obs, safe, act = np.array([[0.0, 0.0]]), np.array([0.4]), np.array([0.5])
     x = np.array([[0.45, 0.0]])
     # global input heading into the obstacle: avoidance on
@@ -153,6 +117,53 @@ def test_supervisor_eq18_and_continuity():
     u2, _ = sup.step(x, u_g, obs, safe, act)
     assert np.allclose(u2, [[3.0 * (0.4 - 0.45), 0.1]], atol=1e-3)
     # beyond the activation distance nothing happens
-    sup2 = Supervisor(1, theta=3.0)
+    sup2 = _supervisor()
     _, du3 = sup2.step(np.array([[0.6, 0.0]]), np.array([[-0.2, 0.0]]), obs, safe, act)
     assert not sup2.reactive[0] and np.allclose(du3, 0)
+
+
+def test_controller_eq15_through_its_public_method():
+    ctrl = paper.Controller()
+    team, _ = _team(4)
+    ctrl.reset(team.config, np.zeros((4, 2)), np.zeros((4, 2)))
+    rng = np.random.default_rng(1)
+    x_hat, x_d, xd_dot = (
+        rng.normal(size=(4, 4, 2)),
+        rng.normal(size=(4, 2)),
+        rng.normal(size=(4, 2)),
+    )
+    u_hat = ctrl.collective_input(x_hat, x_d, xd_dot)
+    assert np.allclose(u_hat, xd_dot[None] + 4.0 * (x_d[None] - x_hat))  # ẋ_d + k_c(x_d − ⁱx̂)
+    assert np.array_equal(ctrl.own_input(u_hat), u_hat[np.arange(4), np.arange(4)])  # eq. 16
+
+
+@pytest.mark.parametrize(("n", "obstacles"), [(4, True), (4, False), (12, False)])
+def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monkeypatch):
+    """The compiled period composes the blocks' own compiled functions: same numbers,
+    bit for bit, through obstacles, saturation, anti-windup, a detection and an exclusion."""
+    fast, x = _team(n, obstacles=obstacles, command_limit=1.0)
+    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", False)
+    slow, _ = _team(n, obstacles=obstacles, command_limit=1.0)
+    assert (fast.path, slow.path) == ("compiled", "general")
+    rng = np.random.default_rng(n)
+    v = np.array([0.0, 0.1]) if obstacles else np.array([0.1, 0.0])
+    xs = x.copy()
+    for k in range(1500):
+        t = k * 0.01
+        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
+        fast.step(t, x_m, v * t, v)
+        slow.step(t, x_m, v * t, v)
+        a, b = fast.outputs(), slow.outputs()
+        for name in a:
+            assert np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f"), (
+                f"{name} at step {k}"
+            )
+        assert fast.events == slow.events
+        phi = np.zeros_like(xs)
+        if t > 8.0:
+            phi[1] = [1.5, 0.0]  # beyond the command range: anti-windup and a detection
+        xs = xs + 0.01 * (np.clip(fast.u_bar, -1.0, 1.0) + phi)  # actuators saturate at 1 m/s
+    assert fast.detected == slow.detected and fast.detected  # the fault was caught on both
+    assert list(fast.members) == list(slow.members)
+    assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
+    copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)

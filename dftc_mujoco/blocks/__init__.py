@@ -94,4 +94,6 @@ def create(
     try:
         return cls(**dict(params or {}))
     except TypeError as exc:
-        raise ScenarioError(f"{where}: cannot create {name!r} with onboard.params.{block}: {exc}")
+        raise ScenarioError(
+            f"{where}: cannot create {name!r} with onboard.params.{block}: {exc}"
+        ) from None

@@ -28,7 +28,7 @@ def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compile
 
 @njit(cache=True)
 def own_input(u_hat_g, out):  # pragma: no cover - compiled
-    """u_g,i = Γᵢ ⁱû_g: robot i takes its own block of its estimate (eq. 16), into ``out`` (M, n)."""
+    """u_g,i = Γᵢ ⁱû_g: robot i takes its own block of its estimate (eq. 16), into ``out``."""
     for i in range(u_hat_g.shape[0]):
         for d in range(u_hat_g.shape[2]):
             out[i, d] = u_hat_g[i, i, d]
@@ -48,7 +48,9 @@ class Controller(Block):
         """Read the gain k_c."""
         self.kc = config.kc
 
-    def collective_input(self, x_hat: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray) -> np.ndarray:
+    def collective_input(
+        self, x_hat: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray
+    ) -> np.ndarray:
         """ⁱû_g (M, M, n) of eq. 15 from the estimates ⁱx̂ (M, M, n), x_d (M, n) and ẋ_d (M, n)."""
         out = np.empty(x_hat.shape)
         collective_input(

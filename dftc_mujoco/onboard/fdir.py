@@ -14,6 +14,7 @@ which owns the vectors that are resized.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 from numba import njit
 from scipy.linalg import expm

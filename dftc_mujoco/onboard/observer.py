@@ -130,7 +130,7 @@ class Observer(Block):
 
     def _connect(self, graph: Graph) -> None:
         self.messages = Messages(graph.edges, graph.n)
-        m, n = self.y_hat.shape[0], self.y_hat.shape[2]
+        m = self.y_hat.shape[0]
         self._x_hat = np.empty_like(self.y_hat)
         self._r = np.empty_like(self.y_hat)
         self._r_norm = np.empty((m, m))
