@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -129,8 +130,14 @@ def _qual(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}".replace("dftc_mujoco.onboard.", "dftc_mujoco.")
 
 
-def make_blocks(s: Scenario, given: Mapping[str, Block] | None = None) -> dict[str, Block]:
-    """Instances of the six blocks: ``given`` ones as they are, the rest from the scenario."""
+def make_blocks(
+    s: Scenario, given: Mapping[str, Block] | None = None, search: Sequence[Path] = ()
+) -> dict[str, Block]:
+    """Instances of the six blocks: ``given`` ones as they are, the rest from the scenario.
+
+    A block named ``module:Class`` is imported from sys.path, else from the
+    scenario file's folder, else from the folders ``search``.
+    """
     given = dict(given or {})
     unknown = sorted(set(given) - set(blocks_mod.BLOCKS))
     if unknown:
@@ -147,7 +154,7 @@ def make_blocks(s: Scenario, given: Mapping[str, Block] | None = None) -> dict[s
             k,
             name,
             s.onboard.params.get(k, {}),
-            search=s.directory,
+            search=[d for d in (s.directory, *search) if d is not None],
             where=f"{s.source}: onboard.{k}",
         )
     return out
@@ -158,9 +165,10 @@ class Simulation:
 
     ``blocks`` replaces onboard blocks by instances (``{"controller":
     MyController(gain=2.0)}``); the others come from the scenario's
-    ``[onboard]`` table. ``hook(t, plant)``, if given, is called after every
-    control period with the plant (for instrumentation or to perturb the
-    physics). Use it as a context manager, or call :meth:`close`::
+    ``[onboard]`` table (a ``module:Class`` name is imported from sys.path,
+    the scenario file's folder or the folders ``search``). ``hook(t, plant)``,
+    if given, is called after every control period with the plant (for
+    instrumentation or to perturb the physics). Use it as a context manager, or call :meth:`close`::
 
         with Simulation(load_scenario("paper_case")) as sim:
             snap = sim.step(100)      # 1 s
@@ -178,10 +186,12 @@ class Simulation:
         *,
         blocks: Mapping[str, Block] | None = None,
         hook: Callable[[float, Plant], None] | None = None,
+        search: Sequence[str | Path] = (),
     ) -> None:
         wall0 = time.perf_counter()
         self.scenario = scenario
         self.hook = hook
+        self._search = [Path(p) for p in search]
         self._given = dict(blocks or {})
         self.block_names = block_names(scenario, self._given)
         self.robot = robots.get(
@@ -259,7 +269,7 @@ class Simulation:
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
         limited = sc.model.actuator_ctrllimited[sc.actuator].all()
         limit = self.adapter.command_limit if limited else np.inf
-        blocks = make_blocks(s, self._given)
+        blocks = make_blocks(s, self._given, self._search)
         self.team = Team(
             team_config(s, model, limit), plant.measure(), self.path.position[0], blocks
         )
@@ -437,13 +447,14 @@ def simulate(
     progress: bool = False,
     hook: Callable[[float, Plant], None] | None = None,
     blocks: Mapping[str, Block] | None = None,
+    search: Sequence[str | Path] = (),
 ) -> RunResult:
     """Run scenario ``s`` to the end and return its records (a thin wrapper of :class:`Simulation`).
 
     Physics trouble does not raise: the result carries the error and the log
     up to that instant (``result.ok`` is False).
     """
-    with Simulation(s, blocks=blocks, hook=hook) as sim:
+    with Simulation(s, blocks=blocks, hook=hook, search=search) as sim:
         return sim.run(progress=progress)
 
 

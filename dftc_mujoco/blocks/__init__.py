@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 import re
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -50,29 +50,46 @@ def check_name(block: str, name: Any) -> str | None:
     return f'expected a built-in name ({names}) or an import path "module:Class", got {name!r}'
 
 
-def load_class(block: str, name: str, search: Path | None = None, where: str = "") -> Any:
-    """The class (or factory) ``name`` selects for ``block``; ``search`` is tried after sys.path."""
-    where = where or f"onboard.{block}"
-    target = BUILTIN[block].get(name, name)
-    module_name, _, attr = target.partition(":")
+def _import(module_name: str, search: Sequence[Path], where: str) -> Any:
+    """Import ``module_name`` from sys.path, else from the folders ``search`` (in order)."""
     try:
-        module = importlib.import_module(module_name)
+        return importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
-        if search is None or exc.name is None or not module_name.startswith(exc.name):
-            raise ScenarioError(f"{where}: cannot import {module_name!r}: {exc}") from None
-        sys.path.append(str(search))  # a module beside the scenario file
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as exc2:
-            raise ScenarioError(
-                f"{where}: cannot import {module_name!r} (searched sys.path and {search}): {exc2}"
-            ) from None
-        finally:
-            sys.path.remove(str(search))
+        if exc.name is None or not module_name.startswith(exc.name):
+            raise ScenarioError(f"{where}: importing {module_name!r} failed: {exc}") from None
+        missing = exc
     except Exception as exc:  # the user's module failed while importing
         raise ScenarioError(
             f"{where}: importing {module_name!r} failed: {type(exc).__name__}: {exc}"
         ) from None
+    top = module_name.split(".")[0]
+    for folder in search:
+        if not (Path(folder) / top).is_dir() and not (Path(folder) / f"{top}.py").is_file():
+            continue
+        sys.path.append(str(folder))  # a module beside the scenario (or campaign) file
+        try:
+            return importlib.import_module(module_name)
+        except Exception as exc:
+            raise ScenarioError(
+                f"{where}: importing {module_name!r} from {folder} failed: "
+                f"{type(exc).__name__}: {exc}"
+            ) from None
+        finally:
+            sys.path.remove(str(folder))
+    places = ", ".join(str(f) for f in search)
+    raise ScenarioError(
+        f"{where}: cannot import {module_name!r}: {missing} (searched sys.path"
+        + (f" and {places})" if places else ")")
+    ) from None
+
+
+def load_class(block: str, name: str, search: Sequence[Path] = (), where: str = "") -> Any:
+    """The class (or factory) ``name`` selects for ``block``; ``search`` folders are tried
+    after sys.path."""
+    where = where or f"onboard.{block}"
+    target = BUILTIN[block].get(name, name)
+    module_name, _, attr = target.partition(":")
+    module = _import(module_name, search, where)
     obj: Any = module
     for part in attr.split("."):
         if not hasattr(obj, part):
@@ -85,7 +102,7 @@ def create(
     block: str,
     name: str,
     params: Mapping[str, Any] | None = None,
-    search: Path | None = None,
+    search: Sequence[Path] = (),
     where: str = "",
 ) -> Any:
     """A new block instance: ``load_class(...)(**params)``; errors name the scenario key."""

@@ -7,11 +7,9 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+
+from ..render.figures import new_figure
 
 
 def _pct(a: float | None) -> str:
@@ -110,7 +108,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
     lines.append("")
     if ok and any(r["delay_first"] is not None for r in ok):
         d = [r["delay_first"] for r in ok if r["delay_first"] is not None]
-        fig, ax = plt.subplots(figsize=(6, 3.5))
+        fig, ax = new_figure(figsize=(6, 3.5))
         ax.hist(d, bins=min(30, max(5, len(d) // 2)), color="tab:blue")
         if s["dt_d_max"]:
             ax.axvline(s["dt_d_max"], color="k", ls="--", label="Δt_d,max")
@@ -128,7 +126,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         idx = np.clip(np.digitize(mags, edges) - 1, 0, len(edges) - 2)
         centre = (edges[:-1] + edges[1:]) / 2
         rate = [hit[idx == b].mean() if (idx == b).any() else np.nan for b in range(len(centre))]
-        fig, ax = plt.subplots(figsize=(6, 3.5))
+        fig, ax = new_figure(figsize=(6, 3.5))
         ax.plot(centre, rate, "o-")
         ax.set_xlabel("bias magnitude [m/s]")
         ax.set_ylabel("detection rate")
@@ -151,7 +149,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
             "| N | graph | stop runs | detected | by all | median delay [s] |",
             "|---|---|---|---|---|---|",
         ]
-        fig, ax = plt.subplots(figsize=(6, 3.5))
+        fig, ax = new_figure(figsize=(6, 3.5))
         for fam in sorted({k[1] for k in groups}):
             ns = sorted(k[0] for k in groups if k[1] == fam)
             rates = [np.mean([r["detected"] for r in groups[(n, fam)]]) for n in ns]
@@ -178,8 +176,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
 
 
 def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.png")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.png")
     fig.tight_layout()
     fig.savefig(tmp, dpi=100)
-    plt.close(fig)
     os.replace(tmp, path)

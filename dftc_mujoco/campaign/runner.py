@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
 from .spec import Spec, draw, scenario_for
 
@@ -33,7 +33,7 @@ def run_one(spec: Spec, params: dict[str, Any]) -> dict[str, Any]:
     row: dict[str, Any] = dict(params)
     try:
         s = scenario_for(spec, params)
-        result = simulate(s)
+        result = simulate(s, search=spec_folders(spec))
         row.update(_facts(params, result.summary, s.fdir.dt_d_max))
         row["status"] = result.summary["status"]
         row["error"] = result.summary["error"]
@@ -43,6 +43,16 @@ def run_one(spec: Spec, params: dict[str, Any]) -> dict[str, Any]:
         row["traceback"] = traceback.format_exc(limit=4)
     row["wall_time"] = time.perf_counter() - t0
     return row
+
+
+def spec_folders(spec: Spec) -> list[Path]:
+    """Where a campaign's user blocks are looked for: beside the spec and its base scenario."""
+    folders = []
+    for src in (spec.source, spec.base_source):
+        p = Path(src)
+        if p.is_file() and p.parent.resolve() not in folders:
+            folders.append(p.parent.resolve())
+    return folders
 
 
 def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[str, Any]:
@@ -77,6 +87,8 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
         "margin": summary.get("margin"),
         "min_obstacle_clearance": summary["min_obstacle_clearance"],
         "warnings": len(summary["warnings"]),
+        "onboard_path": summary.get("onboard", {}).get("path"),
+        "blocks": json.dumps(summary.get("onboard", {}).get("blocks", {}), sort_keys=True),
         "duration": summary["duration"],
     }
 

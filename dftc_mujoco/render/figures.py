@@ -9,18 +9,24 @@ faulty robots first.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
 
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
 MAX_GRID = 6
 FIGURES = ("fig3_paths", "fig4_fault_estimate", "fig5_8_residuals", "fig9_errors", "fig10_inputs")
+
+
+def new_figure(*args, figsize=None, **kwargs):
+    """A new Figure and its axes, made without pyplot: no backend is chosen or forced,
+    nothing global is kept, and the Figure shows itself in a notebook."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def _faulty(summary: dict[str, Any]) -> dict[int, list[dict[str, Any]]]:
@@ -44,10 +50,10 @@ def fig_paths(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 3: paths, desired centroid path, snapshots, initial and final configurations."""
     t, x = log["t"], log["x"]
     faulty = _faulty(summary)
-    fig, ax = plt.subplots(figsize=(8, 6))
+    fig, ax = new_figure(figsize=(8, 6))
     for ox, oy, r, d in log["obstacles"]:
-        ax.add_patch(plt.Circle((ox, oy), r, color="0.55"))
-        ax.add_patch(plt.Circle((ox, oy), d, fill=False, ls="--", color="0.55", lw=0.8))
+        ax.add_patch(Circle((ox, oy), r, color="0.55"))
+        ax.add_patch(Circle((ox, oy), d, fill=False, ls="--", color="0.55", lw=0.8))
     ax.plot(log["c_d"][:, 0], log["c_d"][:, 1], "b--", lw=1.2, label="desired centroid")
     for i in range(x.shape[1]):
         colour = "tab:red" if i in faulty else "tab:green"
@@ -91,7 +97,7 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
     t = log["t"]
     biased = sorted({f["robot"] - 1 for f in summary.get("faults", []) if f["kind"] == "bias"})
     robots = biased or list(range(log["x"].shape[1]))
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True, squeeze=False)
+    fig, axes = new_figure(2, 1, figsize=(8, 5), sharex=True, squeeze=False)
     for c, name in enumerate("xy"):
         ax = axes[c, 0]
         for i in robots:
@@ -118,7 +124,7 @@ def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
     faulty = sorted(_faulty(summary))
     cols = (faulty + [k for k in range(n) if k not in faulty])[:MAX_GRID]
     rows = list(range(n))[:MAX_GRID]
-    fig, axes = plt.subplots(
+    fig, axes = new_figure(
         len(rows), len(cols), figsize=(2.6 * len(cols), 1.9 * len(rows)), sharex=True, squeeze=False
     )
     for a, i in enumerate(rows):
@@ -158,7 +164,7 @@ def estimation_error(log: dict[str, np.ndarray]) -> np.ndarray:
 def fig_errors(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 9: ‖x̃*‖ (top) and the task errors ‖σ̃₁‖, ‖σ̃₂‖ (bottom)."""
     t = log["t"]
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    fig, (top, bottom) = new_figure(2, 1, figsize=(8, 5), sharex=True)
     top.semilogy(t, estimation_error(log), "b-", lw=0.8)
     top.set_ylabel("‖x̃*‖ [m]")
     top.set_title("Estimation and task errors (paper Fig. 9)")
@@ -184,7 +190,7 @@ def fig_inputs(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 10: each robot's nominal input uᵢ (x and y)."""
     t, u = log["t"], log["u"]
     n = min(u.shape[1], 8)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 1.4 * n + 0.8), sharex=True, squeeze=False)
+    fig, axes = new_figure(n, 1, figsize=(8, 1.4 * n + 0.8), sharex=True, squeeze=False)
     for i in range(n):
         ax = axes[i, 0]
         ax.plot(t, u[:, i, 0], lw=0.7, label="x")
@@ -208,16 +214,23 @@ DRAW = {
 }
 
 
+def make_all(log: dict[str, np.ndarray], summary: dict[str, Any]) -> dict[str, Figure]:
+    """Every figure of a run as a matplotlib Figure, by name (nothing is written or shown)."""
+    return {name: DRAW[name](log, summary) for name in FIGURES}
+
+
 def draw_all(log: dict[str, np.ndarray], summary: dict[str, Any], folder: Path) -> list[Path]:
-    """Draw every figure as a PNG in ``folder``; returns the paths written."""
+    """Draw every figure as a PNG in ``folder`` (each written atomically); returns the paths."""
     folder.mkdir(parents=True, exist_ok=True)
     written = []
     for name in FIGURES:
         fig = DRAW[name](log, summary)
         path = folder / f"{name}.png"
-        tmp = folder / f".{name}.tmp.png"
-        fig.savefig(tmp, dpi=110)
-        plt.close(fig)
-        tmp.replace(path)
+        tmp = folder / f".{name}.{os.getpid()}.tmp.png"  # private to this process
+        try:
+            fig.savefig(tmp, dpi=110)
+            tmp.replace(path)
+        finally:
+            tmp.unlink(missing_ok=True)
         written.append(path)
     return written

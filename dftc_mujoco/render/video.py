@@ -360,7 +360,7 @@ def write_video(
     """Render the run to an H.264 MP4 at ``path`` (atomically); returns the frame count."""
     options = options or VideoOptions()
     import imageio.v2 as imageio
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     duration = float(log["t"][-1])
     times = frame_times(duration, options.fps)

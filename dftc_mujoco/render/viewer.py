@@ -9,6 +9,7 @@ fault estimate, red flagged by a teammate, grey excluded).
 from __future__ import annotations
 
 import os
+import threading
 import time
 
 import mujoco
@@ -83,12 +84,16 @@ def watch(sim: Simulation, speed: float = 1.0, fps: float = 30.0, max_seconds: f
         )
     import mujoco.viewer
 
+    before = set(threading.enumerate())
     try:
         handle = mujoco.viewer.launch_passive(
             sim.model, sim.data, show_left_ui=False, show_right_ui=False
         )
     except Exception as exc:  # GLFW could not open a window on this display
         raise ViewerUnavailable(f"MuJoCo's viewer could not open a window: {exc}") from None
+    # the viewer renders in a daemon thread: wait for it after closing, or a process that
+    # exits right away tears down GL under it (a crash at exit under Xvfb)
+    ui_threads = [t for t in threading.enumerate() if t not in before]
     periods = max(1, round(1.0 / (fps * sim.dt)))
     start = time.perf_counter()
     shown = 0
@@ -104,4 +109,6 @@ def watch(sim: Simulation, speed: float = 1.0, fps: float = 30.0, max_seconds: f
                 time.sleep(ahead)
             if max_seconds is not None and time.perf_counter() - start > max_seconds:
                 break
+    for thread in ui_threads:
+        thread.join(timeout=10.0)
     return shown
