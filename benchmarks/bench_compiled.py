@@ -1,84 +1,53 @@
-"""The compiled team step (numba) against the numpy one, on paper_case.
+"""The two paths of the onboard control period, on paper_case.
 
-    pip install -e ".[fast]"    # numba
-    python benchmarks/bench_compiled.py
+    python benchmarks/bench_compiled.py [--reps 20000]
 
-Times one control period of the onboard stacks (Team.step) both ways on the
-same state, and the whole 60 s closed loop both ways (the numpy path is forced
-by switching the kernel off), with bare mj_step for the ratio.
+Times one control period of the team (``Team.step``, thresholds included) on
+the compiled path (the paper's blocks' compiled functions composed in one
+call, ``onboard/period.py``) and on the general path (the same blocks called
+one by one through their Python methods, as with a user's block), on the same
+state after 10 s of paper_case. Both compute the same numbers bit for bit.
 """
 
 from __future__ import annotations
 
+import argparse
 import copy
+import statistics
 import time
 
-import numpy as np
-
-from dftc_mujoco import loop, mission, scenario
-from dftc_mujoco.onboard import kernel
-from dftc_mujoco.onboard.team import Team
+from dftc_mujoco import Simulation, load_scenario
+from dftc_mujoco.onboard import team as team_mod
 
 
-def step_us(team: Team, x: np.ndarray, c: np.ndarray, cd: np.ndarray, reps: int) -> float:
-    t0 = time.perf_counter()
-    for _ in range(reps):
-        team.step(3.0, x, c, cd)
-    return (time.perf_counter() - t0) / reps * 1e6
-
-
-def loop_us(s: scenario.Scenario, repeat: int = 3) -> float:
-    steps = round(s.duration / s.physics.control_period)
-    best = min(
-        (r.summary["wall_time"] - r.summary["build_time"])
-        for r in (loop.simulate(s) for _ in range(repeat))
-    )
-    return best / steps * 1e6
+def period_us(team: team_mod.Team, x, c, cd, reps: int) -> float:
+    """Median of 5 timings of ``reps`` periods, µs per period."""
+    times = []
+    for _ in range(5):
+        t = copy.deepcopy(team)
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            t.step(10.0, x, c, cd, x)
+        times.append((time.perf_counter() - t0) / reps * 1e6)
+    return statistics.median(times)
 
 
 def main() -> None:
-    if not kernel.AVAILABLE:
-        raise SystemExit('numba is not installed: pip install -e ".[fast]"')
-    s = scenario.load("paper_case")
-    dt = s.physics.control_period
-    path = mission.centroid_table(s.mission.centroid, s.duration, dt)
-    x = np.asarray(s.team.initial_positions, float).copy()
-    fast = Team(loop.team_config(s, None, 1.0), x, path.position[0])
-    for k in range(300):
-        c, cd = path.at(k)
-        x = x + dt * fast.step(k * dt, x, c, cd).u_bar
-    slow = copy.deepcopy(fast)
-    slow.compiled = False
-    c, cd = path.at(300)
-    fast.step(3.0, x, c, cd)  # compiled already; warm
-    numpy_step = step_us(slow, x, c, cd, 20000)
-    numba_step = step_us(fast, x, c, cd, 20000)
-    loop.simulate(s)  # warm-up (imports, JIT cache)
-    with_kernel = loop_us(s)
-    kernel.AVAILABLE = False
-    try:
-        without = loop_us(s)
-    finally:
-        kernel.AVAILABLE = True
-    import mujoco
-
-    from dftc_mujoco.sim import robots, scene
-
-    sc = scene.build(s, robots.get("disk"))
-    data = mujoco.MjData(sc.model)
-    steps = round(s.duration / dt)
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(sc.model, data, nstep=s.physics.substeps)
-    bare = (time.perf_counter() - t0) / steps * 1e6
-    print(
-        f"paper_case, N = {s.team.robots}: Team.step numpy {numpy_step:.1f} us, "
-        f"numba {numba_step:.1f} us"
-    )
-    print(
-        f"closed loop: numpy {without:.1f} us = {without / bare:.1f} x bare mj_step, "
-        f"numba {with_kernel:.1f} us = {with_kernel / bare:.1f} x (bare {bare:.1f} us)"
-    )
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--reps", type=int, default=20000)
+    args = p.parse_args()
+    s = load_scenario("paper_case")
+    with Simulation(s) as sim:
+        sim.step(1000)
+        team = sim.team
+        x = sim.plant.positions()
+        c, cd = sim.path.position[1000], sim.path.velocity[1000]
+        compiled = period_us(team, x, c, cd, args.reps)
+        team.compiled = False
+        general = period_us(team, x, c, cd, args.reps)
+    print(f"paper_case onboard period (N = {s.team.robots}), median of 5 x {args.reps}:")
+    print(f"  compiled path {compiled:6.1f} us")
+    print(f"  general path  {general:6.1f} us  ({general / compiled:.1f}x)")
 
 
 if __name__ == "__main__":

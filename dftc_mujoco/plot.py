@@ -8,32 +8,12 @@ success, 2 bad input (missing or unreadable records), 4 no OpenGL backend.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from .errors import ScenarioError
 from .render import gl
 from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, setup_video
-
-
-def load_records(run_dir: Path) -> tuple[dict, dict]:
-    """The log arrays and the summary of a saved run; ScenarioError names what is missing."""
-    import numpy as np
-
-    log_path, summary_path = run_dir / "log.npz", run_dir / "summary.json"
-    for p in (log_path, summary_path):
-        if not p.is_file():
-            raise ScenarioError(
-                f"{p}: missing; is {run_dir} a folder written by python -m dftc_mujoco.run?"
-            )
-    try:
-        with np.load(log_path) as f:
-            log = {k: f[k] for k in f.files}
-        summary = json.loads(summary_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ScenarioError(f"{run_dir}: cannot read the records: {exc}") from None
-    return log, summary
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,16 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     wants_gl = not args.no_video or bool(args.still)
     try:
         options = setup_video(args, wants_gl)
-        log, summary = load_records(args.run_dir)
-        scenario = None
-        if options is not None:
-            from . import scenario as scenario_mod
+        from .results import open_run
 
-            scenario = scenario_mod.load(args.run_dir / "scenario.toml").with_overrides(
-                seed=summary["seed"],
-                duration=summary["duration"],
-                robot_model=summary["robot_model"],
-            )
+        run = open_run(args.run_dir)  # log.npz, summary.json and the scenario that ran
+        log, summary = run.log, run.summary
+        scenario = run.scenario if options is not None else None
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INPUT

@@ -175,7 +175,7 @@ def test_exclusion_that_breaks_the_graph_is_reported_and_the_run_goes_on():
 
 
 def test_cli_lists_the_events_in_time_order(tmp_path, capsys):
-    assert run.main(["paper_case", "--out", str(tmp_path), "--no-progress"]) == 0
+    assert run.main(["paper_case", "--out", str(tmp_path), "--no-progress", "--no-video"]) == 0
     text = capsys.readouterr().out
     lines = [ln for ln in text.splitlines() if ln[:8].strip().replace(".", "").isdigit()]
     times = [float(ln.split()[0]) for ln in lines]
