@@ -20,10 +20,11 @@ def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compile
     x_d = J⁻¹σ_d are the desired positions (the mission, which every robot knows).
     """
     m, _, n = x_hat.shape
+    xd, vd = x_d.reshape(-1), xd_dot.reshape(-1)
+    xh, o = x_hat.reshape(m, m * n), out.reshape(m, m * n)
     for i in range(m):
-        for k in range(m):
-            for d in range(n):
-                out[i, k, d] = xd_dot[k, d] + kc * (x_d[k, d] - x_hat[i, k, d])
+        for a in range(m * n):
+            o[i, a] = vd[a] + kc * (xd[a] - xh[i, a])
 
 
 @njit(cache=True)

@@ -25,11 +25,9 @@ from .block import Block, TeamConfig
 @njit(cache=True)
 def estimate(y_hat, int_u_hat, out):  # pragma: no cover - compiled
     """ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) for every robot (eq. 21), into ``out`` (M, M, n)."""
-    m, _, n = y_hat.shape
-    for i in range(m):
-        for k in range(m):
-            for d in range(n):
-                out[i, k, d] = y_hat[i, k, d] + int_u_hat[i, k, d]
+    y, s, o = y_hat.reshape(-1), int_u_hat.reshape(-1), out.reshape(-1)
+    for a in range(y.shape[0]):
+        o[a] = y[a] + s[a]
 
 
 @njit(cache=True)
@@ -40,13 +38,15 @@ def residual(y_hat, int_u_own, x_m, src, first_edge, in_degree, r, r_norm):  # p
     first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2).
     """
     m, _, n = y_hat.shape
+    y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
+    rr = r.reshape(m, m * n)
     for i in range(m):
-        for k in range(m):
-            for d in range(n):
-                acc = -in_degree[i] * y_hat[i, k, d]
-                for e in range(first_edge[i], first_edge[i + 1]):
-                    acc += y_hat[src[e], k, d]
-                r[i, k, d] = acc
+        for a in range(m * n):
+            rr[i, a] = -in_degree[i] * y[i, a]
+        for e in range(first_edge[i], first_edge[i + 1]):
+            j = src[e]
+            for a in range(m * n):
+                rr[i, a] += y[j, a]
         for d in range(n):
             r[i, i, d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
         for k in range(m):
@@ -64,17 +64,16 @@ def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt):  # prag
     (M, n) the nominal input uᵢ of eq. 8 each robot applied.
     """
     m, _, n = y_hat.shape
+    s, g = int_u_hat.reshape(-1), u_hat_g.reshape(-1)
+    for a in range(s.shape[0]):
+        s[a] += dt * g[a]  # ∫ ⁱû_g
     for i in range(m):
-        for k in range(m):
-            for d in range(n):
-                int_u_hat[i, k, d] += dt * u_hat_g[i, k, d]  # ∫ ⁱû_g
         for d in range(n):
             int_u_hat[i, i, d] += dt * delta_u[i, d]  # ∫ Γᵢᵀ Δuᵢ
             int_u_own[i, d] += dt * u[i, d]  # ∫ uᵢ, for y_m (eq. 21)
-    for i in range(m):
-        for k in range(m):
-            for d in range(n):
-                y_hat[i, k, d] += ko * dt * r[i, k, d]  # d/dt ⁱŷ = k_o ⁱr (eq. 19, y-form)
+    y, rr = y_hat.reshape(-1), r.reshape(-1)
+    for a in range(y.shape[0]):
+        y[a] += ko * dt * rr[a]  # d/dt ⁱŷ = k_o ⁱr (eq. 19, y-form)
 
 
 class Messages:
