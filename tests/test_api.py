@@ -105,7 +105,7 @@ def test_save_and_open_run_round_trip(tmp_path):
 
 
 def test_open_run_names_what_is_missing(tmp_path):
-    with pytest.raises(ScenarioError, match="summary.json: missing"):
+    with pytest.raises(ScenarioError, match=r"summary\.json: missing"):
         open_run(tmp_path)
 
 

@@ -135,8 +135,10 @@ def test_examples_run(script, expect, tmp_path):
 def test_viewer_without_a_display_says_so_in_one_line(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     out = subprocess.run(
-        [sys.executable, "-m", "dftc_mujoco.run", "paper_case", "--viewer", "--no-video"]
-        + ["--duration", "1", "--out", str(tmp_path), "--no-progress"],
+        [
+            *(sys.executable, "-m", "dftc_mujoco.run", "paper_case", "--viewer", "--no-video"),
+            *("--duration", "1", "--out", str(tmp_path), "--no-progress"),
+        ],
         capture_output=True,
         text=True,
         env=env,
