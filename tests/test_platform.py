@@ -12,6 +12,7 @@ import pytest
 
 from dftc_mujoco.campaign import runner, spec
 from dftc_mujoco.campaign.__main__ import main as campaign_main
+from tests.test_campaign import _rows
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -68,11 +69,6 @@ def test_cli_runs_blocks_from_a_module_outside_the_package(tmp_path):
     bad = _run([*common, "--set", "onboard.thresholds=nolab.fdi:Scaled"], cwd=tmp_path)
     assert bad.returncode == 2
     assert bad.stderr.count("\n") == 1 and "onboard.thresholds: cannot import 'nolab" in bad.stderr
-
-
-def _rows(folder):
-    rows = [json.loads(line) for line in (folder / "results.jsonl").read_text().splitlines()]
-    return {r["run"]: {k: v for k, v in r.items() if k not in runner.TIMING_COLUMNS} for r in rows}
 
 
 @pytest.fixture(scope="module")
