@@ -29,7 +29,10 @@ BUILTIN: dict[str, dict[str, str]] = {
     "controller": {"paper": "dftc_mujoco.blocks.paper:Controller"},
     "supervisor": {"paper": "dftc_mujoco.blocks.paper:Supervisor"},
     "fault_estimator": {"paper": "dftc_mujoco.blocks.paper:FaultEstimator"},
-    "thresholds": {"paper": "dftc_mujoco.blocks.paper:Thresholds"},
+    "thresholds": {
+        "paper": "dftc_mujoco.blocks.paper:Thresholds",
+        "block_row": "dftc_mujoco.onboard.thresholds:BlockRow",
+    },
     "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
 }
 

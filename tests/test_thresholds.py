@@ -1,0 +1,87 @@
+"""Threshold rules: the block-row rule is a bound for the discrete-time observer it runs on."""
+
+import numpy as np
+import pytest
+
+from dftc_mujoco.graph import Graph, random_strongly_connected
+from dftc_mujoco.onboard.fdir import Thresholds
+from dftc_mujoco.onboard.locality import demo_team
+from dftc_mujoco.onboard.thresholds import BlockRow
+
+PAPER = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)))
+
+
+def _noise(kind: str, k: int, n: int, bound: float, rng) -> np.ndarray:
+    """Adversarial bounded signals, each of norm exactly ``bound``."""
+    if kind == "flip":  # the largest change every period, along one direction
+        v = np.tile([1.0, 0.0], (n, 1)) * (1 if k % 2 else -1)
+    elif kind == "constant":
+        v = np.tile([0.6, 0.8], (n, 1))
+    elif kind == "switch":  # sign changes every 0.5 s, directions per robot
+        ang = np.arange(n) * 2.0
+        v = np.column_stack([np.cos(ang), np.sin(ang)]) * (1 if (k // 50) % 2 else -1)
+    else:  # random directions on the circle
+        ang = rng.uniform(0, 2 * np.pi, n)
+        v = np.column_stack([np.cos(ang), np.sin(ang)])
+    return bound * v
+
+
+@pytest.mark.parametrize("compensate", [False, True])
+@pytest.mark.parametrize("seed", range(4))
+def test_block_row_bounds_the_residual_on_an_ideal_plant(seed, compensate):
+    """Random strongly connected graphs N <= 12, η and ξ at their bounds with worst-case
+    signs and switching: the residual never exceeds the block-row threshold, at any
+    period, for any pair (i, k). Without compensation this is the rule's proof
+    (the drift of y_k over a period is h ξ); with it, the drift also carries −h φ̂."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 13))
+    graph = random_strongly_connected(n, int(rng.integers(1, 4)), rng)
+    eta_bar, xi_bar, h = 0.001, 0.005, 0.01
+    worst = 0.0
+    for kinds in (("flip", "constant"), ("switch", "switch"), ("random", "random")):
+        team_k, xs = demo_team(
+            n,
+            {"thresholds": BlockRow()},
+            graph,
+            seed=seed,
+            compensate=compensate,
+            eta_bar=eta_bar,
+            xi_bar=xi_bar,
+            initial_error_bound=2.0,
+        )
+        v = np.array([0.1, 0.0])
+        for k in range(1500):  # 15 s
+            t = k * h
+            eta = _noise(kinds[0], k, n, eta_bar, rng)
+            xi = _noise(kinds[1], k, n, xi_bar, rng)
+            team_k.step(t, xs + eta, v * t, v)
+            ratio = team_k.r_norm / team_k.mu
+            worst = max(worst, float(ratio.max()))
+            assert (team_k.r_norm <= team_k.mu).all(), (kinds, k, float(ratio.max()))
+            xs = xs + h * (team_k.u_bar + xi)
+    print(f"N = {n}, compensate = {compensate}: worst residual / threshold {worst:.3f}")
+    assert worst > 0.05  # the test exercised the bound, it did not pass trivially
+
+
+def test_block_row_is_tighter_than_eq40_and_grows_slowly_with_n():
+    br4 = BlockRow.for_graph(PAPER, 6.0, 0.001, 0.005, np.ones(4))
+    pa4 = Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.ones(4))
+    steady4 = br4.mu(1e4)
+    assert steady4.max() < 0.006  # 3.3-5.0 mm on the paper's graph
+    assert (pa4.mu(1e4) / steady4).min() > 4.5
+    from dftc_mujoco.graph import ring_with_chords
+
+    g16 = ring_with_chords(16, (3,))
+    br16 = BlockRow.for_graph(g16, 6.0, 0.001, 0.005, np.ones(16))
+    pa16 = Thresholds.for_graph(g16, 6.0, 0.001, 0.005, np.ones(16))
+    assert br16.mu(1e4).max() < 0.008  # eq. 40: 0.27-0.37 m on the same graph
+    assert (pa16.mu(1e4) / br16.mu(1e4)).min() > 30
+    # the threshold starts from the initial-error term and decays to its steady value
+    assert br4.mu(0.0).min() > br4.mu(5.0).max() > steady4.max() - 1e-12
+
+
+def test_block_row_gives_no_bound_where_the_graph_is_not_strongly_connected():
+    ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
+    mu = BlockRow.for_graph(ring_without_1, 6.0, 0.001, 0.005, np.ones(3)).mu(10.0)
+    assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
+    assert np.isfinite(mu[:, 0]).all()
