@@ -6,7 +6,7 @@ import pytest
 from dftc_mujoco.graph import Graph, random_strongly_connected
 from dftc_mujoco.onboard.fdir import Thresholds
 from dftc_mujoco.onboard.locality import demo_team
-from dftc_mujoco.onboard.thresholds import BlockRow
+from dftc_mujoco.onboard.thresholds import BlockRow, Drive
 
 PAPER = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)))
 
@@ -26,13 +26,19 @@ def _noise(kind: str, k: int, n: int, bound: float, rng) -> np.ndarray:
     return bound * v
 
 
-@pytest.mark.parametrize("compensate", [False, True])
+RULES = {"block_row": BlockRow, "drive": Drive}
+
+
+@pytest.mark.parametrize(
+    ("rule", "compensate"), [("block_row", False), ("block_row", True), ("drive", True)]
+)
 @pytest.mark.parametrize("seed", range(4))
-def test_block_row_bounds_the_residual_on_an_ideal_plant(seed, compensate):
+def test_rules_bound_the_residual_on_an_ideal_plant(seed, rule, compensate):
     """Random strongly connected graphs N <= 12, η and ξ at their bounds with worst-case
-    signs and switching: the residual never exceeds the block-row threshold, at any
-    period, for any pair (i, k). Without compensation this is the rule's proof
-    (the drift of y_k over a period is h ξ); with it, the drift also carries −h φ̂."""
+    signs and switching: the residual never exceeds the threshold, at any period, for
+    any pair (i, k). block_row is proved without compensation (the drift of y_k over a
+    period is then h ξ) and measured with it; drive is proved with compensation (the
+    team's default), Φ̄ being the fault estimator's ℓ1 gain on this plant."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(3, 13))
     graph = random_strongly_connected(n, int(rng.integers(1, 4)), rng)
@@ -41,7 +47,7 @@ def test_block_row_bounds_the_residual_on_an_ideal_plant(seed, compensate):
     for kinds in (("flip", "constant"), ("switch", "switch"), ("random", "random")):
         team_k, xs = demo_team(
             n,
-            {"thresholds": BlockRow()},
+            {"thresholds": RULES[rule]()},
             graph,
             seed=seed,
             compensate=compensate,
@@ -59,7 +65,7 @@ def test_block_row_bounds_the_residual_on_an_ideal_plant(seed, compensate):
             worst = max(worst, float(ratio.max()))
             assert (team_k.r_norm <= team_k.mu).all(), (kinds, k, float(ratio.max()))
             xs = xs + h * (team_k.u_bar + xi)
-    print(f"N = {n}, compensate = {compensate}: worst residual / threshold {worst:.3f}")
+    print(f"{rule}, N = {n}, compensate = {compensate}: worst residual / threshold {worst:.3f}")
     assert worst > 0.05  # the test exercised the bound, it did not pass trivially
 
 
@@ -85,3 +91,22 @@ def test_block_row_gives_no_bound_where_the_graph_is_not_strongly_connected():
     mu = BlockRow.for_graph(ring_without_1, 6.0, 0.001, 0.005, np.ones(3)).mu(10.0)
     assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
     assert np.isfinite(mu[:, 0]).all()
+
+
+@pytest.mark.parametrize(("rule", "within"), [("block_row", 0.8), ("drive", 0.5)])
+def test_paper_case_keeps_its_outcome_with_the_tight_rules(rule, within):
+    """MuJoCo disk robots: robot 1's stop is flagged by all four robots within 1.5 s
+    (eq. 40: 3.3-6.0 s), robot 2's compensated bias by nobody, no healthy residual
+    above its threshold, and robot 1 is the only robot excluded."""
+    from dftc_mujoco import load_scenario, simulate
+
+    r = simulate(load_scenario("paper_case", {"onboard.thresholds": rule}))
+    s = r.summary
+    assert s["onboard"]["blocks"]["thresholds"] == rule and s["onboard"]["path"] == "compiled"
+    stop = 41.8
+    flags = {d["by"]: d["t"] - stop for d in s["detections"]}
+    assert all(d["robot"] == 1 for d in s["detections"])  # nobody else, robot 2 included
+    assert sorted(flags) == [1, 2, 3, 4] and max(flags.values()) < within
+    assert [e["robot"] for e in s["exclusions"]] == [1]
+    assert s["margin"] < 0.8
+    assert not r.events.of_kind("exclusion_cancelled")

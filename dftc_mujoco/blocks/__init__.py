@@ -32,6 +32,7 @@ BUILTIN: dict[str, dict[str, str]] = {
     "thresholds": {
         "paper": "dftc_mujoco.blocks.paper:Thresholds",
         "block_row": "dftc_mujoco.onboard.thresholds:BlockRow",
+        "drive": "dftc_mujoco.onboard.thresholds:Drive",
     },
     "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
 }

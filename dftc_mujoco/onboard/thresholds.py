@@ -1,26 +1,27 @@
 """Threshold rules beside the paper's eq. 40, derived for the discrete-time observer.
 
-``docs/thresholds.md`` has the derivation. In short: with the observer run by
-forward Euler at the control period h, A_k = I − h M_k, M_k = k_o(L + e_k e_kᵀ),
-the residual block of robot k at robot i is exactly
+``docs/thresholds.md`` has the derivations. The observer runs by forward Euler
+at the control period h; with M_k = k_o(L + e_k e_kᵀ) and A_k = I − h M_k:
 
-    ⁱr_k(t) = −[(M_k/k_o) A_k^t]_{i,:} ỹ_k(0)
-              − Σ_{j<t} [(M_k/k_o) A_k^j]_{i,:} (k_o h e_k η_k − 1_N w_k)(t−1−j) + δ_ik η_k(t)
+* ``block_row``: with ‖η_k‖ ≤ η̄ and a drift of y_k = x_k − ∫u_k within h ξ̄ per
+  period, ⁱμ_k(t) = ‖e_iᵀ(M_k/k_o)A_k^t‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{j<t} ‖e_iᵀ(M_k/k_o)A_k^j‖
+  + δ_ik η̄ (the discrete form of the bound proposed in issue 10).
+* ``drive``: robot k's own measured y_m,k = x_m,k − ∫u_k equals y_m,k(0) + G φ̂_k(t)
+  exactly (the fault estimator's algebra, any plant), so
+  ⁱr_k(t) = −[(M_k/k_o)A_k^t]_{i,:} ε_k(0) + Σ_{m<t} c_m G φ̂_k(t − m) with
+  c_0 = δ_ik, c_m = [A_k^m − A_k^{m−1}]_{ik}, and
+  ⁱμ_k(t) = ‖e_iᵀ(M_k/k_o)A_k^t‖ ε̄0 + TV_ik(t) ‖G‖ Φ̄, TV_ik(t) = Σ_{m<t} |c_m|,
+  where Φ̄ bounds a healthy robot's ‖φ̂‖ (from the fault estimator's closed loop
+  on an ideal plant with η̄ and ξ̄, unless given).
 
-where w_k is the drift of y_k = x_k − ∫u_k over one period. With ‖η_k‖ ≤ η̄ and
-‖w_k‖ ≤ h ξ̄ it is bounded by the *block-row* rule
-
-    ⁱμ_k(t) = ‖e_iᵀ(M_k/k_o)A_k^t‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{j<t} ‖e_iᵀ(M_k/k_o)A_k^j‖ + δ_ik η̄,
-
-the discrete-time form of the bound in issue 10 (eq. 40 bounds the same
-product by a product of norms, and grows with κ/λ). The row norms are tabulated
-once per graph (batched over k) until A_k^t has decayed below 1e-6; past the
-table a rigorous tail bound is used.
+Both are tabulated once per graph (batched over the monitored robots k) until
+A_k^t has decayed below 1e-6, with a rigorous bound for later times.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,23 +37,76 @@ def _two_norm_bound(q: np.ndarray) -> np.ndarray:
     return np.sqrt(a.sum(axis=1).max(axis=1) * a.sum(axis=2).max(axis=1))
 
 
-class BlockRow(Thresholds):
-    """The block-row threshold rule (``[onboard] thresholds = "block_row"``).
+@dataclass(frozen=True)
+class ObserverTables:
+    """Powers of every A_k = I − h k_o(L + e_k e_kᵀ), tabulated for j = 0 .. T − 1.
 
-    Valid (a bound, not an estimate) when each robot's measurement noise is
-    within η̄ and the drift of y_k = x_k − ∫u_k over one control period is
-    within h ξ̄; ``docs/thresholds.md`` derives it and says what that
-    assumption means with compensation and actuator lag.
-    ``max_steps`` caps the table (the set-up grows with N³ per step).
+    ``row[j, k, i]`` = ‖e_iᵀ (M_k/k_o) A_k^j‖; ``col[j, k, i]`` = [A_k^j]_{ik};
+    ``norm[j, k]`` ≥ ‖A_k^j‖₂; ``rho[k]`` = ``norm[T − 1, k]`` < 1, ``a_max[k]`` ≥
+    sup_j ‖A_k^j‖ and ``tail[k]`` ≥ Σ_{j≥0} ‖A_k^j‖ where ``finite[k]`` (M_k Hurwitz).
     """
+
+    row: np.ndarray
+    col: np.ndarray
+    norm: np.ndarray
+    rho: np.ndarray
+    a_max: np.ndarray
+    tail: np.ndarray
+    finite: np.ndarray
+
+    @property
+    def steps(self) -> int:
+        return len(self.row)
+
+
+def observer_tables(
+    graph: Graph, ko: float, h: float, decayed: float = 1e-6, max_steps: int = 20000
+) -> ObserverTables:
+    """Tabulate the powers of A_k for every k of ``graph`` (see :class:`ObserverTables`)."""
+    n = graph.n
+    idx = np.arange(n)
+    p = np.repeat(graph.laplacian()[None], n, axis=0)
+    p[idx, idx, idx] += 1.0  # M_k / k_o = L + e_k e_kᵀ
+    a = np.eye(n)[None] - (h * ko) * p
+    q = np.broadcast_to(np.eye(n), a.shape).copy()  # A_k^j
+    # a monitored robot whose M_k is not Hurwitz (graph not strongly connected) has no bound
+    finite = np.linalg.eigvals(p).real.min(axis=1) > 1e-12
+    rows, cols, norms = [], [], []
+    while True:
+        rows.append(np.linalg.norm(p, axis=2))
+        cols.append(q[idx, :, idx])  # column k of A_k^j
+        norms.append(_two_norm_bound(q))
+        if len(rows) % 50 == 0 and ((norms[-1][finite] < decayed).all() or len(rows) >= max_steps):
+            break
+        p = p @ a
+        q = q @ a
+    norm = np.stack(norms)
+    rho = norm[-1]
+    if finite.any() and (rho[finite] >= 1.0).any():
+        raise ScenarioError(
+            f"onboard.thresholds: the observer of this {n}-robot graph decays too slowly for "
+            f"{max_steps} tabulated periods; use a better connected graph, a larger ko, or "
+            'thresholds = "paper"'
+        )
+    with np.errstate(divide="ignore"):
+        tail = np.where(finite, norm.sum(axis=0) / (1.0 - np.minimum(rho, 0.999999)), np.inf)
+    return ObserverTables(np.stack(rows), np.stack(cols), norm, rho, norm.max(axis=0), tail, finite)
+
+
+class _Tabulated(Thresholds):
+    """A rule tabulated as μ[j] (M, M) for the periods j < T after a restart, then a
+    constant bound valid for every later period."""
 
     def __init__(self, max_steps: int = 20000, decayed: float = 1e-6) -> None:
         self.max_steps = int(max_steps)
         self.decayed = float(decayed)
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
-        """Read h, k_o, η̄, ξ̄ and tabulate the rule on the team's graph."""
+        """Read h, k_o, η̄, ξ̄ (and G) and tabulate the rule on the team's graph."""
         self.h = config.dt
+        self.G = np.asarray(config.G, float)
+        self.K = np.asarray(config.K, float)
+        self.restarts = 0
         super().reset(config, x_m0, prior)
 
     @classmethod
@@ -66,83 +120,183 @@ class BlockRow(Thresholds):
         t0: float = 0.0,
         n_dim: int = 2,
         dt: float = 0.01,
-    ) -> BlockRow:
-        """The rule on ``graph`` outside any team (control period ``dt``)."""
+        K: float = 3.0,
+        G: float = 0.01,
+    ) -> _Tabulated:
+        """The rule on ``graph`` outside any team (control period ``dt``, gains K, G)."""
+        from ..mission import polygon_offsets
+        from ..scenario import Formation
+
+        config = TeamConfig(
+            graph=graph,
+            kc=1.0,
+            ko=ko,
+            K=K * np.eye(n_dim),
+            G=G * np.eye(n_dim),
+            theta=1.0,
+            dt=dt,
+            eta_bar=eta_bar,
+            xi_bar=xi_bar,
+            formation=Formation(),
+            obstacle_position=np.zeros((0, 2)),
+            obstacle_safe=np.zeros(0),
+            obstacle_activation=np.zeros(0),
+        )
         th = cls()
-        th.h = dt
-        th.ko, th.eta_bar, th.xi_bar, th.n_dim = ko, eta_bar, xi_bar, n_dim
-        th.restart(graph, np.asarray(y0, float), t0)
+        x0 = polygon_offsets(graph.n, 0.5)
+        th.reset(config, x0, x0)
+        if t0 or not np.allclose(y0, 1.0):
+            th.restart(graph, np.asarray(y0, float), t0)
         return th
 
     def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
-        """Tabulate the row norms for ``graph``, starting at ``t0`` with ‖ỹ*_k(t0)‖ ≤ y0[k]."""
+        """Tabulate for ``graph`` from ``t0``, with initial errors bounded by ``y0[k]``."""
         self.graph, self.y0, self.t0 = graph, np.asarray(y0, float), t0
-        n, h, ko = graph.n, self.h, self.ko
-        lap = graph.laplacian()
-        idx = np.arange(n)
-        p = np.repeat(lap[None], n, axis=0)
-        p[idx, idx, idx] += 1.0  # (M_k / k_o) for every k: L + e_k e_kᵀ
-        a = np.eye(n)[None] - (h * ko) * p  # A_k = I − h M_k
-        q = np.broadcast_to(np.eye(n), a.shape).copy()  # A_k^j
-        # a monitored robot whose M_k is not Hurwitz (graph not strongly connected) has no bound
-        finite = np.linalg.eigvals(h * ko * p).real.min(axis=1) > 1e-12
-        rows, bounds = [], []
-        steps = 0
-        while True:
-            rows.append(np.linalg.norm(p, axis=2))  # ‖e_iᵀ (M_k/k_o) A_k^j‖ (K, N)
-            bounds.append(_two_norm_bound(q))
-            steps += 1
-            if steps % 50 == 0:
-                if (bounds[-1][finite] < self.decayed).all() or steps >= self.max_steps:
-                    break
-            p = p @ a
-            q = q @ a
-        rho = bounds[-1]  # ‖A_k^T‖ bound at the last tabulated step
-        if finite.any() and (rho[finite] >= 1.0).any():
-            raise ScenarioError(
-                f"onboard.thresholds: block_row: the observer of this {n}-robot graph decays "
-                f"too slowly for {self.max_steps} tabulated periods; use a faster graph, "
-                "a larger ko, or thresholds = \"paper\""
-            )
-        r = np.stack(rows)  # (T, K, N): row norms
-        sum_a = np.sum(bounds, axis=0)  # Σ_{m<T} ‖A^m‖ per k
-        a_max = np.max(bounds, axis=0)  # sup_m ‖A^m‖ per k (ρ < 1 beyond)
-        with np.errstate(divide="ignore"):
-            tail = np.where(finite, sum_a / (1.0 - np.minimum(rho, 0.999999)), np.inf)
-        cum = np.concatenate([np.zeros((1, n, n)), np.cumsum(r, axis=0)])  # Σ_{l<j}
-        noise = ko * self.eta_bar + math.sqrt(n) * self.xi_bar
-        eye = np.eye(n)
-        # μ[j, i, k] for j < T, then a bound valid for every later step
-        init = r * self.y0[None, :, None]
-        self._table = np.transpose(init + h * noise * cum[:-1], (0, 2, 1)) + self.eta_bar * eye
-        last = r[-1]  # (K, N)
-        tail = np.where(finite, tail, 0.0)  # (no bound there: set to inf below)
-        steady = (
-            last * a_max[:, None] * self.y0[:, None]
-            + h * noise * (cum[-1] + last * tail[:, None])
-        ).T + self.eta_bar * eye
-        self._steady_mu = np.where(finite[None, :], steady, np.inf)
-        self._table[:, :, ~finite] = np.inf
-        self._steps = len(r)
-        self._finite = finite
-        self._norms = np.stack(bounds)  # (T, K): bounds of ‖A_k^j‖
-        self._norms_cum = np.concatenate([np.zeros((1, n)), np.cumsum(self._norms, axis=0)])
-        self._rho, self._a_max, self._tail = rho, a_max, np.where(finite, tail, np.inf)
-        self._noise_h = h * noise
+        tables = observer_tables(graph, self.ko, self.h, self.decayed, self.max_steps)
+        self._tables = tables
+        table, steady = self._tabulate(tables)
+        table[:, :, ~tables.finite] = np.inf
+        self._table = table
+        self._steady_mu = np.where(tables.finite[None, :], steady, np.inf)
+        self.restarts = getattr(self, "restarts", 0) + (t0 > 0)
+
+    def _tabulate(self, tb: ObserverTables) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
 
     def mu(self, t: float) -> np.ndarray:
-        """ⁱμ_k(t) (M, M): rows i observe, columns k are monitored (the block-row rule)."""
-        j = int(round((t - self.t0) / self.h))
-        if j < 0:
-            j = 0
-        return self._table[j] if j < self._steps else self._steady_mu
+        """ⁱμ_k(t) (M, M): rows i observe, columns k are monitored."""
+        j = max(round((t - self.t0) / self.h), 0)
+        return self._table[j] if j < len(self._table) else self._steady_mu
+
+
+class BlockRow(_Tabulated):
+    """The block-row rule (``[onboard] thresholds = "block_row"``).
+
+    A bound when each robot's measurement noise is within η̄ and the drift of
+    y_k = x_k − ∫u_k over one control period is within h ξ̄ (``docs/thresholds.md``).
+    """
+
+    def _tabulate(self, tb: ObserverTables) -> tuple[np.ndarray, np.ndarray]:
+        n, h = self.graph.n, self.h
+        noise = self.ko * self.eta_bar + math.sqrt(n) * self.xi_bar
+        cum = np.concatenate([np.zeros((1, n, n)), np.cumsum(tb.row, axis=0)])  # Σ_{l<j}
+        eye = np.eye(n)
+        init = tb.row * self.y0[None, :, None]
+        table = np.transpose(init + h * noise * cum[:-1], (0, 2, 1)) + self.eta_bar * eye
+        last = tb.row[-1]
+        tail = np.where(tb.finite, tb.tail, 0.0)
+        steady = (
+            last * tb.a_max[:, None] * self.y0[:, None]
+            + h * noise * (cum[-1] + last * tail[:, None])
+        ).T + self.eta_bar * eye
+        self._noise_h = h * noise
+        self._norm_cum = np.concatenate([np.zeros((1, n)), np.cumsum(tb.norm, axis=0)])
+        return table, steady
 
     def bracket(self, t: float) -> np.ndarray:
-        """A bound of ‖ỹ*_k(t)‖ per k (restart value at an exclusion):
-        ‖A_k^j‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{m<j} ‖A_k^m‖, from the same tables."""
-        j = max(int(round((t - self.t0) / self.h)), 0)
-        if j < self._steps:
-            out = self._norms[j] * self.y0 + self._noise_h * self._norms_cum[j]
+        """‖ỹ*_k(t)‖ ≤ ‖A_k^j‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{m<j} ‖A_k^m‖ (restart at an exclusion)."""
+        tb, j = self._tables, max(round((t - self.t0) / self.h), 0)
+        if j < tb.steps:
+            out = tb.norm[j] * self.y0 + self._noise_h * self._norm_cum[j]
         else:
-            out = self._rho * self._a_max * self.y0 + self._noise_h * self._tail
-        return np.where(self._finite, out, np.inf)
+            out = tb.rho * tb.a_max * self.y0 + self._noise_h * tb.tail
+        return np.where(tb.finite, out, np.inf)
+
+
+class Drive(_Tabulated):
+    """The drive rule (``[onboard] thresholds = "drive"``): the tightest rule here.
+
+    A bound whenever every healthy robot's fault estimate stays within
+    ``phi_bar`` [m/s] (and its anti-windup does not act). By default ``phi_bar``
+    is the ℓ1 gain of the fault estimator's closed loop on an ideal plant, from
+    η (bound η̄) and from a velocity mismatch (bound ξ̄) to φ̂; on a real robot
+    its own mismatch adds to it (``docs/thresholds.md``).
+    """
+
+    def __init__(
+        self, phi_bar: float | None = None, max_steps: int = 20000, decayed: float = 1e-6
+    ) -> None:
+        super().__init__(max_steps, decayed)
+        self.phi_bar_param = phi_bar
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """Compute Φ̄ (unless given), then tabulate."""
+        self.h = config.dt
+        self.phi_bar = (
+            float(self.phi_bar_param)
+            if self.phi_bar_param is not None
+            else estimator_gain(config.K, config.G, config.dt, config.eta_bar, config.xi_bar)
+        )
+        super().reset(config, x_m0, prior)
+
+    def _tabulate(self, tb: ObserverTables) -> tuple[np.ndarray, np.ndarray]:
+        n, h, ko = self.graph.n, self.h, self.ko
+        # the drive G φ̂_k: measured from φ̂(0) = 0 at the start, from φ̂(t_r) after a restart
+        self._drive = np.linalg.norm(self.G, 2) * self.phi_bar * (2.0 if self.t0 > 0 else 1.0)
+        c = np.diff(tb.col, axis=0, prepend=0.0)  # c_m = [A^m − A^{m−1}]_{ik}, c_0 = δ_ik
+        tv = np.concatenate([np.zeros((1, n, n)), np.cumsum(np.abs(c), axis=0)])  # Σ_{m<t}
+        init = tb.row * self.y0[None, :, None]
+        table = np.transpose(init + self._drive * tv[:-1], (0, 2, 1))
+        # beyond the table: |c_m| = h [M A^{m−1}]_{ik} <= h k_o row[T−1] ‖A^{m−T}‖
+        last = tb.row[-1]
+        tail = np.where(tb.finite, tb.tail, 0.0)
+        steady = (
+            last * tb.a_max[:, None] * self.y0[:, None]
+            + self._drive * (tv[-1] + h * ko * last * tail[:, None])
+        ).T
+        return table, steady
+
+    def bracket(self, t: float) -> np.ndarray:
+        """A bound of ‖ε_k(t)‖ = ‖(ⁱŷ_k − y_m,k)_i‖ over the team, for the restart at an
+        exclusion: ‖A^t‖ ε̄0 + (√N + h k_o Σ_{m<t} ‖A^m‖) ‖G‖ Φ̄ (by parts, as in the rule)."""
+        tb, j = self._tables, max(round((t - self.t0) / self.h), 0)
+        a_sum = self._norm_sum(j)
+        a_t = tb.norm[j] if j < tb.steps else tb.rho * tb.a_max
+        out = a_t * self.y0 + (math.sqrt(self.graph.n) + self.h * self.ko * a_sum) * self._drive
+        return np.where(tb.finite, out, np.inf)
+
+    def _norm_sum(self, j: int) -> np.ndarray:
+        tb = self._tables
+        if j < tb.steps:
+            return tb.norm[:j].sum(axis=0)
+        return tb.tail
+
+
+def estimator_gain(
+    K: np.ndarray, G: np.ndarray, h: float, eta_bar: float, xi_bar: float, steps: int = 100000
+) -> float:
+    """Bound of ‖φ̂‖ on a healthy robot of an ideal plant (ẋ = ū + ξ, x_m = x + η).
+
+    The fault estimator's closed loop (eqs. 28-31 with compensation) is linear in
+    the deviation d = x − z and the integral I = ∫e: φ̂ = G⁻¹(d + η + K I),
+    d⁺ = d + h(ξ − φ̂ − K(d + η)), I⁺ = I + h(d + η). Returns
+    Σ_t ‖H_η(t)‖₂ η̄ + Σ_t ‖H_ξ(t)‖₂ ξ̄ (ℓ1 norms of its impulse responses).
+    """
+    K, G = np.asarray(K, float), np.asarray(G, float)
+    gi = np.linalg.inv(G)
+    n = len(K)
+    eye = np.eye(n)
+    # state s = [d, I]; φ̂ = C s + D η
+    C = np.hstack([gi, gi @ K])
+    D = gi
+    Ad = np.block(
+        [[eye - h * gi - h * K, -h * gi @ K], [h * eye, eye]]
+    )  # d⁺ = d − h G⁻¹(d + K I) − h K d + ...
+    B_eta = np.vstack([-h * gi - h * K, h * eye])
+    B_xi = np.vstack([h * eye, np.zeros((n, n))])
+    if np.abs(np.linalg.eigvals(Ad)).max() >= 1.0:
+        raise ScenarioError(
+            "gains.G, gains.K: the fault estimator's loop is unstable at this control period; "
+            'thresholds = "drive" needs it stable'
+        )
+    total_eta = np.linalg.norm(D, 2)
+    total_xi = 0.0
+    xe, xx = B_eta.copy(), B_xi.copy()
+    for _ in range(steps):
+        he, hx = np.linalg.norm(C @ xe, 2), np.linalg.norm(C @ xx, 2)
+        total_eta += he
+        total_xi += hx
+        if max(np.abs(xe).max(), np.abs(xx).max()) < 1e-14:
+            break
+        xe, xx = Ad @ xe, Ad @ xx
+    return float(total_eta * eta_bar + total_xi * xi_bar)
