@@ -76,6 +76,8 @@ def team_config(
         obstacle_activation=np.array([o.activation_distance for o in obs]),
         detection_window=f.detection_window,
         dt_d_max=f.dt_d_max,
+        isolation=f.isolation,
+        reference_fault=f.reference_fault or s.mission.centroid.speed,
         initial_error_bound=f.initial_error_bound,
         replan_time=f.replan_time,
         excluded_safe=excluded_safe,
@@ -273,6 +275,8 @@ class Simulation:
         self.team = Team(
             team_config(s, model, limit), plant.measure(), self.path.position[0], blocks
         )
+        if "warning" in self.team.dt_d_max_info:
+            self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
         self.noise = NoiseStream(plant)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
@@ -437,6 +441,7 @@ class Simulation:
             finished=self.k > self.steps,
         )
         summary["build_time"] = self._build
+        summary["dt_d_max"] = self.team.dt_d_max_info
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}
         return RunResult(self.scenario, arrays, self.events, summary, self.error)
 

@@ -220,7 +220,7 @@ class Fdir:
     """
 
     detection_window: float = 0.2
-    dt_d_max: float = 5.0
+    dt_d_max: float | str = 5.0  # Δt_d,max [s], or "auto": from the analysis (eq. 46)
     initial_error_bound: float = 1.0
     replan_time: float = 4.0
     excluded_safe_distance: float = 0.35
@@ -228,6 +228,8 @@ class Fdir:
     phi_low_pass: float = 0.0
     enabled: bool = True
     compensate: bool = True  # false: φ̂ is estimated and logged but not applied
+    isolation: str = "pairwise"  # or "exclusive": eq. 39's second clause
+    reference_fault: float = 0.0  # [m/s] the fault Δt_d,max = "auto" is sized for (0: path speed)
 
 
 @dataclass(frozen=True)
@@ -1303,7 +1305,7 @@ def _fdir(t: _Table) -> Fdir:
     safe = t.number("excluded_safe_distance", 0.35, low=0.0)
     f = Fdir(
         detection_window=t.number("detection_window", 0.2, low=0.0, strict_low=False),
-        dt_d_max=t.number("dt_d_max", 5.0, low=0.0),
+        dt_d_max=_dt_d_max(t),
         initial_error_bound=t.number("initial_error_bound", 1.0, low=0.0, strict_low=False),
         replan_time=t.number("replan_time", 4.0, low=0.0, strict_low=False),
         excluded_safe_distance=safe,
@@ -1316,9 +1318,22 @@ def _fdir(t: _Table) -> Fdir:
         phi_low_pass=t.number("phi_low_pass", 0.0, low=0.0, strict_low=False),
         enabled=t.boolean("enabled", True),
         compensate=t.boolean("compensate", True),
+        isolation=t.string("isolation", "pairwise", choices=("pairwise", "exclusive")),
+        reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
     )
     t.finish()
     return f
+
+
+def _dt_d_max(t: _Table) -> float | str:
+    """Δt_d,max: seconds, or "auto" (computed per run from the graph and the rule)."""
+    raw = t.data.get("dt_d_max", 5.0)
+    if isinstance(raw, str):
+        t.raw("dt_d_max")
+        if raw != "auto":
+            t.report("dt_d_max", f'expected a number of seconds or "auto", got {raw!r}')
+        return "auto"
+    return t.number("dt_d_max", 5.0, low=0.0)
 
 
 def _onboard(t: _Table) -> Onboard:

@@ -110,3 +110,56 @@ def test_paper_case_keeps_its_outcome_with_the_tight_rules(rule, within):
     assert [e["robot"] for e in s["exclusions"]] == [1]
     assert s["margin"] < 0.8
     assert not r.events.of_kind("exclusion_cancelled")
+
+
+def test_dt_d_max_from_the_analysis_covers_every_robots_detection():
+    """fdir.dt_d_max = "auto": eq. 46 for a constant fault at the path speed gives
+    Δt_d,max; every robot then flags the stopped robot before t_r = min ⁱt_d + Δt_d,max."""
+    from dftc_mujoco import load_scenario, simulate
+
+    s = load_scenario("paper_case", {"onboard.thresholds": "block_row", "fdir.dt_d_max": "auto"})
+    r = simulate(s)
+    info = r.summary["dt_d_max"]
+    assert info["source"] == "analysis (eq. 46)" and info["reference_fault"] == 0.1
+    assert 0.5 < info["value"] < 2.0  # 1.37 s, against the paper's guessed 5 s
+    (excl,) = r.summary["exclusions"]
+    first = min(d["t"] for d in r.summary["detections"])
+    assert excl["t"] == pytest.approx(first + info["value"], abs=0.011)
+    assert max(d["t"] for d in r.summary["detections"]) <= excl["t"]
+    assert sorted(d["by"] for d in r.summary["detections"]) == [1, 2, 3, 4]
+    # eq. 40 cannot guarantee a 0.1 m/s fault at every robot: said, and 5 s kept
+    paper = simulate(load_scenario("paper_case", {"fdir.dt_d_max": "auto", "duration": 1.0}))
+    assert paper.summary["dt_d_max"]["value"] == 5.0
+    assert any("not guaranteed detectable" in w for w in paper.summary["warnings"])
+
+
+def test_exclusive_isolation_needs_the_other_residuals_below_their_thresholds():
+    from dftc_mujoco.onboard.fdir import Decision
+
+    mu = np.ones((2, 3))
+    one = np.array([[0.0, 2.0, 0.0], [0.0, 0.0, 0.0]])  # robot 1 sees only robot 2 over
+    two = np.array([[0.0, 2.0, 2.0], [0.0, 0.0, 0.0]])  # robot 1 sees robots 2 and 3 over
+    for residual, expect in (
+        (one, {"pairwise": True, "exclusive": True}),
+        (two, {"pairwise": True, "exclusive": False}),
+    ):
+        for rule, flagged in expect.items():
+            d = Decision.standalone(3, window=0.05, dt=0.01)
+            d.above, d.below = np.zeros((2, 3)), np.zeros((2, 3))
+            d.flag, d._raised = np.zeros((2, 3), bool), np.zeros((2, 3), bool)
+            d.exclusive = rule == "exclusive"
+            for _ in range(10):
+                d.update(residual, mu)
+            assert bool(d.flag[0, 1]) == flagged, (rule, residual)
+
+
+def test_fdir_options_are_validated():
+    from dftc_mujoco import load_scenario
+    from dftc_mujoco.errors import ScenarioError
+
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("paper_case", {"fdir.dt_d_max": "soon", "fdir.isolation": "x"})
+    lines = str(err.value).splitlines()
+    assert len(lines) == 2
+    assert 'fdir.dt_d_max: expected a number of seconds or "auto"' in lines[0]
+    assert "fdir.isolation: expected one of 'pairwise', 'exclusive'" in lines[1]

@@ -37,7 +37,9 @@ class TeamConfig:
     obstacle_safe: np.ndarray  # (O,) d of eq. 17
     obstacle_activation: np.ndarray  # (O,)
     detection_window: float = 0.2
-    dt_d_max: float = 5.0
+    dt_d_max: float | str = 5.0  # or "auto": from the analysis of eq. 46 (onboard/fdir.py)
+    isolation: str = "pairwise"  # or "exclusive" (eq. 39's second clause)
+    reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
     initial_error_bound: float = 1.0
     replan_time: float = 4.0
     excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)

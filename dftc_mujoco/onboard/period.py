@@ -64,6 +64,7 @@ def team_period(
     below,
     flag,
     window,
+    exclusive,
     x_own,
     x_d,
     xd_dot,
@@ -108,7 +109,7 @@ def team_period(
         estimate_faults(x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, u_bar)
         if not compensate:
             u_bar[:] = u
-        if decide(r_norm, mu, above, below, flag, dt, window, raised):  # eq. 39
+        if decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # eq. 39
             code |= RAISED
     else:
         u_bar[:] = u

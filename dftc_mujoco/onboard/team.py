@@ -107,7 +107,40 @@ class Team:
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
         self.events: list[dict[str, Any]] = []
+        self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
         self._resize()
+
+    def _detection_horizon(self) -> tuple[float, dict[str, Any]]:
+        """Δt_d,max: the scenario's, or (``"auto"``) eq. 46 for the reference fault."""
+        cfg = self.config
+        if cfg.dt_d_max != "auto":
+            return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
+        from .thresholds import predicted_delays
+
+        th = self.thresholds
+        delays = predicted_delays(
+            cfg.graph,
+            cfg.ko,
+            cfg.dt,
+            np.asarray(th.mu(1e9)),
+            cfg.reference_fault,
+            getattr(th, "_tables", None),
+        )
+        worst = float(delays.max()) + cfg.detection_window
+        info = {
+            "source": "analysis (eq. 46)",
+            "reference_fault": cfg.reference_fault,
+            "predicted_delays_max": worst if np.isfinite(worst) else None,
+        }
+        if np.isfinite(worst):
+            info["value"] = worst
+            return worst, info
+        info["value"] = 5.0
+        info["warning"] = (
+            f"a constant fault of {cfg.reference_fault:g} m/s is not guaranteed detectable by "
+            "every robot with these thresholds (eq. 46); Δt_d,max falls back to 5 s"
+        )
+        return 5.0, info
 
     @property
     def path(self) -> str:
@@ -210,6 +243,7 @@ class Team:
             dec.below,
             dec.flag,
             dec.window,
+            dec.exclusive,
             self.x_own,
             self.x_d,
             self.xd_dot,
@@ -359,7 +393,7 @@ class Team:
             self.detected.add((by, robot))
             self.events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
             if robot not in self.first_detection:
-                t_r = t + self.config.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
+                t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
                 self.first_detection[robot] = t
                 self.pending[robot] = t_r
                 self.events.append(

@@ -300,3 +300,30 @@ def estimator_gain(
             break
         xe, xx = Ad @ xe, Ad @ xx
     return float(total_eta * eta_bar + total_xi * xi_bar)
+
+
+def predicted_delays(
+    graph: Graph,
+    ko: float,
+    h: float,
+    mu_steady: np.ndarray,
+    fault: float,
+    tables: ObserverTables | None = None,
+) -> np.ndarray:
+    """ⁱΔt_d (M, M) for a constant, uncompensated fault of size ``fault`` [m/s] on robot k.
+
+    Such a fault moves robot k's measured y_m,k by h·fault every period, so by eq. (1)
+    of ``docs/thresholds.md`` its signature at robot i after τ = j h is
+    ‖ⁱf_k(τ)‖ = h·fault·Σ_{m<j} [A_k^m]_{ik} (non-negative, increasing), and eq. 46
+    guarantees detection once it reaches 2 ⁱμ_k (the steady threshold ``mu_steady``).
+    +inf where it never does within the tabulated horizon (a stop at the path speed
+    may still be detected later, as the team pulls away and its command grows).
+    """
+    tb = tables or observer_tables(graph, ko, h)
+    signature = h * fault * np.cumsum(tb.col, axis=0)  # (T, K, N): after j + 1 periods
+    need = 2.0 * np.asarray(mu_steady).T  # (K, N) as [k, i]
+    reached = signature >= need[None]
+    first = np.where(reached.any(axis=0), reached.argmax(axis=0) + 1, -1)
+    delays = np.where(first > 0, first * h, np.inf)
+    # past the table the signature only grows towards fault / k_o (its limit, eq. 46)
+    return delays.T
