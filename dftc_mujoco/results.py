@@ -47,16 +47,26 @@ class RunResult:
         """True when the physics ran to the end without trouble."""
         return self.error is None
 
-    def save(self, out: str | Path) -> Path:
-        """Write ``log.npz``, ``scenario.toml`` and then ``summary.json`` into ``out``.
+    def save(self, out: str | Path, *, figures: bool = True, video: bool = False) -> Path:
+        """Write what ``python -m dftc_mujoco.run`` writes into ``out``.
 
-        Exactly what ``python -m dftc_mujoco.run`` writes before its figures and
-        video; each file is written atomically, the summary last.
+        ``log.npz``, ``scenario.toml`` and then ``summary.json`` (each atomically,
+        the summary last), the paper's figures in ``figures/`` unless ``figures`` is
+        False, and ``video.mp4`` (640x480 at 30 fps, offscreen through the GL backend
+        chosen when dftc_mujoco was imported) if ``video``. Returns ``out``.
         """
         out = Path(out)
         write_npz(out / "log.npz", self.log)
         write_text(out / "scenario.toml", self.scenario.to_toml())
         write_json(out / "summary.json", self.summary)
+        if figures:
+            from .render import figures as figures_mod
+
+            figures_mod.draw_all(self.log, self.summary, out / "figures")
+        if video:
+            from .render.video import write_video
+
+            write_video(out / "video.mp4", self.scenario, self.log, self.summary)
         return out
 
     def figures(self) -> dict[str, Any]:

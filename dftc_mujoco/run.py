@@ -218,8 +218,9 @@ def report(result: RunResult, out: Path) -> str:
 
 
 def write_records(result: RunResult, out: Path) -> None:
-    """Write ``log.npz``, ``scenario.toml`` then ``summary.json`` (atomically) into ``out``."""
-    result.save(out)
+    """Write ``log.npz``, ``scenario.toml`` then ``summary.json`` (atomically) into ``out``
+    (figures and video follow, in :func:`render_outputs`)."""
+    result.save(out, figures=False)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -85,12 +85,16 @@ def test_save_and_open_run_round_trip(tmp_path):
     """A run made from code (with overrides) is saved as the CLI saves it and read back."""
     s = load_scenario("paper_case", {"gains.ko": 3.0, "duration": 8.0})
     result = simulate(s)
-    result.save(tmp_path)
+    result.save(tmp_path, video=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "figures",
         "log.npz",
         "scenario.toml",
         "summary.json",
+        "video.mp4",
     ]
+    assert len(list((tmp_path / "figures").glob("*.png"))) == 5
+    assert (tmp_path / "video.mp4").stat().st_size > 10_000
     back = open_run(tmp_path)
     assert isinstance(back, RunResult)
     assert back.scenario.gains.ko == 3.0 and back.scenario.duration == 8.0

@@ -85,6 +85,7 @@ def test_campaign_workers_import_the_users_blocks(two_workers):
     for r in rows.values():
         blocks = json.loads(r["blocks"])
         assert blocks["thresholds"] == r["onboard.thresholds"]  # the row names what ran
+        assert blocks["controller"] == "mylab.control:Lyapunov" and r["onboard_path"] == "general"
         by_rule.setdefault(r["onboard.thresholds"], []).append(r["delay_first"])
     assert set(by_rule) == {"paper", "mylab.fdi:Scaled"}
     # the scaled rule (factor 0.5) flags the stop earlier than eq. 40 in every run
