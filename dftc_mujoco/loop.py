@@ -298,7 +298,7 @@ class Simulation:
     @property
     def done(self) -> bool:
         """The run reached its duration or stopped on physics trouble."""
-        return self.k > self.steps or self.error is not None
+        return self.k > self.steps or self.error is not None or self.team.ended is not None
 
     # ------------------------------------------------------------------ stepping
 
@@ -388,9 +388,9 @@ class Simulation:
                             events.add(e.pop("t"), e.pop("kind"), **e)
                         team.events.clear()
                     ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
-                    if k % log_every == 0:
+                    if k % log_every == 0 or team.ended:  # the last period of an ended mission too
                         self._sample(t, x, ctrl, position[j])
-                    if k == steps:
+                    if k == steps or team.ended:
                         k += 1
                         break
                     plant.step(ctrl, nsub)
@@ -439,6 +439,7 @@ class Simulation:
             error=self.error,
             sim_time=self.plant.time,
             finished=self.k > self.steps,
+            ended=self.team.ended,
         )
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info

@@ -216,6 +216,7 @@ def summarize(
     error: SimulationError | None,
     sim_time: float,
     finished: bool = True,
+    ended: str | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` contract (robots numbered from 1), from the raw records."""
     t = log["t"]
@@ -225,7 +226,9 @@ def summarize(
     simulated = float(t[-1]) if len(t) else 0.0
     gap, margin_d = obstacle_clearance(log, footprint, obstacle_safe)
     status = "ok" if error is None else "failed"
-    if error is None and not finished:
+    if error is None and ended:
+        status = "ended"  # the mission ended early: the team fell apart
+    elif error is None and not finished:
         status = "incomplete"
     summary: dict[str, Any] = {
         "scenario": s.name,
@@ -235,6 +238,7 @@ def summarize(
         "robot_model": s.team.robot_model,
         "status": status,
         "error": None if error is None else str(error),
+        "end_reason": ended,
         "simulated_time": round(sim_time, 9) if error else simulated,
         "wall_time": wall,
         "real_time_factor": (simulated / wall) if wall > 0 else None,

@@ -166,6 +166,8 @@ def _fmt_event(e: dict) -> str:
         )
     if k == "warning":
         return f"WARNING: {e['message']}"
+    if k == "mission_ended":
+        return f"MISSION ENDED: {e['reason']}"
     if k == "simulation_error":
         return f"SIMULATION ERROR: {e['message']}"
     return f"{k} {e}"

@@ -1,5 +1,9 @@
 """Fault tolerance on MuJoCo physics: compensation, isolation, exclusion, re-planning."""
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -190,3 +194,46 @@ def test_cli_lists_the_events_in_time_order(tmp_path, capsys):
     ):
         assert needle in body, needle
     assert "flags robot 2" not in body
+
+
+def test_a_team_reduced_to_one_robot_ends_the_mission_with_its_records(tmp_path):
+    """Two robots, both stop: excluding the first leaves one robot, which is no team.
+    The run ends there with an event and status "ended", keeping every record (it used
+    to crash in the threshold set-up and leave nothing)."""
+    two = tmp_path / "two.toml"
+    faults = [{"robot": 1, "kind": "stop", "t": 10.0}, {"robot": 2, "kind": "stop", "t": 30.0}]
+    s = scenario.load_scenario(
+        "paper_case",
+        {
+            "team.robots": 2,
+            "team.initial_positions": [[-0.3, 0.0], [0.3, 0.0]],
+            "team.graph": [[1, 2], [2, 1]],
+            "faults": faults,
+            "obstacles": [],
+            "duration": 40.0,
+        },
+    )
+    two.write_text(s.to_toml())
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dftc_mujoco.run",
+            str(two),
+            "--no-video",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "Traceback" not in out.stderr
+    assert "MISSION ENDED: the team was reduced to robot 2 alone" in out.stdout
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["status"] == "ended" and summary["exclusions"][0]["robot"] == 1
+    assert summary["end_reason"] == "the team was reduced to robot 2 alone"
+    with np.load(tmp_path / "o" / "log.npz") as log:
+        assert log["t"][-1] == pytest.approx(summary["exclusions"][0]["t"])
+        assert list(log["active"][-1]) == [False, True]

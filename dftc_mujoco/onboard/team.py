@@ -107,6 +107,7 @@ class Team:
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
         self.events: list[dict[str, Any]] = []
+        self.ended: str | None = None  # why the mission ended early (the team fell apart)
         self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
         self._resize()
 
@@ -422,6 +423,23 @@ class Team:
                 )
                 self.detected = {(b, k) for b, k in self.detected if k != robot}
                 continue
+            if len(self.members) <= 2:  # one robot would be left: no team, no mission
+                self.active[robot] = False
+                self.events.append(
+                    {
+                        "t": t,
+                        "kind": "exclusion",
+                        "robot": robot + 1,
+                        "flagged_by": flaggers,
+                        "detected_by": detectors,
+                    }
+                )
+                left = [int(k) + 1 for k in self.members if k != robot]
+                self.ended = f"the team was reduced to robot {left[0]} alone"
+                self.events.append(
+                    {"t": t, "kind": "mission_ended", "reason": self.ended, "robots": left}
+                )
+                return
             self._exclude(t, p)
             self.events.append(
                 {
