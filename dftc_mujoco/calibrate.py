@@ -17,7 +17,6 @@ mismatch and the recommendation in the model file. Exit codes: 0, 2 bad input.
 
 from __future__ import annotations
 
-import argparse
 import math
 import re
 import sys
@@ -180,11 +179,11 @@ def report(cal: Calibration) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
+    from . import cli
     from .sim import robots
 
-    p = argparse.ArgumentParser(
-        prog="python -m dftc_mujoco.calibrate",
-        description="Measure a robot model's mismatch from ẋ = u.",
+    p = cli.parser(
+        "dftc_mujoco.calibrate", "dftc-calibrate", "Measure a robot model's mismatch from ẋ = u."
     )
     p.add_argument("model", help=f"a model name ({', '.join(robots.available())}) or an MJCF path")
     p.add_argument(

@@ -7,10 +7,10 @@ success, 2 bad input (missing or unreadable records), 4 no OpenGL backend.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
+from . import cli
 from .errors import ScenarioError
 from .render import gl
 from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, setup_video
@@ -18,9 +18,8 @@ from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, setup_vide
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    p = argparse.ArgumentParser(
-        prog="python -m dftc_mujoco.plot",
-        description="Redraw a run's figures (and video) from its records.",
+    p = cli.parser(
+        "dftc_mujoco.plot", "dftc-plot", "Redraw a run's figures (and video) from its records."
     )
     p.add_argument("run_dir", type=Path, help="a folder written by python -m dftc_mujoco.run")
     add_video_options(p)

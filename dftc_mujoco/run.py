@@ -20,7 +20,7 @@ import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import __version__
+from . import cli
 from .errors import ScenarioError
 from .paths import RENDERS
 from .render import gl
@@ -33,12 +33,8 @@ EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER = 0, 2, 3, 4
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    p = argparse.ArgumentParser(
-        prog="python -m dftc_mujoco.run",
-        description="Run a DFTC scenario on MuJoCo physics.",
-    )
+    p = cli.parser("dftc_mujoco.run", "dftc-run", "Run a DFTC scenario on MuJoCo physics.")
     p.add_argument("scenario", help="scenario name (scenarios/NAME.toml) or path to a .toml file")
-    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     p.add_argument("--out", type=Path, help="output folder (default: renders/<name>/)")
     p.add_argument(
         "--set",

@@ -964,9 +964,24 @@ def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario
     return scenario
 
 
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name an output folder (it becomes ``renders/<name>``), or None."""
+    if NAME_PATTERN.match(name) and ".." not in name:
+        return None
+    return (
+        "expected a plain name (letters, digits, '_', '-', '.'; no path separators or '..', "
+        f"at most 100 characters): it names the output folder renders/<name>, got {name!r}"
+    )
+
+
 def _document(doc: _Doc, data: Any) -> Scenario | None:
     top = _Table(doc.file, data, "", doc)
     name = top.string("name")
+    if top.ok("name") and name_problem(name):
+        top.report("name", name_problem(name))
     description = top.string("description", "")
     duration = top.number("duration", low=0.0)
     seed = top.integer("seed", 0, low=0)

@@ -8,21 +8,19 @@ already recorded are skipped. Exit codes: 0, 2 bad input.
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import sys
 from pathlib import Path
 
+from .. import cli
 from ..errors import ScenarioError
 from ..paths import RENDERS
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    p = argparse.ArgumentParser(
-        prog="python -m dftc_mujoco.campaign", description="Run a Monte-Carlo fault campaign."
-    )
+    p = cli.parser("dftc_mujoco.campaign", "dftc-campaign", "Run a Monte-Carlo fault campaign.")
     p.add_argument("spec", type=Path, help="campaign spec (TOML), e.g. campaigns/stop_faults.toml")
     p.add_argument(
         "--workers",
@@ -54,6 +52,8 @@ def main(argv: list[str] | None = None) -> int:
             import dataclasses
 
             spec = dataclasses.replace(spec, runs=args.runs)
+        if args.limit is not None and args.limit < 1:
+            raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
         if args.workers < 1:
             raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
         out = args.out or RENDERS / "campaigns" / spec.name

@@ -72,6 +72,8 @@ def load(path: str | Path) -> Spec:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
     top = _Table(str(path), data, "")
     name = top.string("name")
+    if scenario_mod.name_problem(name):
+        top.fail("name", scenario_mod.name_problem(name))
     description = top.string("description", "")
     base_name = top.string("scenario")
     candidate = path.parent / base_name

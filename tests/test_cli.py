@@ -1,0 +1,61 @@
+"""Command lines: version, program names, names that would write outside renders/, limits."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import dftc_mujoco
+from dftc_mujoco import load_scenario
+from dftc_mujoco.campaign.__main__ import main as campaign_main
+from dftc_mujoco.errors import ScenarioError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("command", ["run", "plot", "calibrate", "campaign"])
+def test_every_command_says_its_version(command):
+    out = subprocess.run(
+        [sys.executable, "-m", f"dftc_mujoco.{command}", "--version"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0
+    assert out.stdout.strip() == f"python -m dftc_mujoco.{command} {dftc_mujoco.__version__}"
+
+
+def test_installed_commands_call_themselves_by_their_name():
+    script = Path(sys.executable).parent / "dftc-run"
+    if not script.exists():
+        pytest.skip("the dftc-run console script is not installed beside this Python")
+    out = subprocess.run([str(script), "--help"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.startswith("usage: dftc-run ")
+
+
+@pytest.mark.parametrize("name", ["/tmp/x", "../../../x", "a/b", "..", ".hidden", ""])
+def test_a_scenario_name_cannot_point_outside_renders(name):
+    with pytest.raises(ScenarioError, match=r"name: expected a plain name"):
+        load_scenario("paper_case", {"name": name})
+
+
+def test_a_campaign_name_cannot_point_outside_renders(tmp_path, capsys):
+    text = (ROOT / "campaigns" / "tiny.toml").read_text().replace('name = "tiny"', 'name = "../x"')
+    text = text.replace(
+        'scenario = "paper_case"', f'scenario = "{ROOT / "scenarios" / "paper_case.toml"}"'
+    )
+    spec = tmp_path / "bad.toml"
+    spec.write_text(text)
+    assert campaign_main([str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert "name: expected a plain name" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() and not (tmp_path.parent / "x").exists()
+
+
+def test_a_negative_limit_is_refused(tmp_path, capsys):
+    code = campaign_main(
+        [str(ROOT / "campaigns" / "tiny.toml"), "--limit", "-3", "--out", str(tmp_path)]
+    )
+    assert code == 2
+    assert "--limit: expected at least 1, got -3" in capsys.readouterr().err
+    assert not (tmp_path / "results.jsonl").exists()
