@@ -144,3 +144,19 @@ def test_batched_kappa_lambda_agree_with_the_per_robot_ones(name):
         k1, l1 = fdir.decay_bound(fdir.observer_matrix(g, 6.0, k))
         assert lam[k] == pytest.approx(l1)
         assert k1 * (1 - 1e-3) <= kappa[k] <= k1 * 1.002  # both bound the sup, within 0.2 %
+
+
+@pytest.mark.parametrize("n", [6, 16])
+def test_rotation_invariant_graphs_compute_one_robot_and_agree_with_all(n):
+    """Rings with chords look the same from every robot: κ_k, λ_k are computed for k = 0
+    only, and equal the full batched computation; results are cached per graph but
+    handed out as copies."""
+    from dftc_mujoco.graph import ring_with_chords
+
+    g = ring_with_chords(n, (2,))
+    kappa, lam = fdir.decay_bounds(g, 3.0)
+    full_kappa, full_lam = fdir._decay_bounds(g, 3.0)
+    np.testing.assert_allclose(kappa, full_kappa, rtol=1e-10)
+    np.testing.assert_allclose(lam, full_lam, rtol=1e-10)
+    kappa[:] = -1.0  # the cache keeps its own values
+    assert (fdir.decay_bounds(g, 3.0)[0] > 0).all()

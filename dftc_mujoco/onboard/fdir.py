@@ -13,6 +13,7 @@ which owns the vectors that are resized.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -70,7 +71,32 @@ def observer_matrix(graph: Graph, ko: float, k: int) -> np.ndarray:
 
 
 def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarray, np.ndarray]:
-    """κ_k, λ_k (eq. 41) for every monitored robot k of ``graph``, batched over k.
+    """κ_k, λ_k (eq. 41) for every monitored robot k of ``graph`` (cached per graph).
+
+    See :func:`_decay_bounds`. A graph invariant under the rotation i -> i + 1
+    (rings, rings with chords: every robot sees the same graph) needs only k = 0.
+    The last graphs are cached, so campaign workers and reset runs pay once.
+    """
+    kappa, lam = _cached_decay_bounds(graph.n, tuple(sorted(graph.edges)), float(ko), n_lambda)
+    return kappa.copy(), lam.copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_decay_bounds(
+    n: int, edges: tuple[tuple[int, int], ...], ko: float, n_lambda: int
+) -> tuple[np.ndarray, np.ndarray]:
+    graph = Graph(n, edges)
+    rotated = {((j + 1) % n, (i + 1) % n) for j, i in edges}
+    if n > 1 and rotated == set(edges):  # circulant: M_k = P^k M_0 P^-k, same norms
+        kappa, lam = _decay_bounds(graph, ko, n_lambda, only=np.array([0]))
+        return np.full(n, kappa[0]), np.full(n, lam[0])
+    return _decay_bounds(graph, ko, n_lambda)
+
+
+def _decay_bounds(
+    graph: Graph, ko: float, n_lambda: int = 49, only: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """κ_k, λ_k (eq. 41) for every monitored robot k of ``graph`` (or those in ``only``).
 
     Same definition as :func:`decay_bound` (λ on a grid below λ_min minimising
     κ/λ, κ the sup of ‖exp(−M_k t)‖ e^{λt}), computed for all k at once so that
@@ -83,12 +109,12 @@ def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarra
     """
     n = graph.n
     lap = graph.laplacian()
-    m = np.repeat(lap[None] * ko, n, axis=0)
-    idx = np.arange(n)
-    m[idx, idx, idx] += ko  # M_k = k_o (L + e_k e_kᵀ)
+    idx = np.arange(n) if only is None else np.asarray(only)
+    m = np.repeat(lap[None] * ko, len(idx), axis=0)
+    m[np.arange(len(idx)), idx, idx] += ko  # M_k = k_o (L + e_k e_kᵀ)
     lam_min = np.linalg.eigvals(m).real.min(axis=1)
-    kappa = np.full(n, np.inf)
-    lam = np.zeros(n)
+    kappa = np.full(len(idx), np.inf)
+    lam = np.zeros(len(idx))
     good = np.flatnonzero(lam_min > 1e-9)
     if len(good) == 0:
         return kappa, lam
@@ -132,10 +158,11 @@ def _top_singular(a: np.ndarray, v: np.ndarray, iters: int = 30) -> tuple[np.nda
     """Largest singular value of each matrix in the stack ``a`` (K, N, N), by power
     iteration on aᵀa started from ``v`` (K, N); returns the values and the vectors."""
     at = np.swapaxes(a, 1, 2)
+    v = v[..., None]
     for _ in range(iters):
-        w = np.einsum("kij,kj->ki", at, np.einsum("kij,kj->ki", a, v))
+        w = at @ (a @ v)  # batched matrix-vector products (BLAS), not einsum
         v = w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
-    return np.linalg.norm(np.einsum("kij,kj->ki", a, v), axis=1), v
+    return np.linalg.norm((a @ v)[..., 0], axis=1), v[..., 0]
 
 
 @njit(cache=True)
