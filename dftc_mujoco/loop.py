@@ -30,7 +30,7 @@ from . import mission
 from .errors import ScenarioError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team, TeamConfig
-from .record import Events, Log
+from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
 from .sim import faults as sim_faults
@@ -250,10 +250,12 @@ class Simulation:
         self.steps = round(s.duration / dt)
         self.log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
         obstacles = np.array([[*o.position, o.radius, o.safe_distance] for o in s.obstacles])
+        rows = self.steps // self.log_every + 2  # + the last period of an ended mission
         self.log = Log(
-            self.steps // self.log_every + 1,
+            rows,
             n,
             n_act=sc.actuator.shape[1],
+            matrix_every=matrix_every(n, rows, self.log_every, dt, s.physics.matrix_log_rate),
             obstacles=obstacles.reshape(-1, 4),
         )
         self.events = Events()
@@ -418,7 +420,7 @@ class Simulation:
         d["c_d"][row] = c
         d["ctrl"][row] = ctrl
         self.plant.poses(out=d["pose"][row])
-        self.team.write_row(d, row, self.scenario.fdir.enabled)
+        self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
         log.size += 1
 
     # ------------------------------------------------------------------ results

@@ -37,8 +37,32 @@ LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
 }
 # derived from the other fields after the run (results.py), not sampled in the loop
 DERIVED_FIELDS = ("phi", "sigma_err")
+# N × N fields: sampled every ``matrix_every`` log rows (the static "matrix_every" in log.npz)
+MATRIX_FIELDS = ("x_hat", "residual", "threshold")
+MATRIX_LOG_BUDGET = 256 * 2**20  # bytes the N × N fields may take at the "auto" rate
+
+
+def matrix_every(n_robots: int, n_rows: int, log_every: int, dt: float, rate: float | str) -> int:
+    """Log rows between two samples of the N × N fields (1: every row).
+
+    ``rate`` in Hz, or "auto": every row while the N × N fields of ``n_rows`` rows fit in
+    :data:`MATRIX_LOG_BUDGET`, else as many rows apart as needed.
+    """
+    if rate == "auto":
+        per_row = n_robots * n_robots * (2 * 4 + 4 + 4)  # float32 x_hat, residual, threshold
+        return max(1, -(-n_rows * per_row // MATRIX_LOG_BUDGET))
+    return max(1, round(1.0 / (float(rate) * dt * log_every)))
+
+
+def matrix_rows(log: dict[str, np.ndarray]) -> np.ndarray:
+    """Indices of the log rows at which the N × N fields were sampled."""
+    every = int(log["matrix_every"]) if "matrix_every" in log else 1
+    return np.arange(len(log["residual"])) * every
+
+
 # arrays without a time axis stored beside them in log.npz
-STATIC_FIELDS = ("obstacles",)  # (O, 4): x, y, radius, safe distance d
+# (O, 4): x, y, radius, safe distance d; and the log rows between two N × N samples
+STATIC_FIELDS = ("obstacles", "matrix_every")
 
 
 def _shape(code: str, n: int, n_act: int = 2) -> tuple[int, ...]:
@@ -46,28 +70,51 @@ def _shape(code: str, n: int, n_act: int = 2) -> tuple[int, ...]:
 
 
 class Log:
-    """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part."""
+    """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part.
 
-    def __init__(self, n_samples: int, n_robots: int, n_act: int = 2, **static: np.ndarray) -> None:
+    The N × N fields (:data:`MATRIX_FIELDS`) are kept every ``matrix_every`` rows
+    only, so that large teams stay within a bounded memory; ``row_nn`` is the index
+    of the N × N sample that goes with the current row (or -1 when none does).
+    """
+
+    def __init__(
+        self,
+        n_samples: int,
+        n_robots: int,
+        n_act: int = 2,
+        matrix_every: int = 1,
+        **static: np.ndarray,
+    ) -> None:
         self.n = n_robots
         self.size = 0
-        self.static = static
+        self.matrix_every = matrix_every
+        self.static = {**static, "matrix_every": np.array(matrix_every)}
+        n_matrix = -(-n_samples // matrix_every)
         self.data = {
-            name: np.full((n_samples, *_shape(code, n_robots, n_act)), fill, dtype=dtype)
+            name: np.full(
+                (n_matrix if name in MATRIX_FIELDS else n_samples, *_shape(code, n_robots, n_act)),
+                fill,
+                dtype=dtype,
+            )
             for name, (code, dtype, fill) in LOG_FIELDS.items()
             if name not in DERIVED_FIELDS
         }
 
-    def sample(self, **values: Any) -> None:
-        """Store one sample; fields not given keep their fill value (NaN / False)."""
-        row = self.size
-        for name, value in values.items():
-            self.data[name][row] = value
-        self.size += 1
+    @property
+    def row_nn(self) -> int:
+        """Where the current row's N × N fields go, or -1 when this row has none."""
+        return self.size // self.matrix_every if self.size % self.matrix_every == 0 else -1
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The samples taken so far, by field name, plus the static arrays."""
-        return {**{name: a[: self.size] for name, a in self.data.items()}, **self.static}
+        n_matrix = -(-self.size // self.matrix_every)
+        return {
+            **{
+                name: a[: n_matrix if name in MATRIX_FIELDS else self.size]
+                for name, a in self.data.items()
+            },
+            **self.static,
+        }
 
 
 @dataclass

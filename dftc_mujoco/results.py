@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import ScenarioError, SimulationError
-from .record import Events, write_json, write_npz, write_text
+from .record import Events, matrix_rows, write_json, write_npz, write_text
 
 if TYPE_CHECKING:
     from .scenario import Scenario
@@ -270,7 +270,7 @@ def summarize(
         "min_safe_distance_margin": _finite_or_none(margin_d),
     }
     if s.fdir.enabled:
-        healthy, settled, _ = fault_masks(s, t)
+        healthy, settled, _ = fault_masks(s, t[matrix_rows(log)])
         summary["margin"] = peak_ratio(log["residual"], log["threshold"], healthy)
         summary["margin_compensated"] = (
             peak_ratio(log["residual"], log["threshold"], settled)

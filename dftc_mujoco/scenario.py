@@ -118,6 +118,9 @@ class Physics:
     control_period: float = 0.01
     log_rate: float = 50.0
     robot_contacts: bool = True
+    # rate of the N × N fields (estimates, residuals, thresholds) [Hz], or "auto": the
+    # log rate while they fit in MATRIX_LOG_BUDGET bytes, less for large teams
+    matrix_log_rate: float | str = "auto"
 
     @property
     def substeps(self) -> int:
@@ -1056,8 +1059,21 @@ def _physics(t: _Table) -> Physics:
             "log_rate", f"expected at most the control rate {1.0 / period:g} Hz, got {log_rate:g}"
         )
     contacts = t.boolean("robot_contacts", True)
+    raw = t.data.get("matrix_log_rate", "auto")
+    matrix_rate: float | str = "auto"
+    if isinstance(raw, str):
+        t.raw("matrix_log_rate", "auto")
+        if raw != "auto":
+            t.report("matrix_log_rate", f'expected a rate in Hz or "auto", got {raw!r}')
+    else:
+        matrix_rate = t.number("matrix_log_rate", 50.0, low=0.0)
+        if t.ok("matrix_log_rate", "log_rate") and matrix_rate > log_rate + 1e-9:
+            t.report(
+                "matrix_log_rate",
+                f"expected at most log_rate = {log_rate:g} Hz, got {matrix_rate:g}",
+            )
     t.finish()
-    return Physics(timestep, period, log_rate, contacts)
+    return Physics(timestep, period, log_rate, contacts, matrix_rate)
 
 
 _FAMILIES = ("explicit", "ring_chords", "random", "knn")

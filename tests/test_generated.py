@@ -70,3 +70,28 @@ def test_sixteen_robot_grid_tracks_its_formation_on_physics():
     after = r.log["t"] >= 15.0  # the slowest observer mode here is λ ≈ 0.2 1/s
     assert r.log["sigma_err"][after].max() < 0.02
     assert r.log["sigma_err"][-1].max() < 0.015
+
+
+def test_large_teams_log_their_n_by_n_fields_within_a_memory_budget():
+    """The N × N fields (estimates, residuals, thresholds) are logged every k-th row when
+    they would not fit in the budget; everything derived from them still works."""
+    from dftc_mujoco import load_scenario, simulate
+    from dftc_mujoco.record import MATRIX_LOG_BUDGET, matrix_every, matrix_rows
+
+    # paper_case fits: every row; N = 400 for 60 s at 50 Hz would take 7.7 GB: 1 row in 29
+    assert matrix_every(4, 3002, 2, 0.01, "auto") == 1
+    every = matrix_every(400, 3002, 2, 0.01, "auto")
+    assert every == 29 and -(-3002 // every) * 400 * 400 * 16 <= MATRIX_LOG_BUDGET
+    assert matrix_every(4, 3002, 2, 0.01, 5.0) == 10  # 5 Hz of a 50 Hz log
+    s = load_scenario(
+        "paper_case", {"physics.matrix_log_rate": 5.0, "duration": 47.0, "noise.at_bound": True}
+    )
+    r = simulate(s)
+    log = r.log
+    assert int(log["matrix_every"]) == 10 and len(log["residual"]) == len(log["t"][::10])
+    assert log["x_hat"].shape == (len(log["residual"]), 4, 4, 2)
+    rows = matrix_rows(log)
+    # rows line up: robot 3's estimate of the healthy robots 2-4 is where they are
+    assert np.allclose(log["x_hat"][-1][2, 1:], log["x"][rows[-1], 1:], atol=0.01)
+    assert r.summary["margin"] < 1 and {d["robot"] for d in r.summary["detections"]} == {1}
+    assert len(r.figures()) == 5

@@ -111,7 +111,7 @@ def test_several_errors_are_reported_together_in_file_order(tmp_path):
     )
     assert _error(scenario.load, path).splitlines() == [
         f"{path}: physics.speed: unknown key (known keys here: control_period, log_rate, "
-        "robot_contacts, timestep)",
+        "matrix_log_rate, robot_contacts, timestep)",
         f"{path}: gains.kc: expected a number, got str 'fast'",
         f"{path}: faults[2].robot: robot 9 out of range: robots are numbered 1..4",
     ]
@@ -132,9 +132,9 @@ def test_errors_in_every_section_and_no_follow_on_errors():
         "x.toml: seed: expected an integer >= 0, got -1",
         "x.toml: physics.timestep: expected a number, got str 'small'",
         "x.toml: physics.zz: unknown key (known keys here: control_period, log_rate, "
-        "robot_contacts, timestep)",
+        "matrix_log_rate, robot_contacts, timestep)",
         "x.toml: physics.aa: unknown key (known keys here: control_period, log_rate, "
-        "robot_contacts, timestep)",
+        "matrix_log_rate, robot_contacts, timestep)",
         "x.toml: team.robots: expected an integer, got str 'four'",
         "x.toml: team.graph[2]: edge [2, 2] goes from a robot to itself",
         "x.toml: mission.centroid.speed: expected a number > 0, got 0",

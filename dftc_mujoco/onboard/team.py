@@ -327,27 +327,36 @@ class Team:
             "active": self.active,
         }
 
-    def write_row(self, log: dict[str, np.ndarray], row: int, fdir: bool = True) -> None:
-        """Write the period's outputs into row ``row`` of preallocated log arrays
-        (original robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``)."""
+    def write_row(
+        self, log: dict[str, np.ndarray], row: int, fdir: bool = True, row_nn: int = -1
+    ) -> None:
+        """Write the period's outputs into row ``row`` of preallocated log arrays (original
+        robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``); the N × N
+        ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1."""
         if len(self.members) < self.n:  # after an exclusion: expand to the original axis
             out = self.outputs()
-            for name in ("u", "x_hat", "x_d", "residual", "flagged", "reactive", "active"):
+            for name in ("u", "x_d", "flagged", "reactive", "active"):
                 log[name][row] = out[name]
             if fdir:
                 log["phi_hat"][row] = out["phi_hat"]
-                log["threshold"][row] = out["threshold"]
+            if row_nn >= 0:
+                log["x_hat"][row_nn] = out["x_hat"]
+                log["residual"][row_nn] = out["residual"]
+                if fdir:
+                    log["threshold"][row_nn] = out["threshold"]
             return
         log["u"][row] = self.u
-        log["x_hat"][row] = self.x_hat
         log["x_d"][row] = self.x_d
-        log["residual"][row] = self.r_norm
         log["active"][row] = self.active
         np.greater_equal(self.supervisor.active, 0, out=log["reactive"][row])
         flagged_by_teammates(np.asarray(self.flag, bool), log["flagged"][row])
         if fdir:
             log["phi_hat"][row] = self.phi_hat
-            log["threshold"][row] = self.mu
+        if row_nn >= 0:
+            log["x_hat"][row_nn] = self.x_hat
+            log["residual"][row_nn] = self.r_norm
+            if fdir:
+                log["threshold"][row_nn] = self.mu
 
     def avoiding(self) -> np.ndarray:
         """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""

@@ -17,6 +17,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from ..record import matrix_rows
+
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
 MAX_GRID = 6
 FIGURES = ("fig3_paths", "fig4_fault_estimate", "fig5_8_residuals", "fig9_errors", "fig10_inputs")
@@ -119,7 +121,7 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
 
 def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Figs. 5-8: ‖ⁱr_k‖ and ⁱμ_k, rows i (observer), columns k (monitored robot)."""
-    t, r, mu = log["t"], log["residual"], log["threshold"]
+    t, r, mu = log["t"][matrix_rows(log)], log["residual"], log["threshold"]
     n = r.shape[1]
     faulty = sorted(_faulty(summary))
     cols = (faulty + [k for k in range(n) if k not in faulty])[:MAX_GRID]
@@ -153,9 +155,10 @@ def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
 
 
 def estimation_error(log: dict[str, np.ndarray]) -> np.ndarray:
-    """‖x̃*‖ over the robots in the team at each sample (paper Fig. 9, top)."""
-    err = log["x_hat"] - log["x"][:, None, :, :]
-    act = log["active"]
+    """‖x̃*‖ over the robots in the team at each N × N sample (paper Fig. 9, top)."""
+    rows = matrix_rows(log)
+    err = log["x_hat"] - log["x"][rows][:, None, :, :]
+    act = log["active"][rows]
     mask = act[:, :, None] & act[:, None, :]
     sq = np.where(mask, (err**2).sum(axis=-1), 0.0)
     return np.sqrt(sq.sum(axis=(1, 2)))
@@ -165,7 +168,7 @@ def fig_errors(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 9: ‖x̃*‖ (top) and the task errors ‖σ̃₁‖, ‖σ̃₂‖ (bottom)."""
     t = log["t"]
     fig, (top, bottom) = new_figure(2, 1, figsize=(8, 5), sharex=True)
-    top.semilogy(t, estimation_error(log), "b-", lw=0.8)
+    top.semilogy(t[matrix_rows(log)], estimation_error(log), "b-", lw=0.8)
     top.set_ylabel("‖x̃*‖ [m]")
     top.set_title("Estimation and task errors (paper Fig. 9)")
     bottom.semilogy(t, log["sigma_err"][:, 0], lw=0.8, label="‖σ̃₁‖ centroid")
