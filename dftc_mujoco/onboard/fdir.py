@@ -211,11 +211,35 @@ class Thresholds(Block):
         y0: np.ndarray,
         t0: float = 0.0,
         n_dim: int = 2,
+        dt: float = 0.01,
+        K: float = 3.0,
+        G: float = 0.01,
     ) -> Thresholds:
-        """Thresholds of ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team."""
+        """The rule on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team (control
+        period ``dt``, fault-estimator gains K, G as scalars times I)."""
+        from ..mission import polygon_offsets
+        from ..scenario import Formation
+
+        config = TeamConfig(
+            graph=graph,
+            kc=1.0,
+            ko=ko,
+            K=K * np.eye(n_dim),
+            G=G * np.eye(n_dim),
+            theta=1.0,
+            dt=dt,
+            eta_bar=eta_bar,
+            xi_bar=xi_bar,
+            formation=Formation(),
+            obstacle_position=np.zeros((0, 2)),
+            obstacle_safe=np.zeros(0),
+            obstacle_activation=np.zeros(0),
+        )
         th = cls()
-        th.ko, th.eta_bar, th.xi_bar, th.n_dim = ko, eta_bar, xi_bar, n_dim
-        th.restart(graph, np.asarray(y0, float), t0)
+        slots = polygon_offsets(graph.n, 0.5)
+        th.reset(config, slots, slots)
+        if t0 or not np.allclose(y0, config.initial_error_bound):
+            th.restart(graph, np.asarray(y0, float), t0)
         return th
 
     def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:

@@ -432,24 +432,11 @@ class Team:
                 )
                 self.detected = {(b, k) for b, k in self.detected if k != robot}
                 continue
-            if len(self.members) <= 2:  # one robot would be left: no team, no mission
+            last_pair = len(self.members) <= 2  # one robot would be left: no team, no mission
+            if last_pair:
                 self.active[robot] = False
-                self.events.append(
-                    {
-                        "t": t,
-                        "kind": "exclusion",
-                        "robot": robot + 1,
-                        "flagged_by": flaggers,
-                        "detected_by": detectors,
-                    }
-                )
-                left = [int(k) + 1 for k in self.members if k != robot]
-                self.ended = f"the team was reduced to robot {left[0]} alone"
-                self.events.append(
-                    {"t": t, "kind": "mission_ended", "reason": self.ended, "robots": left}
-                )
-                return
-            self._exclude(t, p)
+            else:
+                self._exclude(t, p)
             self.events.append(
                 {
                     "t": t,
@@ -459,6 +446,13 @@ class Team:
                     "detected_by": detectors,
                 }
             )
+            if last_pair:
+                left = [int(k) + 1 for k in self.members if k != robot]
+                self.ended = f"the team was reduced to robot {left[0]} alone"
+                self.events.append(
+                    {"t": t, "kind": "mission_ended", "reason": self.ended, "robots": left}
+                )
+                return
             if not self.graph.is_strongly_connected():
                 self.events.append(
                     {

@@ -109,46 +109,6 @@ class _Tabulated(Thresholds):
         self.restarts = 0
         super().reset(config, x_m0, prior)
 
-    @classmethod
-    def for_graph(
-        cls,
-        graph: Graph,
-        ko: float,
-        eta_bar: float,
-        xi_bar: float,
-        y0: np.ndarray,
-        t0: float = 0.0,
-        n_dim: int = 2,
-        dt: float = 0.01,
-        K: float = 3.0,
-        G: float = 0.01,
-    ) -> _Tabulated:
-        """The rule on ``graph`` outside any team (control period ``dt``, gains K, G)."""
-        from ..mission import polygon_offsets
-        from ..scenario import Formation
-
-        config = TeamConfig(
-            graph=graph,
-            kc=1.0,
-            ko=ko,
-            K=K * np.eye(n_dim),
-            G=G * np.eye(n_dim),
-            theta=1.0,
-            dt=dt,
-            eta_bar=eta_bar,
-            xi_bar=xi_bar,
-            formation=Formation(),
-            obstacle_position=np.zeros((0, 2)),
-            obstacle_safe=np.zeros(0),
-            obstacle_activation=np.zeros(0),
-        )
-        th = cls()
-        x0 = polygon_offsets(graph.n, 0.5)
-        th.reset(config, x0, x0)
-        if t0 or not np.allclose(y0, 1.0):
-            th.restart(graph, np.asarray(y0, float), t0)
-        return th
-
     def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
         """Tabulate for ``graph`` from ``t0``, with initial errors bounded by ``y0[k]``."""
         self.graph, self.y0, self.t0 = graph, np.asarray(y0, float), t0
