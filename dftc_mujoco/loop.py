@@ -119,17 +119,14 @@ class Snapshot:
 
 
 def block_names(s: Scenario, given: Mapping[str, Any] | None) -> dict[str, str]:
-    """The name of each block a run uses: the scenario's, or ``module:Class`` of a given one."""
+    """The name of each block a run uses: the scenario's, or for a given instance its
+    built-in name (``"paper"``, ...) when it is one, else ``module:Class``."""
     names = {k: getattr(s.onboard, k) for k in blocks_mod.BLOCKS}
     for k, b in (given or {}).items():
         cls = type(b)
-        builtin = [n for n, path in blocks_mod.BUILTIN[k].items() if path == _qual(cls)]
-        names[k] = builtin[0] if builtin else _qual(cls)
+        builtin = [n for n in blocks_mod.BUILTIN[k] if blocks_mod.load_class(k, n) is cls]
+        names[k] = builtin[0] if builtin else f"{cls.__module__}:{cls.__qualname__}"
     return names
-
-
-def _qual(cls: type) -> str:
-    return f"{cls.__module__}:{cls.__qualname__}".replace("dftc_mujoco.onboard.", "dftc_mujoco.")
 
 
 def make_blocks(
@@ -228,7 +225,7 @@ class Simulation:
             self.faults.clear()
             self.plant = None
 
-    def reset(self, seed: int | None = None) -> Snapshot | None:
+    def reset(self, seed: int | None = None) -> None:
         """Start the run again from t = 0 (with another ``seed`` if given)."""
         wall0 = time.perf_counter()
         if seed is not None:
@@ -290,7 +287,6 @@ class Simulation:
         self._build = self._build_time + (time.perf_counter() - wall0)
         self._wall = self._build
         self._build_time = 0.0
-        return None
 
     @property
     def t(self) -> float:

@@ -218,3 +218,15 @@ def test_every_public_name_is_documented():
     params = inspect.signature(paper.Controller.collective_input).parameters
     assert list(params) == ["self", "x_hat", "x_d", "xd_dot"]
     assert list(inspect.signature(paper.Thresholds.mu).parameters) == ["self", "t"]
+
+
+def test_given_builtin_blocks_keep_their_names_and_the_compiled_path():
+    from dftc_mujoco.onboard.thresholds import Drive
+
+    r = simulate(
+        load_scenario("paper_case", {"duration": 1.0}),
+        blocks={"controller": paper.Controller(), "thresholds": Drive()},
+    )
+    assert r.summary["onboard"]["path"] == "compiled"
+    assert r.summary["onboard"]["blocks"]["controller"] == "paper"
+    assert r.summary["onboard"]["blocks"]["thresholds"] == "drive"
