@@ -279,7 +279,7 @@ class Simulation:
         self.noise = NoiseStream(plant)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
-        self.interrupted = False
+        self.stopped: str | None = None  # why the run was stopped early (request_stop)
         self._x = np.empty((n, 2))
         self._x_m = np.empty((n, 2))
         self._cmd = np.empty((n, 2))
@@ -295,8 +295,19 @@ class Simulation:
 
     @property
     def done(self) -> bool:
-        """The run reached its duration or stopped on physics trouble."""
-        return self.k > self.steps or self.error is not None or self.team.ended is not None
+        """The run reached its duration, stopped on physics trouble, ended early (the team
+        fell apart) or was stopped by :meth:`request_stop`."""
+        return (
+            self.k > self.steps
+            or self.error is not None
+            or self.team.ended is not None
+            or self.stopped is not None
+        )
+
+    def request_stop(self, reason: str) -> None:
+        """Stop stepping before the next control period (safe from a signal handler):
+        the records so far stay, and the summary's status is "interrupted"."""
+        self.stopped = reason
 
     # ------------------------------------------------------------------ stepping
 
@@ -372,6 +383,8 @@ class Simulation:
         try:
             with np.errstate(invalid="ignore", divide="ignore"):
                 for k in range(k0, k_end):
+                    if self.stopped is not None:  # request_stop(): end before this period
+                        break
                     t = k * dt
                     if t >= faults.due:
                         for f in faults.apply(t):
@@ -438,6 +451,7 @@ class Simulation:
             sim_time=self.plant.time,
             finished=self.k > self.steps,
             ended=self.team.ended,
+            stopped=self.stopped,
         )
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info

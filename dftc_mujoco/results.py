@@ -217,6 +217,7 @@ def summarize(
     sim_time: float,
     finished: bool = True,
     ended: str | None = None,
+    stopped: str | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` contract (robots numbered from 1), from the raw records."""
     t = log["t"]
@@ -226,7 +227,10 @@ def summarize(
     simulated = float(t[-1]) if len(t) else 0.0
     gap, margin_d = obstacle_clearance(log, footprint, obstacle_safe)
     status = "ok" if error is None else "failed"
-    if error is None and ended:
+    if error is None and stopped and not finished:
+        status = "interrupted"  # stopped on request (a signal): the records so far
+        ended = stopped
+    elif error is None and ended:
         status = "ended"  # the mission ended early: the team fell apart
     elif error is None and not finished:
         status = "incomplete"

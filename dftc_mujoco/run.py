@@ -15,6 +15,8 @@ simulator only after ``--gl`` has been applied.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import tomllib
 from pathlib import Path
@@ -128,6 +130,24 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = text  # a bare word: a string
         out[key.strip()] = value
     return out
+
+
+@contextlib.contextmanager
+def stop_on_signals(sim):
+    """While inside, SIGINT and SIGTERM stop ``sim`` before its next control period
+    (the run keeps its records); yields the list the caught signal numbers go to."""
+    caught: list[int] = []
+
+    def handler(signum, frame):
+        caught.append(signum)
+        sim.request_stop(f"interrupted by {signal.Signals(signum).name}")
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield caught
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def print_error(exc: Exception) -> None:
@@ -250,7 +270,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"--duration {s.duration:g} s and will not happen",
                 file=sys.stderr,
             )
-        with Simulation(s) as sim:
+        with Simulation(s) as sim, stop_on_signals(sim) as caught:
             if args.viewer:
                 from .render.viewer import ViewerUnavailable, watch
 
@@ -269,6 +289,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: cannot write the records to {out}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_INPUT
     print(report(result, out))
+    if caught:
+        signum = caught[0]
+        print(
+            f"interrupted by {signal.Signals(signum).name}: the records up to "
+            f"t = {result.summary['simulated_time']:.2f} s are in {out} (no figures or video)",
+            file=sys.stderr,
+        )
+        return 128 + signum  # 130 for SIGINT, 143 for SIGTERM
     code = EXIT_OK
     if not result.ok:
         print(f"error: {result.error}", file=sys.stderr)
