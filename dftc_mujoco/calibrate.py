@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
             write(path, cal)
             print(f"written to {path}")
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return 2
     return 0
 

@@ -20,3 +20,9 @@ def parser(module: str, script: str, description: str) -> argparse.ArgumentParse
     p = argparse.ArgumentParser(prog=prog(module, script), description=description)
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
+
+
+def print_error(exc: BaseException) -> None:
+    """One ``error:`` line on stderr per problem the exception reports."""
+    for line in str(exc).splitlines() or [type(exc).__name__]:
+        print(f"error: {line}", file=sys.stderr)

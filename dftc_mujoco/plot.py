@@ -48,10 +48,10 @@ def main(argv: list[str] | None = None) -> int:
         log, summary = run.log, run.summary
         scenario = run.scenario if options is not None else None
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return EXIT_INPUT
     except gl.RenderError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return EXIT_RENDER
     from .run import render_outputs
 
@@ -89,7 +89,7 @@ def write_stills(scenario, log, summary, out: Path, options, times: list[float])
                 iio.imwrite(path, fr.frame(t))
                 print(f"still: {path}")
     except gl.RenderError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return EXIT_RENDER
     return EXIT_OK
 

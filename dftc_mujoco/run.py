@@ -150,12 +150,6 @@ def stop_on_signals(sim):
             signal.signal(sig, old)
 
 
-def print_error(exc: Exception) -> None:
-    """One ``error:`` line per problem the exception reports."""
-    for line in str(exc).splitlines() or [type(exc).__name__]:
-        print(f"error: {line}", file=sys.stderr)
-
-
 def _fmt_event(e: dict) -> str:
     k = e["kind"]
     r = e.get("robot", 0)
@@ -248,10 +242,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         options = setup_video(args, not args.no_video)
     except ScenarioError as exc:
-        print_error(exc)
+        cli.print_error(exc)
         return EXIT_INPUT
     except gl.RenderError as exc:
-        print_error(exc)
+        cli.print_error(exc)
         return EXIT_RENDER
 
     from . import scenario as scenario_mod
@@ -280,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"note: {exc}; running without the viewer", file=sys.stderr)
             result = sim.run(progress=progress)
     except ScenarioError as exc:
-        print_error(exc)
+        cli.print_error(exc)
         return EXIT_INPUT
     out = args.out if args.out is not None else RENDERS / s.name
     try:
@@ -323,7 +317,7 @@ def render_outputs(scenario, log, summary, out: Path, options, progress: bool) -
     try:
         frames = write_video(out / "video.mp4", scenario, log, summary, options, progress)
     except gl.RenderError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return EXIT_RENDER
     wall = time.perf_counter() - t0
     print(

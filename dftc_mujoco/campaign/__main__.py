@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
             limit=args.limit,
         )
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        cli.print_error(exc)
         return 2
     rows = [r for r in results.rows if r["run"] < spec.runs]
     path = report.write(rows, out, spec.name, spec.description)
