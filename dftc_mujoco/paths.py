@@ -1,4 +1,5 @@
-"""Where the repository's data folders live (``models/``, ``scenarios/``, ``renders/``)."""
+"""Where the repository's data folders live (``models/``, ``scenarios/``); runs write to
+``./renders/`` in the working directory."""
 
 from __future__ import annotations
 
@@ -7,4 +8,3 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
 SCENARIOS = ROOT / "scenarios"
-RENDERS = ROOT / "renders"

@@ -6,7 +6,10 @@ overrides applied), the paper's figures and (unless ``--no-video``)
 of the run. ``--viewer`` also shows the run live in MuJoCo's viewer. Exit
 codes: 0 success, 2 bad input (scenario file or command line), 3 the physics
 failed (the records written so far are kept and ``summary.json`` says what
-went wrong), 4 no OpenGL backend for the video.
+went wrong), 4 no OpenGL backend for the video, 5 the output folder cannot be used
+(holds another run without ``--overwrite``, is being written by another process, is
+not writable or lacks space), 130 / 143 interrupted by SIGINT / SIGTERM (the records
+so far are kept).
 
 MuJoCo reads ``MUJOCO_GL`` when it is imported, so this module imports the
 simulator only after ``--gl`` has been applied.
@@ -24,20 +27,27 @@ from typing import TYPE_CHECKING, Any
 
 from . import cli
 from .errors import ScenarioError
-from .paths import RENDERS
+from .output import OutputError, free_space_check, run_folder
 from .render import gl
 
 if TYPE_CHECKING:
     from .results import RunResult
 
-EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER = 0, 2, 3, 4
+EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER, EXIT_OUTPUT = 0, 2, 3, 4, 5
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     p = cli.parser("dftc_mujoco.run", "dftc-run", "Run a DFTC scenario on MuJoCo physics.")
     p.add_argument("scenario", help="scenario name (scenarios/NAME.toml) or path to a .toml file")
-    p.add_argument("--out", type=Path, help="output folder (default: renders/<name>/)")
+    p.add_argument(
+        "--out", type=Path, help="output folder (default: ./renders/<name>/ in this directory)"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing run folder at --out (as a whole; never a non-run folder)",
+    )
     p.add_argument(
         "--set",
         dest="overrides",
@@ -264,24 +274,35 @@ def main(argv: list[str] | None = None) -> int:
                 f"--duration {s.duration:g} s and will not happen",
                 file=sys.stderr,
             )
-        with Simulation(s) as sim, stop_on_signals(sim) as caught:
-            if args.viewer:
-                from .render.viewer import ViewerUnavailable, watch
+        out = args.out if args.out is not None else Path.cwd() / "renders" / s.name
+        with run_folder(out, args.overwrite) as work:
+            with Simulation(s) as sim, stop_on_signals(sim) as caught:
+                free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
+                if args.viewer:
+                    from .render.viewer import ViewerUnavailable, watch
 
-                try:
-                    watch(sim)
-                except ViewerUnavailable as exc:
-                    print(f"note: {exc}; running without the viewer", file=sys.stderr)
-            result = sim.run(progress=progress)
+                    try:
+                        watch(sim)
+                    except ViewerUnavailable as exc:
+                        print(f"note: {exc}; running without the viewer", file=sys.stderr)
+                result = sim.run(progress=progress)
+            return _finish(result, work, Path(out).absolute(), caught, options, progress)
     except ScenarioError as exc:
         cli.print_error(exc)
         return EXIT_INPUT
-    out = args.out if args.out is not None else RENDERS / s.name
-    try:
-        write_records(result, out)
+    except OutputError as exc:
+        cli.print_error(exc)
+        return EXIT_OUTPUT
     except OSError as exc:
-        print(f"error: cannot write the records to {out}: {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_INPUT
+        print(f"error: cannot write the run: {exc}", file=sys.stderr)
+        return EXIT_OUTPUT
+
+
+def _finish(result, work: Path, out: Path, caught: list[int], options, progress: bool) -> int:
+    """Write the records (and figures, video) into ``work``, print the report; the exit code.
+
+    ``out`` is where ``work`` is moved once this returns (the paths printed)."""
+    write_records(result, work)
     print(report(result, out))
     if caught:
         signum = caught[0]
@@ -296,19 +317,26 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {result.error}", file=sys.stderr)
         code = EXIT_PHYSICS
     return max(
-        code, render_outputs(result.scenario, result.log, result.summary, out, options, progress)
+        code,
+        render_outputs(
+            result.scenario, result.log, result.summary, work, options, progress, shown=out
+        ),
     )
 
 
-def render_outputs(scenario, log, summary, out: Path, options, progress: bool) -> int:
-    """Draw the figures and (if ``options``) the video of a run; returns an exit code."""
+def render_outputs(
+    scenario, log, summary, out: Path, options, progress: bool, shown: Path | None = None
+) -> int:
+    """Draw the figures and (if ``options``) the video of a run into ``out``; returns an
+    exit code. ``shown`` is the folder named in the messages (default ``out``)."""
+    shown = shown or out
     import time
 
     from .render import figures
 
     t0 = time.perf_counter()
     paths = figures.draw_all(log, summary, out / "figures")
-    print(f"figures: {len(paths)} in {out / 'figures'} ({time.perf_counter() - t0:.1f} s)")
+    print(f"figures: {len(paths)} in {shown / 'figures'} ({time.perf_counter() - t0:.1f} s)")
     if options is None:
         return EXIT_OK
     from .render.video import write_video
@@ -321,7 +349,7 @@ def render_outputs(scenario, log, summary, out: Path, options, progress: bool) -
         return EXIT_RENDER
     wall = time.perf_counter() - t0
     print(
-        f"video: {out / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
+        f"video: {shown / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
         f"{options.width}x{options.height}, rendered and encoded at {frames / wall:.0f} "
         f"frames/s)"
     )

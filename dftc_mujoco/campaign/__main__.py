@@ -15,7 +15,6 @@ from pathlib import Path
 
 from .. import cli
 from ..errors import ScenarioError
-from ..paths import RENDERS
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,7 +35,9 @@ def main(argv: list[str] | None = None) -> int:
         metavar="ADDRESS",
         help="run on Ray: a local instance, or the cluster at ADDRESS",
     )
-    p.add_argument("--out", type=Path, help="results folder (default renders/campaigns/NAME)")
+    p.add_argument(
+        "--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)"
+    )
     p.add_argument("--runs", type=int, help="override the spec's number of runs")
     p.add_argument("--limit", type=int, help="stop after this many new runs (resume later)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
         if args.workers < 1:
             raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
-        out = args.out or RENDERS / "campaigns" / spec.name
+        out = args.out or Path.cwd() / "renders" / "campaigns" / spec.name
         out.mkdir(parents=True, exist_ok=True)
         if args.spec.resolve() != (out / "spec.toml").resolve():
             shutil.copyfile(args.spec, out / "spec.toml")
