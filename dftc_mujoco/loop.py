@@ -211,6 +211,8 @@ class Simulation:
     @property
     def data(self) -> mujoco.MjData:
         """The MuJoCo data of the current run."""
+        if self.plant is None:
+            raise RuntimeError("the simulation is closed; call reset() to start a new run")
         return self.plant.data
 
     def __enter__(self) -> Simulation:
