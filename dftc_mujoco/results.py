@@ -121,7 +121,7 @@ def _finite_or_none(v: float) -> float | None:
 
 def fault_masks(s: Scenario, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per logged instant (T, N): robots still healthy, and biased robots whose
-    compensation has settled; plus each robot's first fault time (N,)."""
+    compensation has settled; plus which robots have only bias faults (N,)."""
     n = s.team.robots
     start = np.full(n, np.inf)
     bias_only = np.ones(n, bool)
@@ -130,7 +130,7 @@ def fault_masks(s: Scenario, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
         bias_only[f.robot] &= f.kind == "bias"
     healthy = start[None, :] > t[:, None]
     settled = bias_only[None, :] & (start[None, :] + SETTLE <= t[:, None])
-    return healthy, settled, start
+    return healthy, settled, bias_only & np.isfinite(start)
 
 
 def peak_ratio(residual: np.ndarray, threshold: np.ndarray, columns: np.ndarray) -> float:
@@ -274,24 +274,11 @@ def summarize(
         "min_safe_distance_margin": _finite_or_none(margin_d),
     }
     if s.fdir.enabled:
-        healthy, settled, _ = fault_masks(s, t[matrix_rows(log)])
+        healthy, settled, biased = fault_masks(s, t[matrix_rows(log)])
         summary["margin"] = peak_ratio(log["residual"], log["threshold"], healthy)
         summary["margin_compensated"] = (
-            peak_ratio(log["residual"], log["threshold"], settled)
-            if _bias_faulty(s).any()
-            else None
+            peak_ratio(log["residual"], log["threshold"], settled) if biased.any() else None
         )
         summary["fault_estimates"] = fault_estimates(s, log, events)
     summary["events"] = events.ordered()
     return summary
-
-
-def _bias_faulty(s: Scenario) -> np.ndarray:
-    """Robots whose only faults are biases (N,) bool."""
-    n = s.team.robots
-    has = np.zeros(n, bool)
-    only = np.ones(n, bool)
-    for f in s.faults:
-        has[f.robot] = True
-        only[f.robot] &= f.kind == "bias"
-    return has & only

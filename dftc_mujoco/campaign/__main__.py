@@ -35,9 +35,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="ADDRESS",
         help="run on Ray: a local instance, or the cluster at ADDRESS",
     )
-    p.add_argument(
-        "--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)"
-    )
+    p.add_argument("--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)")
     p.add_argument("--runs", type=int, help="override the spec's number of runs")
     p.add_argument("--limit", type=int, help="stop after this many new runs (resume later)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")

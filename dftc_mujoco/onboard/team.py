@@ -102,7 +102,6 @@ class Team:
         self.u = np.zeros((n, 2))
         self.u_bar = np.zeros((n, 2))
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
-        self._zero = np.zeros(2)
         self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported

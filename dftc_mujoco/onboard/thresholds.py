@@ -102,11 +102,9 @@ class _Tabulated(Thresholds):
         self.decayed = float(decayed)
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
-        """Read h, k_o, η̄, ξ̄ (and G) and tabulate the rule on the team's graph."""
+        """Read h, k_o, η̄, ξ̄ and G, and tabulate the rule on the team's graph."""
         self.h = config.dt
         self.G = np.asarray(config.G, float)
-        self.K = np.asarray(config.K, float)
-        self.restarts = 0
         super().reset(config, x_m0, prior)
 
     def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
@@ -118,7 +116,6 @@ class _Tabulated(Thresholds):
         table[:, :, ~tables.finite] = np.inf
         self._table = table
         self._steady_mu = np.where(tables.finite[None, :], steady, np.inf)
-        self.restarts = getattr(self, "restarts", 0) + (t0 > 0)
 
     def _tabulate(self, tb: ObserverTables) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError

@@ -19,13 +19,7 @@ _WARNINGS = [
 
 def _disk_sample(rng: np.random.Generator, n: int, radius: float, at_bound: bool) -> np.ndarray:
     """n planar vectors, uniform in the disk of ``radius`` (or on its rim if ``at_bound``)."""
-    r = rng.random((2, n))
-    ang = (2.0 * np.pi) * r[0]
-    mag = radius if at_bound else radius * np.sqrt(r[1])
-    out = np.empty((n, 2))
-    out[:, 0] = mag * np.cos(ang)
-    out[:, 1] = mag * np.sin(ang)
-    return out
+    return _disk_chunk(rng.random((1, 2, n)), radius, at_bound)[0]
 
 
 @njit(cache=True)
@@ -63,7 +57,8 @@ def _gather_pose(xpos, xmat, idx, out):  # pragma: no cover - compiled
 
 
 def _disk_chunk(r: np.ndarray, radius: float, at_bound: bool) -> np.ndarray:
-    """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N), as :func:`_disk_sample`."""
+    """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N): row 0 gives the angle,
+    row 1 the radius (uniform in the disk, or ``radius`` itself if ``at_bound``)."""
     ang = (2.0 * np.pi) * r[:, 0]
     mag = radius if at_bound else radius * np.sqrt(r[:, 1])
     out = np.empty((len(r), r.shape[2], 2))
@@ -135,7 +130,6 @@ class Plant:
         self.xi_bar = xi_bar if xi_bar is not None else (noise.xi_bar or 0.0)
         self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
         self._xi_state = _disk_sample(rng, self.n, self.xi_bar, False)
-        self.xi = np.zeros((self.n, 2))
         self._ctrl_index = scene.actuator.ravel()
         mujoco.mj_forward(self.model, self.data)
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
@@ -181,17 +175,6 @@ class Plant:
         """
         eta = _disk_sample(self.rng, self.n, self.noise.eta_bar, self.at_bound)
         return (self.positions() if x is None else x) + eta
-
-    def disturbance(self) -> np.ndarray:
-        """Advance and return ξ (N, 2), ‖ξᵢ‖ ≤ ξ̄ (eq. 2): one draw per control period."""
-        w = _disk_sample(self.rng, self.n, self.xi_bar, False)
-        self._xi_state = self._alpha * self._xi_state + (1.0 - self._alpha) * w
-        if self.at_bound:
-            norm = np.linalg.norm(self._xi_state, axis=1, keepdims=True)
-            self.xi = self.xi_bar * self._xi_state / np.maximum(norm, 1e-12)
-        else:
-            self.xi = self._xi_state
-        return self.xi
 
     def step(self, ctrl: np.ndarray, nsub: int) -> None:
         """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
