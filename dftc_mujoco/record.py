@@ -33,7 +33,7 @@ LOG_FIELDS: dict[str, tuple[str, type, Any]] = {
     "c_d": ("2", np.float64, np.nan),
     "flagged": ("N", np.bool_, False),
     "pose": ("N3", np.float64, np.nan),
-    "ctrl": ("NA", np.float64, np.nan),  # actuator commands (A per robot), for φ of a stop
+    "v_cmd": ("N2", np.float64, np.nan),  # planar command the drive was asked for (φ of a stop)
 }
 # derived from the other fields after the run (results.py), not sampled in the loop
 DERIVED_FIELDS = ("phi", "sigma_err")
@@ -65,8 +65,8 @@ def matrix_rows(log: dict[str, np.ndarray]) -> np.ndarray:
 STATIC_FIELDS = ("obstacles", "matrix_every")
 
 
-def _shape(code: str, n: int, n_act: int = 2) -> tuple[int, ...]:
-    return tuple(n if c == "N" else n_act if c == "A" else int(c) for c in code)
+def _shape(code: str, n: int) -> tuple[int, ...]:
+    return tuple(n if c == "N" else int(c) for c in code)
 
 
 class Log:
@@ -81,7 +81,6 @@ class Log:
         self,
         n_samples: int,
         n_robots: int,
-        n_act: int = 2,
         matrix_every: int = 1,
         **static: np.ndarray,
     ) -> None:
@@ -92,7 +91,7 @@ class Log:
         n_matrix = -(-n_samples // matrix_every)
         self.data = {
             name: np.full(
-                (n_matrix if name in MATRIX_FIELDS else n_samples, *_shape(code, n_robots, n_act)),
+                (n_matrix if name in MATRIX_FIELDS else n_samples, *_shape(code, n_robots)),
                 fill,
                 dtype=dtype,
             )

@@ -96,7 +96,7 @@ def _plant(changes=None):
 def test_fault_acts_through_the_actuators(kind):
     _, sc, adapter, plant = _plant()
     fault = scenario.Fault(1, kind, 0.5, np.array([0.3, -0.35]), 0.05)
-    inj = sim_faults.ActuatorFaults(sc.model, (fault,), sc.actuator, adapter)
+    inj = sim_faults.ActuatorFaults(sc.model, (fault,), adapter)
     command = np.tile([0.2, 0.1], (4, 1))
     sent = command.copy()
     x_at = {}

@@ -49,6 +49,7 @@ class TeamConfig:
     compiled: bool = True  # compose the paper's blocks in one compiled period when possible
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
+    drift_bound: float = 0.0  # ē [m]: bounded offset of a robot's drift (from calibration)
 
 
 class Block:

@@ -59,7 +59,7 @@ class FrameRenderer:
         self.t = log["t"]
         if len(self.t) < 2:
             raise RenderError("the log has fewer than two samples: nothing to render")
-        model = robot_models.get(scenario.team.robot_model)
+        model = robot_models.get(scenario.team.robot_model, base=scenario.directory)
         self.footprint = model.footprint_radius
         self.scene = scene_mod.build(scenario, model)
         m = self.scene.model
@@ -71,14 +71,9 @@ class FrameRenderer:
         self.model = m
         self.data = mujoco.MjData(m)
         self.n = log["x"].shape[1]
-        self.hull_geoms = [
-            [
-                g
-                for g in range(m.ngeom)
-                if m.geom_bodyid[g] == b and (m.geom_contype[g] or m.geom_conaffinity[g])
-            ]
-            for b in self.scene.body
-        ]
+        self.hull_geoms = [scene_mod.state_geoms(m, b) for b in self.scene.body]
+        for geoms in self.hull_geoms:
+            m.geom_matid[geoms] = -1  # the state colour replaces the robot's material
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # glfw warns before it fails

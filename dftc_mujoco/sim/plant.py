@@ -121,7 +121,7 @@ class Plant:
     ) -> None:
         self.scene = scene
         self.model = scene.model
-        self.data = mujoco.MjData(self.model)
+        self.data = self.initial_data(scene)
         self.noise = noise
         self.rng = rng
         self.at_bound = noise.at_bound
@@ -130,8 +130,8 @@ class Plant:
         self.xi_bar = xi_bar if xi_bar is not None else (noise.xi_bar or 0.0)
         self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
         self._xi_state = _disk_sample(rng, self.n, self.xi_bar, False)
-        self._ctrl_index = scene.actuator.ravel()
-        mujoco.mj_forward(self.model, self.data)
+        # the drive writes the driven and the held actuators, in this order (drives.Drive)
+        self._ctrl_index = np.hstack([scene.actuator, scene.held]).ravel()
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
         self._site_xpos = self.data.site_xpos
         self._xpos = self.data.xpos
@@ -140,6 +140,16 @@ class Plant:
         self._warnings = self.data.warning.number
         self._site = np.ascontiguousarray(scene.site, dtype=np.intp)
         self._body = np.ascontiguousarray(scene.body, dtype=np.intp)
+
+    @staticmethod
+    def initial_data(scene: Scene) -> mujoco.MjData:
+        """MjData at the scene's initial state: each robot at its keyframe pose, the
+        actuators nobody drives holding their keyframe ctrl."""
+        data = mujoco.MjData(scene.model)
+        data.qpos[:] = scene.qpos_init
+        data.ctrl[:] = scene.ctrl_init
+        mujoco.mj_forward(scene.model, data)
+        return data
 
     @property
     def time(self) -> float:
@@ -177,7 +187,7 @@ class Plant:
         return (self.positions() if x is None else x) + eta
 
     def step(self, ctrl: np.ndarray, nsub: int) -> None:
-        """Hold actuator commands ``ctrl`` (N, A) for ``nsub`` MuJoCo steps."""
+        """Hold actuator commands ``ctrl`` (N, A + H: driven, then held) for ``nsub`` steps."""
         self._ctrl[self._ctrl_index] = ctrl.ravel()
         mujoco.mj_step(self.model, self.data, nstep=nsub)
         if np.count_nonzero(self._warnings):

@@ -1,326 +1,721 @@
-"""Robot models and their adapters (the contract is in ``models/robots/README.md``).
+"""Robot models: any MJCF as it is, plus a small robot file that says how to drive it.
 
-A robot model is an MJCF file: a root body ``base``, a site ``center`` (the
-point whose planar position the DFTC controls), velocity actuators, and a
-``<custom>`` block that names its adapter and its measured model mismatch
-(``dftc_xi_bar``). The adapter turns the planar velocity each robot's DFTC
-stack asks for into actuator commands, and a planar fault into actuator
-offsets. Models are found by name in ``models/robots/`` or by path.
+A robot is given to a scenario (``team.robot_model``) or the command line (``--robot``)
+as
+
+* a built-in name (``disk``, ``hexbot``, ``diffdrive``: robot files in ``models/robots/``);
+* a robot file ``NAME.robot.toml`` that points at an MJCF used **unchanged**
+  (``mjcf``, ``base``, ``control_point``, ``drive``, ``keyframe``, ``[holonomic]`` or
+  ``[diffdrive]``, ``[motor]``, ``[calibration]``; the format is in
+  ``models/robots/README.md``);
+* an MJCF file that follows this project's older contract (a root body ``base``, a site
+  ``center`` and ``<custom>`` declarations ``dftc_adapter``, ...), which keeps working.
+
+:func:`get` reads and checks the robot once: the named body, keyframe and actuators
+exist, the actuators are of a kind the drive can use (velocity servos, position servos,
+torque motors, with their gear), the drive's geometry (wheel radius, axle width, the
+control point's offset from the axle) is read from the model unless given, and the
+footprint (the horizontal reach of every colliding geom from the control point) is
+computed at the initial pose. Every problem is one line naming the file and the key.
 """
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from ..errors import ScenarioError
 from ..paths import MODELS
+from . import actuators as act
+from .actuators import ActuatorInfo
 
 ROBOTS = MODELS / "robots"
-FORBIDDEN = ("option", "compiler", "size", "visual", "statistic", "default", "keyframe")
-GROUND_GROUP = 3  # geoms in this group touch the floor (wheels, casters); others are hull
-
-
-class Adapter(Protocol):
-    """Maps planar velocities to one robot model's actuators (leading robot axis)."""
-
-    actuators: tuple[str, ...]
-    command_limit: float
-
-    def command(self, u_bar: np.ndarray) -> np.ndarray:
-        """Actuator commands (N, A) for desired planar velocities ``u_bar`` (N, 2)."""
-        ...
-
-    def bias(self, phi: np.ndarray) -> np.ndarray:
-        """Actuator offsets (N, A), in command units, that shift the velocity by ``phi`` (N, 2)."""
-        ...
-
-    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        """The planar velocity (N, 2) that actuator commands ``ctrl`` (N, A) ask for, with
-        the robots' headings (N,) [rad] if given, else their current ones."""
-        ...
+ROBOT_SUFFIX = ".robot.toml"
+CONTROL_SITE = "dftc_control_point"  # the site added (in memory) at the control point
+DEFAULT_MAX_SPEED = 1.0  # m/s per axis, where neither the robot file nor the actuators limit it
+DRIVE_ROLES = {"holonomic": ("x", "y"), "diffdrive": ("left", "right")}
+HELD_ROLES = {"holonomic": ("yaw",), "diffdrive": ()}
+LEGACY_ACTUATORS = {"holonomic": ("vx", "vy"), "diffdrive": ("wheel_l", "wheel_r")}
+CALIBRATION_KEYS = (
+    "xi_bar",  # recommended ξ̄ [m/s]
+    "mismatch",  # largest ‖ẋ − u‖ on smooth commands [m/s]
+    "startup_mismatch",  # largest ‖ẋ − u‖ while the robot settles at the start [m/s]
+    "startup_time",  # how long it settles [s]
+    "response_time",  # time to follow a command jump [s]
+    "drift_bound",  # ē: bounded position offset of the drift (docs/thresholds.md) [m]
+    "saturation",  # fraction of the programme's commands the actuators clamped
+    "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
+)
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+_SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+_HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+_NQ = {_FREE: 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}
 
 
 @dataclass(frozen=True)
 class RobotModel:
-    """A robot model: its MJCF file and what the simulator needs to know about it."""
+    """A robot as the simulator uses it: where its MJCF is and how to drive it."""
 
     name: str
-    path: Path
-    adapter_kind: str
-    footprint_radius: float  # horizontal reach of the colliding geoms from the site [m]
+    path: Path  # the robot file (or the MJCF of the older contract)
+    mjcf: Path
+    base: str  # the body that carries the robot
+    control_point: tuple[float, float]  # in the base body's frame [m]
+    drive: str  # "holonomic" or "diffdrive"
+    actuators: dict[str, str]  # driven role -> actuator name
+    held: dict[str, str]  # held role (yaw) -> actuator name
+    driven_infos: tuple[ActuatorInfo, ...]
+    held_infos: tuple[ActuatorInfo, ...]
+    root: str  # "planar" (slide joints) or "free" (a free joint)
+    footprint_radius: float  # horizontal reach of the colliding geoms from the control point
     xi_bar: float  # recommended ξ̄ [m/s], from calibrate
-    params: dict[str, float] = field(default_factory=dict)
+    mismatch: float = 0.0  # measured ‖ẋ − u‖ on smooth commands [m/s], from calibrate
+    params: dict[str, float] = field(default_factory=dict)  # drive geometry, mesh data
+    calibration: dict[str, float] = field(default_factory=dict)
+    keyframe: str | None = None
+    max_speed: float | None = None  # per-axis command limit the drive applies [m/s]
+    motor_time_constant: float = act.MOTOR_TIME_CONSTANT
     mass: float = 0.0  # from the mesh, for mesh robots (0: MJCF's own)
     inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    mismatch: float = 0.0  # measured ‖ẋ − u‖ on smooth commands [m/s], from calibrate
+    options: tuple[tuple[str, str], ...] = ()  # <option> (name, value) set by the robot's MJCF
+    init_qpos: tuple[float, ...] = ()  # qpos of the base's subtree at the initial pose
+    init_ctrl: tuple[float, ...] = ()  # ctrl of the robot's actuators at the initial pose
+    init_point: tuple[float, float] = (0.0, 0.0)  # the control point there, own world frame
+    legacy: bool = False  # an MJCF of the older contract (calibration stored in <custom>)
+
+    @property
+    def adapter_kind(self) -> str:
+        """The drive (older name)."""
+        return self.drive
+
+    @property
+    def drift_bound(self) -> float:
+        """ē from calibration (0 when the robot was not calibrated for it)."""
+        return float(self.calibration.get("drift_bound", 0.0))
 
     def spec(self) -> mujoco.MjSpec:
-        """A fresh MjSpec of the robot, mesh paths absolute, mesh inertia applied."""
-        spec = mujoco.MjSpec.from_file(str(self.path))
-        for mesh in spec.meshes:
-            if mesh.file and not Path(mesh.file).is_absolute():
-                mesh.file = str((self.path.parent / spec.meshdir / mesh.file).resolve())
-        spec.meshdir = ""
-        if self.adapter_kind == "holonomic" and "mesh_density" in self.params:
-            base = spec.body("base")
+        """A fresh MjSpec of the robot's MJCF with, in memory only: file paths made absolute,
+        a site at the control point, no keyframes (the initial pose is applied by the
+        scene), and the mesh inertia for mesh robots."""
+        spec = _read_spec(self.mjcf, self.path, "mjcf")
+        base = spec.body(self.base)
+        base.add_site(name=CONTROL_SITE, pos=[*self.control_point, 0.0], group=5)
+        for key in list(spec.keys):
+            spec.delete(key)
+        if "mesh_density" in self.params:
             base.explicitinertial = True
             base.mass = self.mass
             base.inertia = list(self.inertia)
             base.ipos = [0.0, 0.0, self.params.get("mesh_com_z", 0.0)]
         return spec
 
-    def adapter(self, scene: Any, data: mujoco.MjData) -> Adapter:
-        """The adapter for this model, bound to a scene's robots."""
-        cls = ADAPTERS[self.adapter_kind]
-        return cls(self, scene, data)
+    def adapter(self, scene: Any, data: mujoco.MjData, dt: float = 0.01) -> Any:
+        """The drive for this model, bound to a scene's robots (control period ``dt``)."""
+        from .drives import DRIVES
+
+        return DRIVES[self.drive](self, scene, data, dt)
 
 
-class HolonomicAdapter:
-    """Robots on x/y slide joints: actuators ``vx`` and ``vy`` take the planar velocity as is."""
-
-    actuators = ("vx", "vy")
-    pose_dependent = False  # commands do not depend on the robot's heading
-
-    def __init__(self, robot: RobotModel, scene: Any, data: mujoco.MjData) -> None:
-        rng = scene.model.actuator_ctrlrange[scene.actuator]
-        self.command_limit = float(np.abs(rng).min())
-
-    def command(self, u_bar: np.ndarray) -> np.ndarray:
-        return u_bar
-
-    def bias(self, phi: np.ndarray) -> np.ndarray:
-        return phi
-
-    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        return ctrl
+# --------------------------------------------------------------------------- finding
 
 
-class DiffDriveAdapter:
-    """Differential drive: offset-point feedback linearisation (wheel speeds from ū).
+def available() -> list[str]:
+    """Names of the built-in robot models (robot files in ``models/robots/``)."""
+    return sorted(p.name.removesuffix(ROBOT_SUFFIX) for p in ROBOTS.glob(f"*{ROBOT_SUFFIX}"))
 
-    The controlled point p lies ``offset`` = b ahead of the axle on the robot's
-    heading θ. With forward speed v and turn rate ω,
-    ṗ = [cos θ, −b sin θ; sin θ, b cos θ] [v; ω], which is inverted exactly, so
-    the DFTC sees the integrator ṗ = ū at p. Wheel speeds (rad/s):
-    ω_{l,r} = (v ∓ ω L/2) / r. The heading is the robot's own (its compass or
-    odometry), read from its body orientation.
+
+def resolve(name: str, where: str = "team.robot_model", base: Path | None = None) -> Path:
+    """The file for a built-in name or a path (relative to the working directory, else to
+    ``base``, the folder of the scenario that names it)."""
+    path = Path(name).expanduser()
+    is_path = path.suffix in (".xml", ".toml") or len(path.parts) > 1
+    if not is_path:
+        builtin = ROBOTS / f"{name}{ROBOT_SUFFIX}"
+        if builtin.is_file():
+            return builtin
+        raise ScenarioError(
+            f"{where}: unknown robot model {name!r} (available: {', '.join(available())}; "
+            f"or give the path to a robot file NAME{ROBOT_SUFFIX} or an MJCF file)"
+        )
+    candidates = [path] if path.is_absolute() else [Path.cwd() / path]
+    if base is not None and not path.is_absolute():
+        candidates.append(base / path)
+    for c in candidates:
+        if c.is_file():
+            return c.resolve()
+    raise ScenarioError(f"{where}: no such robot file {name!r} (looked in {candidates[0].parent})")
+
+
+def get(name: str, where: str = "team.robot_model", base: Path | None = None) -> RobotModel:
+    """The robot model called ``name``: a built-in name, a robot file or an MJCF path.
+
+    ``where`` says where the name came from (for the error message); a relative path is
+    looked up in the working directory, then in ``base``.
     """
-
-    actuators = ("wheel_l", "wheel_r")
-    pose_dependent = True  # wheel commands depend on the robot's heading
-
-    def __init__(self, robot: RobotModel, scene: Any, data: mujoco.MjData) -> None:
-        self.r = robot.params["wheel_radius"]
-        self.half = robot.params["axle_width"] / 2
-        self.b = robot.params["offset"]
-        self.data = data
-        self.body = scene.body
-        w_max = float(np.abs(scene.model.actuator_ctrlrange[scene.actuator]).min())
-        # the per-axis planar speed reachable in every heading
-        self.command_limit = w_max * self.r * min(1.0, self.b / self.half) / np.sqrt(2)
-
-    def _heading(self) -> tuple[np.ndarray, np.ndarray]:
-        mat = self.data.xmat[self.body]  # (N, 9), row-major
-        c, s = mat[:, 0], mat[:, 3]
-        norm = np.hypot(c, s)
-        unset = norm == 0.0  # kinematics not computed yet: heading 0
-        norm[unset] = 1.0
-        return np.where(unset, 1.0, c / norm), s / norm
-
-    def _wheels(self, u: np.ndarray) -> np.ndarray:
-        c, s = self._heading()
-        v = c * u[:, 0] + s * u[:, 1]
-        w = (-s * u[:, 0] + c * u[:, 1]) / self.b
-        return np.stack([(v - w * self.half) / self.r, (v + w * self.half) / self.r], axis=1)
-
-    def command(self, u_bar: np.ndarray) -> np.ndarray:
-        return self._wheels(u_bar)
-
-    def bias(self, phi: np.ndarray) -> np.ndarray:
-        return self._wheels(phi)
-
-    def planar(self, ctrl: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        c, s = self._heading() if heading is None else (np.cos(heading), np.sin(heading))
-        v = self.r * (ctrl[:, 0] + ctrl[:, 1]) / 2
-        w = self.r * (ctrl[:, 1] - ctrl[:, 0]) / (2 * self.half)
-        return np.stack([c * v - self.b * s * w, s * v + self.b * c * w], axis=1)
+    return load(resolve(name, where, base))
 
 
-ADAPTERS: dict[str, type] = {"holonomic": HolonomicAdapter, "diffdrive": DiffDriveAdapter}
-_REQUIRED = {"diffdrive": ("wheel_radius", "axle_width", "offset")}
+def load(path: Path) -> RobotModel:
+    """Read and check one robot file (``*.robot.toml``) or MJCF of the older contract."""
+    path = Path(path).resolve()
+    if path.name.endswith(".toml"):
+        return _load_robot_file(path)
+    return _load_legacy(path)
 
 
-def _fail(path: Path, message: str) -> None:
-    raise ScenarioError(f"{path}: {message}")
+# --------------------------------------------------------------------------- robot files
 
 
-def _check_xml(path: Path) -> None:
-    """Forbidden top-level elements (they would clash with the arena)."""
+def _load_robot_file(path: Path) -> RobotModel:
+    from ..scenario import _Doc, _Table
+
     try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        _fail(path, f"not valid XML: {exc}")
-    for child in root:
-        if child.tag in FORBIDDEN:
-            _fail(
-                path,
-                f"<{child.tag}> is not allowed in a robot file (the arena sets "
-                f"{', '.join('<' + t + '>' for t in FORBIDDEN)}); remove it",
-            )
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ScenarioError(f"{path}: not valid TOML: the file is not UTF-8 text") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
+    doc = _Doc(str(path), data)
+    t = _Table(str(path), data, "", doc)
+    mjcf_name = t.string("mjcf")
+    base = t.string("base")
+    cp = t.array("control_point", (2,), default=[0.0, 0.0])
+    drive = t.string("drive", choices=tuple(DRIVE_ROLES))
+    keyframe = t.string("keyframe", default=None) if "keyframe" in data else None
+    max_speed = t.number("max_speed", low=0.0) if "max_speed" in data else None
+    name = t.string("name", path.name.removesuffix(ROBOT_SUFFIX).removesuffix(".toml"))
+    params: dict[str, float] = {}
+    if "mesh_density" in data:
+        params["mesh_density"] = t.number("mesh_density", low=0.0)
+    roles: dict[str, str] = {}
+    held: dict[str, str] = {}
+    if not t.ok("drive"):
+        t.used.update(DRIVE_ROLES)  # which table belongs here depends on the drive
+    for kind in DRIVE_ROLES if t.ok("drive") else ():
+        if kind not in data:
+            continue
+        sub = t.table(kind)
+        if kind != drive:
+            t.report(kind, f"this table goes with drive = {kind!r}, but drive = {drive!r}")
+            continue
+        for role in DRIVE_ROLES[kind]:
+            roles[role] = sub.string(role)
+        for role in HELD_ROLES[kind]:
+            if role in sub.data:
+                held[role] = sub.string(role)
+        if kind == "diffdrive":
+            for key in ("wheel_radius", "axle_width"):
+                if key in sub.data:
+                    params[key] = sub.number(key, low=0.0)
+        sub.finish()
+    if t.ok("drive") and drive not in data:
+        t.report(drive, f"missing table [{drive}] naming the actuators to drive")
+    motor_tau = act.MOTOR_TIME_CONSTANT
+    if "motor" in data:
+        m = t.table("motor")
+        motor_tau = m.number("time_constant", act.MOTOR_TIME_CONSTANT, low=0.0)
+        m.finish()
+    calibration: dict[str, float] = {}
+    if "calibration" in data:
+        c = t.table("calibration")
+        for key in CALIBRATION_KEYS:
+            if key in c.data:
+                calibration[key] = c.number(key, low=0.0, strict_low=False)
+        c.finish()
+    t.finish()
+    doc.raise_problems()
+    mjcf = (path.parent / mjcf_name).resolve()
+    if not mjcf.is_file():
+        raise ScenarioError(f"{path}: mjcf: no such file {mjcf}")
+    robot = RobotModel(
+        name=name,
+        path=path,
+        mjcf=mjcf,
+        base=base,
+        control_point=(float(cp[0]), float(cp[1])),
+        drive=drive,
+        actuators=roles,
+        held=held,
+        driven_infos=(),
+        held_infos=(),
+        root="",
+        footprint_radius=0.0,
+        xi_bar=calibration.get("xi_bar", 0.005),
+        mismatch=calibration.get("mismatch", 0.0),
+        params=params,
+        calibration=calibration,
+        keyframe=keyframe,
+        max_speed=max_speed,
+        motor_time_constant=motor_tau,
+    )
+    return _inspect(robot, keys={"base": "base", "keyframe": "keyframe", "role": drive})
 
 
-def _declarations(spec: mujoco.MjSpec) -> tuple[dict[str, str], dict[str, float]]:
+# --------------------------------------------------------------------------- older contract
+
+
+def _load_legacy(path: Path) -> RobotModel:
+    """An MJCF with a root body ``base``, a site ``center`` and ``<custom>`` declarations."""
+    spec = _read_spec(path, path, None)
     texts = {t.name: t.data for t in spec.texts if t.name.startswith("dftc_")}
     nums = {
-        n.name: float(np.atleast_1d(n.data)[0]) for n in spec.numerics if n.name.startswith("dftc_")
+        n.name.removeprefix("dftc_"): float(np.atleast_1d(n.data)[0])
+        for n in spec.numerics
+        if n.name.startswith("dftc_")
     }
-    return texts, nums
+    if spec.body("base") is None:
+        raise ScenarioError(
+            f"{path}: no body named 'base'. A model of your own is used unchanged through a "
+            f"robot file: write NAME{ROBOT_SUFFIX} beside it (mjcf, base, drive and the "
+            "actuators; README 'Swap the robot')"
+        )
+    drive = texts.get("dftc_adapter", "holonomic")
+    if drive not in DRIVE_ROLES:
+        raise ScenarioError(
+            f"{path}: dftc_adapter: expected one of {', '.join(DRIVE_ROLES)}, got {drive!r}"
+        )
+    site = spec.site("center")
+    if site is None:
+        raise ScenarioError(
+            f"{path}: no site named 'center' (the point whose position the DFTC controls)"
+        )
+    if site.parent.name != "base":
+        raise ScenarioError(f"{path}: site 'center' must be on body 'base'")
+    params = {k: v for k, v in nums.items() if k not in ("xi_bar", "mismatch", "drift_bound")}
+    for key in ("wheel_radius", "axle_width", "offset") if drive == "diffdrive" else ():
+        if key not in params:
+            raise ScenarioError(
+                f'{path}: the diffdrive adapter needs <numeric name="dftc_{key}" data="..."/>'
+            )
+    calibration = {k: nums[k] for k in ("xi_bar", "mismatch", "drift_bound") if k in nums}
+    robot = RobotModel(
+        name=path.stem,
+        path=path,
+        mjcf=path,
+        base="base",
+        control_point=(float(site.pos[0]), float(site.pos[1])),
+        drive=drive,
+        actuators=dict(zip(DRIVE_ROLES[drive], LEGACY_ACTUATORS[drive], strict=True)),
+        held={},
+        driven_infos=(),
+        held_infos=(),
+        root="",
+        footprint_radius=0.0,
+        xi_bar=nums.get("xi_bar", 0.005),
+        mismatch=nums.get("mismatch", 0.0),
+        params=params,
+        calibration=calibration,
+        legacy=True,
+    )
+    return _inspect(robot, keys=None)
 
 
-def _mesh_properties(spec: mujoco.MjSpec, path: Path, density: float) -> dict[str, Any]:
+# --------------------------------------------------------------------------- inspection
+
+
+def _read_spec(mjcf: Path, owner: Path, key: str | None) -> mujoco.MjSpec:
+    """MjSpec of ``mjcf`` with asset paths absolute (so that it can be attached anywhere)."""
+    where = f"{owner}: {key}" if key else str(owner)
+    try:
+        spec = mujoco.MjSpec.from_file(str(mjcf))
+    except Exception as exc:
+        raise ScenarioError(
+            f"{where}: MuJoCo cannot read {mjcf.name}: {_first_line(exc)}"
+        ) from None
+    folder = mjcf.parent
+    for attr, kinds in (("meshdir", ("meshes", "hfields")), ("texturedir", ("textures",))):
+        sub = Path(getattr(spec, attr) or "")
+        for kind in kinds:
+            for asset in getattr(spec, kind):
+                if asset.file and not Path(asset.file).is_absolute():
+                    asset.file = str((folder / sub / asset.file).resolve())
+        setattr(spec, attr, "")
+    return spec
+
+
+def _first_line(exc: BaseException) -> str:
+    """MuJoCo's message on one line."""
+    text = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+    return "; ".join(text) if text else type(exc).__name__
+
+
+def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
+    """Compile the robot alone and read what the simulator needs, checking as it goes.
+
+    ``keys`` names the robot-file keys for messages (None: the older contract's terms).
+    """
+    path = robot.path
+
+    def fail(key: str, message: str) -> None:
+        raise ScenarioError(f"{path}: {key}: {message}" if keys else f"{path}: {message}")
+
+    spec = _read_spec(robot.mjcf, path, "mjcf" if keys else None)
+    base = spec.body(robot.base)
+    if base is None:
+        names = [b.name for b in spec.bodies if b.name and b.name != "world"]
+        fail("base", f"no body {robot.base!r} in {robot.mjcf.name} (bodies: {_listing(names)})")
+    if base.parent is None or base.parent.name != "world":
+        fail("base", f"body {robot.base!r} must be a child of <worldbody> (it is attached as is)")
+    mesh: dict[str, Any] = {}
+    if "mesh_density" in robot.params:
+        mesh = _mesh_properties(spec, robot, robot.params["mesh_density"])
+        robot = replace(
+            robot,
+            mass=mesh["mass"],
+            inertia=mesh["inertia"],
+            params={**robot.params, "mesh_com_z": mesh["com_z"]},
+        )
+    options = _option_settings(spec)
+    base.add_site(name=CONTROL_SITE, pos=[*robot.control_point, 0.0])
+    try:
+        model = spec.compile()
+    except Exception as exc:
+        fail("mjcf", f"MuJoCo cannot compile {robot.mjcf.name}: {_first_line(exc)}")
+    data = mujoco.MjData(model)
+    if robot.keyframe is not None:
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, robot.keyframe)
+        if k < 0:
+            keys_found = [model.key(i).name for i in range(model.nkey)]
+            fail(
+                "keyframe",
+                f"no keyframe {robot.keyframe!r} in {robot.mjcf.name} "
+                f"(keyframes: {_listing(keys_found)})",
+            )
+        mujoco.mj_resetDataKeyframe(model, data, k)
+    mujoco.mj_forward(model, data)
+    body = model.body(robot.base).id
+    joints = list(range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]))
+    types = [int(model.jnt_type[j]) for j in joints]
+    if _FREE in types:
+        root = "free"
+    elif types and all(t in (_SLIDE, _HINGE) for t in types):
+        root = "planar"
+    else:
+        fail("base", f"body {robot.base!r} has no joint: expected x/y slide joints or a free joint")
+
+    role_key = (lambda r: f"{keys['role']}.{r}") if keys else (lambda r: f"actuator {r!r}")
+    infos: dict[str, ActuatorInfo] = {}
+    for role, name in {**robot.actuators, **robot.held}.items():
+        a = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+        if a < 0:
+            names = [model.actuator(i).name for i in range(model.nu)]
+            if keys is None:
+                fail(
+                    "",
+                    f"the {robot.drive} adapter drives actuators "
+                    f"{', '.join(robot.actuators.values())}; missing: {name}",
+                )
+            fail(
+                role_key(role),
+                f"no actuator {name!r} in {robot.mjcf.name} (actuators: {_listing(names)})",
+            )
+        info = act.classify(model, a)
+        if isinstance(info, str):
+            fail(role_key(role), f"actuator {name!r} {info}")
+        j = int(model.actuator_trnid[a, 0])
+        dof = int(model.jnt_dofadr[j])
+        infos[role] = replace(info, inertia=_joint_inertia(model, data, dof))
+    params = dict(robot.params)
+    if robot.drive == "holonomic":
+        if root != "planar":
+            fail(
+                "drive",
+                f"a holonomic drive needs x/y slide joints on {robot.base!r}; it has a "
+                "free joint (a wheeled base on a free joint is drive = 'diffdrive')",
+            )
+        for role, axis in (("x", 0), ("y", 1)):
+            info = infos[role]
+            j = model.joint(info.joint).id
+            if info.joint_type != "slide" or model.jnt_bodyid[j] != body:
+                fail(
+                    role_key(role),
+                    f"actuator {info.name!r} must drive a slide joint of "
+                    f"{robot.base!r} (it drives {info.joint!r})",
+                )
+            world_axis = data.xaxis[j]
+            if abs(world_axis[axis]) < 0.999:
+                fail(
+                    role_key(role),
+                    f"joint {info.joint!r} slides along "
+                    f"{np.round(world_axis, 3).tolist()}; expected the world {'xy'[axis]} axis",
+                )
+            params[f"sign_{'xy'[axis]}"] = float(np.sign(world_axis[axis]))
+        if "yaw" in infos:
+            info = infos["yaw"]
+            j = model.joint(info.joint).id
+            if info.joint_type != "hinge" or abs(data.xaxis[j][2]) < 0.999:
+                fail(
+                    role_key("yaw"),
+                    f"actuator {info.name!r} must drive a vertical hinge of {robot.base!r}",
+                )
+    else:
+        if root != "free":
+            fail(
+                "drive",
+                f"a diffdrive robot moves through its wheels: {robot.base!r} needs a free joint",
+            )
+        params.update(_wheel_geometry(model, data, body, infos, robot, fail, role_key, keys))
+    driven = tuple(infos[r] for r in robot.actuators)
+    held = tuple(infos[r] for r in robot.held)
+    site = model.site(CONTROL_SITE).id
+    footprint = _footprint(model, data, site)
+    qpos = data.qpos[qpos_addresses(model, np.flatnonzero(subtree(model, body)[model.jnt_bodyid]))]
+    return replace(
+        robot,
+        driven_infos=driven,
+        held_infos=held,
+        root=root,
+        footprint_radius=footprint,
+        params=params,
+        options=options,
+        init_qpos=tuple(float(v) for v in qpos),
+        init_ctrl=tuple(float(v) for v in data.ctrl),
+        init_point=(float(data.site_xpos[site][0]), float(data.site_xpos[site][1])),
+    )
+
+
+def _joint_inertia(model: mujoco.MjModel, data: mujoco.MjData, dof: int) -> float:
+    """Diagonal of the joint-space inertia at the current pose (armature included)."""
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    return float(full[dof, dof])
+
+
+def _listing(names: list[str], most: int = 12) -> str:
+    names = [n for n in names if n]
+    if not names:
+        return "none named"
+    more = f", ... ({len(names)} in all)" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
+OPTION_NAMES = (
+    "timestep",
+    "integrator",
+    "gravity",
+    "cone",
+    "impratio",
+    "solver",
+    "iterations",
+    "noslip_iterations",
+    "density",
+    "viscosity",
+    "wind",
+    "magnetic",
+    "jacobian",
+    "disableflags",
+    "enableflags",
+)
+
+
+_OPTION_ENUMS = {
+    "integrator": mujoco.mjtIntegrator,
+    "cone": mujoco.mjtCone,
+    "solver": mujoco.mjtSolver,
+    "jacobian": mujoco.mjtJacobian,
+}
+
+
+def option_value(option: Any, name: str) -> str:
+    """An <option> attribute as text (``implicitfast``, ``0.002``), for comparing options."""
+    v = getattr(option, name)
+    if name in _OPTION_ENUMS:
+        member = _OPTION_ENUMS[name](int(v)).name
+        return member.split("_", 1)[1].lower()
+    return " ".join(f"{x:g}" for x in np.atleast_1d(np.asarray(v, float)))
+
+
+def _option_settings(spec: mujoco.MjSpec) -> tuple[tuple[str, str], ...]:
+    """(name, value) of every <option> attribute the robot's MJCF sets to a non-default value."""
+    default = mujoco.MjSpec().option
+    return tuple(
+        (name, option_value(spec.option, name))
+        for name in OPTION_NAMES
+        if option_value(spec.option, name) != option_value(default, name)
+    )
+
+
+def _wheel_geometry(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, float]:
+    """Wheel radius, axle width, the control point's offset from the axle, the forward axis
+    and each wheel's sense of rotation, in the base body's frame, from the model."""
+    rot = data.xmat[body].reshape(3, 3)  # base frame -> world
+    origin = data.xpos[body]
+    anchors, axes, radii = [], [], []
+    for role in ("left", "right"):
+        info = infos[role]
+        j = model.joint(info.joint).id
+        wheel = int(model.jnt_bodyid[j])
+        if info.joint_type != "hinge" or not subtree(model, body)[wheel] or wheel == body:
+            fail(
+                role_key(role),
+                f"actuator {info.name!r} must drive a wheel: a hinge of a body "
+                f"inside {robot.base!r} (it drives {info.joint!r})",
+            )
+        axis = rot.T @ data.xaxis[j]
+        if abs(axis[2]) > 0.2:
+            fail(
+                role_key(role),
+                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} "
+                "in the base frame; a wheel's axle must be horizontal",
+            )
+        anchors.append(rot.T @ (data.xanchor[j] - origin))
+        axes.append(axis)
+        radii.append(_wheel_radius(model, data, wheel, data.xanchor[j], data.xaxis[j]))
+    lateral = anchors[0] - anchors[1]
+    lateral[2] = 0.0
+    width = float(np.linalg.norm(lateral))
+    if width < 1e-3:
+        fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
+    g = lateral / width  # towards the left wheel
+    f = np.cross(g, [0.0, 0.0, 1.0])  # forward
+    mid = (anchors[0] + anchors[1]) / 2
+    cp = np.array([*robot.control_point, 0.0]) - mid
+    offset, lateral_offset = float(cp @ f), float(cp @ g)
+    key = "control_point" if keys else "site center"
+    if abs(offset) < 0.01:
+        fail(
+            key,
+            f"the controlled point is {offset:+.3f} m from the axle along the heading; "
+            "a differential drive can steer a point only ahead of or behind its axle "
+            "(|offset| >= 0.01 m)",
+        )
+    out = {
+        "axle_width": robot.params.get("axle_width", width),
+        "wheel_radius": robot.params.get("wheel_radius", float(min(radii))),
+        "offset": robot.params.get("offset", offset),
+        "lateral": lateral_offset,
+        "forward_angle": float(math.atan2(f[1], f[0])),
+    }
+    for role, axis in zip(("left", "right"), axes, strict=True):
+        # a positive turn about axis a rolls the wheel along a × z
+        out[f"sign_{role}"] = float(np.sign(np.cross(axis, [0.0, 0.0, 1.0]) @ f))
+    if out["wheel_radius"] <= 0:
+        fail(
+            role_key("left"),
+            "the wheel has no colliding geom to take its radius from; give "
+            "[diffdrive] wheel_radius",
+        )
+    return out
+
+
+def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
+    """(nbody,) bool: the bodies of the subtree of body ``root`` (numbered depth first)."""
+    inside = np.zeros(model.nbody, bool)
+    inside[root] = True
+    for b in range(root + 1, model.nbody):
+        inside[b] = inside[model.body_parentid[b]]
+    return inside
+
+
+def qpos_addresses(model: mujoco.MjModel, joints: np.ndarray) -> np.ndarray:
+    """The qpos addresses of ``joints``, in order (7 for a free joint, 4 for a ball)."""
+    parts = [
+        np.arange(model.jnt_qposadr[j], model.jnt_qposadr[j] + _NQ.get(int(model.jnt_type[j]), 1))
+        for j in joints
+    ]
+    return np.concatenate(parts) if parts else np.zeros(0, int)
+
+
+def _wheel_radius(model, data, wheel: int, anchor: np.ndarray, axis: np.ndarray) -> float:
+    """Largest distance from the axle line of the colliding geoms of body ``wheel``."""
+    r = 0.0
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] != wheel or not (
+            model.geom_contype[g] or model.geom_conaffinity[g]
+        ):
+            continue
+        pts = _surface_points(model, data, g)
+        rel = pts - anchor
+        r = max(r, float(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1).max()))
+    return r
+
+
+def _surface_points(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> np.ndarray:
+    """World points whose horizontal hull contains geom ``g`` (corners, rims, vertices)."""
+    t = int(model.geom_type[g])
+    size = model.geom_size[g]
+    rot = data.geom_xmat[g].reshape(3, 3)
+    pos = data.geom_xpos[g]
+    ring = np.linspace(0.0, 2 * np.pi, 33)[:-1]
+    circle = np.stack([np.cos(ring), np.sin(ring), np.zeros_like(ring)], axis=1)
+    if t == int(mujoco.mjtGeom.mjGEOM_MESH):
+        mid = model.geom_dataid[g]
+        start, count = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        local = model.mesh_vert[start : start + count]
+    elif t == int(mujoco.mjtGeom.mjGEOM_BOX):
+        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        local = local * size
+    elif t == int(mujoco.mjtGeom.mjGEOM_CYLINDER):
+        local = np.vstack([circle * size[0] + [0, 0, h] for h in (-size[1], size[1])])
+    elif t == int(mujoco.mjtGeom.mjGEOM_CAPSULE):
+        sphere = _sphere_points(size[0])
+        local = np.vstack([sphere + np.array([0.0, 0.0, h]) for h in (-size[1], size[1])])
+    elif t == int(mujoco.mjtGeom.mjGEOM_SPHERE):
+        local = _sphere_points(size[0])
+    elif t == int(mujoco.mjtGeom.mjGEOM_ELLIPSOID):
+        local = _sphere_points(1.0) * size
+    else:  # planes, height fields, SDFs: their bounding sphere
+        local = _sphere_points(float(model.geom_rbound[g]))
+    return local @ rot.T + pos
+
+
+def _sphere_points(r: float) -> np.ndarray:
+    ring = np.linspace(0.0, 2 * np.pi, 33)[:-1]
+    pts = [
+        np.stack(
+            [np.cos(ring) * np.cos(e), np.sin(ring) * np.cos(e), np.full_like(ring, np.sin(e))],
+            axis=1,
+        )
+        for e in np.linspace(-np.pi / 2, np.pi / 2, 9)
+    ]
+    return r * np.vstack(pts)
+
+
+def colliding(model: mujoco.MjModel, g: int) -> bool:
+    """Geom ``g`` takes part in collisions (its own model's contype or conaffinity)."""
+    return bool(model.geom_contype[g] or model.geom_conaffinity[g])
+
+
+def _footprint(model: mujoco.MjModel, data: mujoco.MjData, site: int) -> float:
+    """Largest horizontal reach of the robot's colliding geoms from the control point."""
+    centre = data.site_xpos[site][:2]
+    reach = 0.0
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] == 0 or not colliding(model, g):
+            continue
+        pts = _surface_points(model, data, g)
+        reach = max(reach, float(np.linalg.norm(pts[:, :2] - centre, axis=1).max()))
+    return reach
+
+
+def _mesh_properties(spec: mujoco.MjSpec, robot: RobotModel, density: float) -> dict[str, Any]:
     """Mass, inertia, centre of mass and horizontal radius of the robot's mesh, from trimesh."""
     import trimesh
 
     meshes = [m for m in spec.meshes if m.file]
     if not meshes:
-        _fail(path, "dftc_mesh_density is set but the robot has no <mesh file=...>")
-    file = (path.parent / spec.meshdir / meshes[0].file).resolve()
+        raise ScenarioError(f"{robot.path}: mesh_density is set but the robot has no mesh file")
+    file = Path(meshes[0].file)
     try:
         mesh = trimesh.load(file, force="mesh")
     except Exception as exc:  # trimesh raises many kinds
-        _fail(path, f"cannot load mesh {file}: {exc}")
+        raise ScenarioError(f"{robot.path}: cannot load mesh {file}: {exc}") from None
     if not mesh.is_watertight:
-        _fail(path, f"mesh {file} is not watertight: its volume and inertia are undefined")
+        raise ScenarioError(
+            f"{robot.path}: mesh {file} is not watertight: its volume and inertia are undefined"
+        )
     mesh.density = density
-    inertia = np.diag(mesh.moment_inertia)
-    radius = float(np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 1]).max())
     return {
         "mass": float(mesh.mass),
-        "inertia": tuple(float(v) for v in inertia),
+        "inertia": tuple(float(v) for v in np.diag(mesh.moment_inertia)),
         "com_z": float(mesh.center_mass[2]),
-        "radius": radius,
     }
-
-
-def _footprint(spec_model: mujoco.MjModel) -> float:
-    """Largest horizontal reach of the hull (non-ground colliding geoms) from site 'center'."""
-    m = spec_model
-    d = mujoco.MjData(m)
-    mujoco.mj_kinematics(m, d)
-    centre = d.site_xpos[m.site("center").id][:2]
-    reach = 0.0
-    for g in range(m.ngeom):
-        if (m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0) or m.geom_group[
-            g
-        ] == GROUND_GROUP:
-            continue
-        t = int(m.geom_type[g])
-        size = m.geom_size[g]
-        if t in (
-            int(mujoco.mjtGeom.mjGEOM_CYLINDER),
-            int(mujoco.mjtGeom.mjGEOM_SPHERE),
-            int(mujoco.mjtGeom.mjGEOM_CAPSULE),
-        ):
-            r = size[0]
-        elif t == int(mujoco.mjtGeom.mjGEOM_BOX):
-            r = float(np.hypot(size[0], size[1]))
-        elif t == int(mujoco.mjtGeom.mjGEOM_MESH):
-            mid = m.geom_dataid[g]
-            start, count = m.mesh_vertadr[mid], m.mesh_vertnum[mid]
-            verts = m.mesh_vert[start : start + count]
-            rot = d.geom_xmat[g].reshape(3, 3)
-            world = verts @ rot.T + d.geom_xpos[g]
-            reach = max(reach, float(np.linalg.norm(world[:, :2] - centre, axis=1).max()))
-            continue
-        else:
-            r = m.geom_rbound[g]
-        reach = max(reach, float(np.linalg.norm(d.geom_xpos[g][:2] - centre)) + r)
-    return reach
-
-
-def available() -> list[str]:
-    """Names of the robot models in ``models/robots/``."""
-    return sorted(p.stem for p in ROBOTS.glob("*.xml"))
-
-
-def get(name: str, where: str = "team.robot_model") -> RobotModel:
-    """The robot model called ``name`` (in ``models/robots/``) or stored at path ``name``.
-
-    ``where`` says where the name came from, for the error message.
-    """
-    path = Path(name)
-    if path.suffix != ".xml":
-        path = ROBOTS / f"{name}.xml"
-    if not path.is_file():
-        raise ScenarioError(
-            f"{where}: unknown robot model {name!r} (available: {', '.join(available())}; "
-            "or give the path to an MJCF file)"
-        )
-    return load(path)
-
-
-def load(path: Path) -> RobotModel:
-    """Read and check one robot file against the contract."""
-    path = path.resolve()
-    _check_xml(path)
-    try:
-        spec = mujoco.MjSpec.from_file(str(path))
-    except Exception as exc:
-        _fail(path, f"MuJoCo cannot read it: {exc}")
-    texts, nums = _declarations(spec)
-    kind = texts.get("dftc_adapter", "holonomic")
-    if kind not in ADAPTERS:
-        _fail(path, f"dftc_adapter: expected one of {', '.join(ADAPTERS)}, got {kind!r}")
-    if spec.body("base") is None:
-        _fail(path, "no root body named 'base'")
-    if spec.site("center") is None:
-        _fail(path, "no site named 'center' (the point whose position the DFTC controls)")
-    params = {k.removeprefix("dftc_"): v for k, v in nums.items()}
-    for key in _REQUIRED.get(kind, ()):
-        if key not in params:
-            _fail(path, f'the {kind} adapter needs <numeric name="dftc_{key}" data="..."/>')
-    mesh: dict[str, Any] = {}
-    if "mesh_density" in params:
-        mesh = _mesh_properties(spec, path, params["mesh_density"])
-        params["mesh_com_z"] = mesh["com_z"]
-    provisional = RobotModel(
-        path.stem,
-        path,
-        kind,
-        0.0,
-        0.0,
-        params,
-        mass=mesh.get("mass", 0.0),
-        inertia=mesh.get("inertia", (0.0, 0.0, 0.0)),
-    )
-    try:
-        compiled = provisional.spec().compile()
-    except Exception as exc:
-        _fail(path, f"MuJoCo cannot compile it: {exc}")
-    names = {compiled.actuator(a).name for a in range(compiled.nu)}
-    missing = [a for a in ADAPTERS[kind].actuators if a not in names]
-    if missing:
-        _fail(
-            path,
-            f"the {kind} adapter drives actuators {', '.join(ADAPTERS[kind].actuators)}; "
-            f"missing: {', '.join(missing)}",
-        )
-    xi_bar = params.pop("xi_bar", 0.005)
-    mismatch = params.pop("mismatch", 0.0)
-    return RobotModel(
-        path.stem,
-        path,
-        kind,
-        _footprint(compiled),
-        xi_bar,
-        params,
-        mass=mesh.get("mass", 0.0),
-        inertia=mesh.get("inertia", (0.0, 0.0, 0.0)),
-        mismatch=mismatch,
-    )

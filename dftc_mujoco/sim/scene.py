@@ -1,21 +1,47 @@
-"""Scene composition with ``mujoco.MjSpec``: arena + N robots + cylinders (NOTES 17)."""
+"""Scene composition with ``mujoco.MjSpec``: arena + N robots + cylinders (NOTES 17).
+
+Each robot's MJCF is attached as it is (``attach_body`` with the prefix ``robotK/``):
+its compiler settings, default classes and assets come along, and the robot keeps its
+own keyframe pose. What the scene adds:
+
+* **Collision filtering by body membership.** Every colliding geom of a robot (any
+  group, named or not) meets the cylinders; the geoms of a robot on a free joint that
+  would touch a default geom in their own model (contype or conaffinity bit 1) also
+  meet the floor (wheels, casters, a chassis that drops); a robot on slide joints never
+  touches the floor. With ``physics.robot_contacts`` the robots keep their own
+  contype/conaffinity bits (so a robot collides with itself, and with its teammates,
+  as in its own model) and their base bodies always meet each other; without it those
+  bits are cleared (no robot-robot and no self contacts). The arena's bits sit above
+  bit 16, clear of the robots' own.
+* **The initial state**: each robot at its keyframe (or its model's default pose),
+  moved so that its control point starts at the scenario's initial position; the
+  actuators hold their keyframe ``ctrl``.
+* **Options** stay the arena's (timestep, integrator from the scenario); a robot file
+  whose ``<option>`` sets something else is reported (:attr:`Scene.notes`).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
 from ..paths import MODELS
 from ..scenario import Obstacle, Scenario
-from .robots import ADAPTERS, GROUND_GROUP, RobotModel
+from .robots import (
+    CONTROL_SITE,
+    OPTION_NAMES,
+    RobotModel,
+    option_value,
+    qpos_addresses,
+    subtree,
+)
 
-# Collision bits: floor 1, robot hulls 2, obstacles 4, ground contacts (wheels,
-# casters) 8. Hulls never touch the floor, always touch obstacles, and touch
-# each other when physics.robot_contacts is true; ground contacts touch only
-# the floor.
-FLOOR, ROBOT, OBSTACLE, GROUND = 1, 2, 4, 8
+# Collision bits of the arena, above the 16 bits the robots' own models use
+FLOOR, OBSTACLE, HULL, ROBOT = 1 << 16, 1 << 17, 1 << 18, 1 << 19
+OWN_BITS = 0xFFFF
+INTEGRATOR = "implicitfast"
 
 
 @dataclass(frozen=True)
@@ -24,12 +50,16 @@ class Scene:
 
     model: mujoco.MjModel
     robot: RobotModel
-    body: np.ndarray  # (N,) root body id of each robot
-    site: np.ndarray  # (N,) position site of each robot
-    actuator: np.ndarray  # (N, A) actuator ids, in the adapter's order
+    body: np.ndarray  # (N,) base body id of each robot
+    site: np.ndarray  # (N,) control-point site of each robot
+    actuator: np.ndarray  # (N, A) driven actuator ids, in the drive's role order
+    held: np.ndarray  # (N, H) held actuator ids (a holonomic base's yaw)
     obstacle_geom: np.ndarray  # (O,) geom ids of the cylinders
-    root_qpos: np.ndarray  # (N, k): x, y slide-joint qpos (k = 2) or free-joint qpos start (k = 1)
-    origin: np.ndarray  # (N, 3) where each robot's base was placed
+    root_qpos: np.ndarray  # (N, 3): x, y, yaw qpos of slide/hinge joints (-1: none), or (N, 1)
+    origin: np.ndarray  # (N, 4): base x, y, z, yaw with its root joints at zero (+ 3 senses)
+    qpos_init: np.ndarray  # (nq,) the initial state: keyframes, robots at their positions
+    ctrl_init: np.ndarray  # (nu,) keyframe commands of every actuator
+    notes: tuple[str, ...] = field(default_factory=tuple)  # warnings about the composition
 
 
 def robot_prefix(i: int) -> str:
@@ -55,24 +85,23 @@ def compose(
     timestep: float = 0.002,
     robot_contacts: bool = True,
 ) -> Scene:
-    """Arena + one ``robot`` per row of ``positions`` (N, 2) + cylinders, compiled."""
+    """Arena + one ``robot`` per row of ``positions`` (N, 2) (where each control point
+    starts) + cylinders, compiled."""
     spec = mujoco.MjSpec.from_file(str(MODELS / "arena.xml"))
     spec.copy_during_attach = True
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    floor = spec.geom("floor")
+    floor.contype, floor.conaffinity = FLOOR, FLOOR
     robot_spec = robot.spec()
-    base = robot_spec.body("base")
-    hull_affinity = OBSTACLE | (ROBOT if robot_contacts else 0)
+    for name in OPTION_NAMES:  # the arena's options apply; differences are in Scene.notes
+        setattr(robot_spec.option, name, getattr(spec.option, name))
+    base = robot_spec.body(robot.base)
+    shift = np.asarray(robot.init_point)  # the control point at the initial pose, own frame
     for i, (x, y) in enumerate(positions):
-        frame = spec.worldbody.add_frame(pos=[x, y, 0.0])
-        frame.attach_body(base, robot_prefix(i), "")
-    for g in spec.geoms:
-        if not g.name.startswith("robot") or not (g.contype or g.conaffinity):
-            continue
-        if g.group == GROUND_GROUP:
-            g.contype, g.conaffinity = GROUND, FLOOR
-        else:
-            g.contype, g.conaffinity = ROBOT, hull_affinity
+        frame = spec.worldbody.add_frame(pos=[x - shift[0], y - shift[1], 0.0])
+        attached = frame.attach_body(base, robot_prefix(i), "")
+        _filter(attached, robot, robot_contacts)
     for k, ob in enumerate(obstacles):
         spec.worldbody.add_geom(
             name=f"obstacle{k + 1}",
@@ -81,33 +110,143 @@ def compose(
             pos=[ob.position[0], ob.position[1], ob.height / 2],
             rgba=[0.55, 0.55, 0.6, 1.0],
             contype=OBSTACLE,
-            conaffinity=ROBOT,
+            conaffinity=HULL,
         )
     model = spec.compile()
     n = len(positions)
-    names = ADAPTERS[robot.adapter_kind].actuators
-    body = np.array([model.body(robot_prefix(i) + "base").id for i in range(n)])
-    site = np.array([model.site(robot_prefix(i) + "center").id for i in range(n)])
-    act = np.array([[model.actuator(robot_prefix(i) + a).id for a in names] for i in range(n)])
+
+    def ids(obj: mujoco.mjtObj, names: list[str]) -> np.ndarray:
+        return np.array(
+            [[mujoco.mj_name2id(model, obj, robot_prefix(i) + s) for s in names] for i in range(n)],
+            dtype=int,
+        ).reshape(n, len(names))
+
+    body = ids(mujoco.mjtObj.mjOBJ_BODY, [robot.base])[:, 0]
+    site = ids(mujoco.mjtObj.mjOBJ_SITE, [CONTROL_SITE])[:, 0]
+    act = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, list(robot.actuators.values()))
+    held = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, list(robot.held.values()))
     obs = np.array([model.geom(f"obstacle{k + 1}").id for k in range(len(obstacles))], dtype=int)
-    root = []
-    for b in body:
-        j = model.body_jntadr[b]
-        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            root.append([model.jnt_qposadr[j]])
-        else:
-            root.append([model.jnt_qposadr[j], model.jnt_qposadr[j + 1]])
+    qpos, ctrl = _initial_state(model, robot, body, positions - shift)
+    root, origin = _roots(model, body)
+    return Scene(
+        model, robot, body, site, act, held, obs, root, origin, qpos, ctrl, _notes(robot, spec)
+    )
+
+
+def _filter(body: mujoco.MjsBody, robot: RobotModel, robot_contacts: bool) -> None:
+    """Collision bits of one attached robot, by membership (module docstring)."""
+    for g in body.find_all(mujoco.mjtObj.mjOBJ_GEOM):
+        ct, ca = int(g.contype), int(g.conaffinity)
+        if not (ct or ca):
+            continue  # visual only
+        ground = robot.root == "free" and bool((ct | ca) & 1)
+        own_ct, own_ca = (ct & OWN_BITS, ca & OWN_BITS) if robot_contacts else (0, 0)
+        extra = FLOOR if ground else 0
+        hull = ROBOT if robot_contacts and g.parent.name == body.name else 0
+        g.contype = own_ct | HULL | extra | hull
+        g.conaffinity = own_ca | OBSTACLE | extra | hull
+
+
+def _initial_state(
+    model: mujoco.MjModel, robot: RobotModel, body: np.ndarray, frames: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """qpos and ctrl of the whole scene with every robot at its own initial pose.
+
+    A robot's joints in the scene are those of its base's subtree, in the same order as
+    in its own model; a free joint's position is in world coordinates, so it moves with
+    the robot's frame. Each robot's actuators are one block, in its model's order.
+    """
+    qpos = model.qpos0.copy()
+    ctrl = np.zeros(model.nu)
+    key_q, key_c = np.asarray(robot.init_qpos), np.asarray(robot.init_ctrl)
+    for i, b in enumerate(body):
+        joints = np.flatnonzero(subtree(model, int(b))[model.jnt_bodyid])
+        adr = qpos_addresses(model, joints)
+        if len(adr) != len(key_q):
+            raise ValueError(f"robot {i + 1}: {len(adr)} joint coordinates, expected {len(key_q)}")
+        qpos[adr] = key_q
+        for j in joints:
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                a = model.jnt_qposadr[j]
+                qpos[a : a + 2] += frames[i]
+    if model.nu == len(body) * len(key_c):
+        ctrl[:] = np.tile(key_c, len(body))
+    return qpos, ctrl
+
+
+def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How to put each base back at a logged pose (:func:`place`): the qpos address of its
+    free joint, or of its x, y slides and yaw hinge (-1: none); and where the base sits
+    with those joints at zero (x, y, z, yaw), with each slide's sense along its axis."""
     data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    return Scene(model, robot, body, site, act, obs, np.array(root), data.xpos[body].copy())
+    mujoco.mj_kinematics(model, data)  # every joint at zero: where the base frame sits
+    root, origin, origin_sense = [], [], []
+    for b in body:
+        joints = range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])
+        free = [j for j in joints if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        if free:
+            root.append([model.jnt_qposadr[free[0]], -1, -1])
+        else:
+            slots, sense = [-1, -1, -1], [1.0, 1.0, 1.0]
+            for j in joints:
+                axis = data.xaxis[j]
+                col = (
+                    2
+                    if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+                    else int(np.argmax(np.abs(axis[:2])))
+                )
+                if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and abs(axis[2]) < 0.999:
+                    continue
+                slots[col] = model.jnt_qposadr[j]
+                sense[col] = float(np.sign(axis[col]))
+            root.append(slots)
+            origin_sense.append(sense)
+        mat = data.xmat[b]
+        origin.append([*data.xpos[b], np.arctan2(mat[3], mat[0])])
+    kinds = np.array(root, dtype=int)
+    if not origin_sense:  # free joints
+        return kinds[:, :1], np.array(origin)
+    return kinds, np.hstack([np.array(origin), np.array(origin_sense)])
+
+
+def _notes(robot: RobotModel, spec: mujoco.MjSpec) -> tuple[str, ...]:
+    """One warning for the <option> settings of the robot file that the arena overrides."""
+    clash = [
+        f"{name}={value}"
+        for name, value in robot.options
+        if option_value(spec.option, name) != value
+    ]
+    if not clash:
+        return ()
+    return (
+        f"{robot.mjcf.name} sets <option {' '.join(clash)}>: the arena's options apply "
+        f"(timestep {spec.option.timestep:g} s and integrator {INTEGRATOR} from the scenario, "
+        "MuJoCo's defaults otherwise)",
+    )
+
+
+def state_geoms(model: mujoco.MjModel, body: int) -> list[int]:
+    """The geoms of a robot's base that show its state colour in a video: those that are
+    drawn (groups 0-2) and collide; where the collision geoms are hidden (published models
+    keep them in group 3), every drawn geom of the base."""
+    drawn = [
+        g for g in range(model.ngeom) if model.geom_bodyid[g] == body and model.geom_group[g] < 3
+    ]
+    hull = [g for g in drawn if model.geom_contype[g] or model.geom_conaffinity[g]]
+    return hull or drawn
 
 
 def place(scene: Scene, data: mujoco.MjData, pose: np.ndarray) -> None:
-    """Put every robot's base at ``pose`` (N, 3): x, y, heading (for re-posing a scene)."""
-    if scene.root_qpos.shape[1] == 2:  # slide joints: qpos is the offset from the origin
-        data.qpos[scene.root_qpos[:, 0]] = pose[:, 0] - scene.origin[:, 0]
-        data.qpos[scene.root_qpos[:, 1]] = pose[:, 1] - scene.origin[:, 1]
+    """Put every robot's base at ``pose`` (N, 3): x, y, heading (for re-posing a scene);
+    every other joint at the initial state."""
+    data.qpos[:] = scene.qpos_init
+    root, origin = scene.root_qpos, scene.origin
+    if root.shape[1] == 3:  # slide joints (and a yaw hinge): offsets from the zero pose
+        for col in range(3):
+            rows = np.flatnonzero(root[:, col] >= 0)
+            zero = origin[rows, 3 if col == 2 else col]
+            data.qpos[root[rows, col]] = (pose[rows, col] - zero) * origin[rows, 4 + col]
         return
-    for (adr,), (x, y, yaw), z in zip(scene.root_qpos, pose, scene.origin[:, 2], strict=True):
+    for (adr,), (x, y, yaw), z in zip(root, pose, scene.qpos_init[root[:, 0] + 2], strict=True):
         data.qpos[adr : adr + 3] = [x, y, z]
         data.qpos[adr + 3 : adr + 7] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]

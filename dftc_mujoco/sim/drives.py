@@ -1,0 +1,158 @@
+"""Drives: the planar velocity each robot's DFTC stack asks for, as joint velocities.
+
+A drive maps the desired velocity ū (N, 2) of each robot's controlled point to the
+velocities of its driven joints (N, A); :class:`~.actuators.Actuation` turns those into
+actuator commands for whichever actuator kind the model has (velocity servo, position
+servo, torque motor). The same mapping shifts a planar bias fault φ into joint offsets.
+
+* :class:`Holonomic`: x / y slide joints of the base, driven directly; an optional yaw
+  hinge is held at its initial angle.
+* :class:`DiffDrive`: offset-point feedback linearisation of a differential drive. The
+  controlled point p lies b ahead of the axle centre c (and l to its left) on the
+  robot's heading θ: ṗ = (v − lω) f + bω g with f = (cos θ, sin θ), g = (−sin θ, cos θ),
+  inverted exactly (b ≠ 0): ω = g·ū/b, v = f·ū + lω; wheel rim speeds v ∓ ωa (a half
+  the axle width), wheel joint velocities ±(v ∓ ωa)/r by each wheel's axis direction.
+  The heading is the robot's own (its compass or odometry), read from its base body.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from .actuators import Actuation
+from .robots import DEFAULT_MAX_SPEED
+
+
+class Drive:
+    """What every drive shares: the actuation of its driven and held joints."""
+
+    pose_dependent = False  # joint velocities depend on the robot's heading
+
+    def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
+        self.robot, self.scene, self.data = robot, scene, data
+        self.n = len(scene.body)
+        self.actuation = Actuation(
+            scene.model, data, scene.actuator, robot.driven_infos, dt, robot.motor_time_constant
+        )
+        self.held = (
+            Actuation(
+                scene.model, data, scene.held, robot.held_infos, dt, robot.motor_time_constant
+            )
+            if scene.held.shape[1]
+            else None
+        )
+        self.hold_target = None if self.held is None else data.qpos[self.held.qpos_adr].copy()
+        width = scene.actuator.shape[1] + scene.held.shape[1]
+        self._ctrl = np.zeros((self.n, width))
+        limit = self._planar_limit(min(i.velocity_limit for i in robot.driven_infos))
+        cap = robot.max_speed
+        if cap is None:  # position servos and motors do not limit the speed themselves
+            cap = limit if np.isfinite(limit) else DEFAULT_MAX_SPEED
+        self.command_limit = min(limit, cap)
+        self._clip = cap < limit  # then the drive clips the planar command
+
+    def _planar_limit(self, joint_limit: float) -> float:
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Position servos' targets at the robots' current pose (start of a run)."""
+        self.actuation.reset()
+        if self.held is not None:
+            self.held.reset()
+            self.hold_target = self.data.qpos[self.held.qpos_adr].copy()
+
+    def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        """Driven joint velocities (N, A) for planar velocities ``u`` (N, 2)."""
+        raise NotImplementedError
+
+    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        """The planar velocity (N, 2) of the controlled points for joint velocities ``qdot``."""
+        raise NotImplementedError
+
+    def command(self, u: np.ndarray) -> np.ndarray:
+        """Actuator commands (N, A + H): driven joints for ``u`` (N, 2), then held joints."""
+        a = self.scene.actuator.shape[1]
+        if self._clip:
+            u = np.clip(u, -self.command_limit, self.command_limit)
+        self._ctrl[:, :a] = self.actuation.command(self.joint_velocity(u))
+        if self.held is not None:
+            self._ctrl[:, a:] = self.held.hold(self.hold_target)
+        return self._ctrl
+
+    def controlled(self) -> np.ndarray:
+        """Scene actuator ids (N, A + H) that :meth:`command` writes, in its column order."""
+        return np.hstack([self.scene.actuator, self.scene.held])
+
+
+class Holonomic(Drive):
+    """Slide joints along the world x and y axes (each may point either way)."""
+
+    def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
+        self.sign = np.array([robot.params.get("sign_x", 1.0), robot.params.get("sign_y", 1.0)])
+        super().__init__(robot, scene, data, dt)
+
+    def _planar_limit(self, joint_limit: float) -> float:
+        return joint_limit
+
+    def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        return u * self.sign
+
+    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        return qdot * self.sign
+
+
+class DiffDrive(Drive):
+    """Two wheels on hinges: offset-point feedback linearisation (module docstring)."""
+
+    pose_dependent = True
+
+    def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
+        p = robot.params
+        self.r, self.half = p["wheel_radius"], p["axle_width"] / 2
+        self.b, self.lat = p["offset"], p.get("lateral", 0.0)
+        self.psi = p.get("forward_angle", 0.0)  # the forward axis in the base frame
+        self.sign = np.array([p.get("sign_left", 1.0), p.get("sign_right", 1.0)])
+        self.body = scene.body
+        super().__init__(robot, scene, data, dt)
+
+    def _planar_limit(self, joint_limit: float) -> float:
+        # the per-axis planar speed reachable in every heading
+        return joint_limit * self.r * min(1.0, abs(self.b) / self.half) / np.sqrt(2)
+
+    def _heading(self) -> tuple[np.ndarray, np.ndarray]:
+        mat = self.data.xmat[self.body]  # (N, 9), row-major
+        c, s = mat[:, 0], mat[:, 3]
+        norm = np.hypot(c, s)
+        unset = norm == 0.0  # kinematics not computed yet: heading 0
+        norm[unset] = 1.0
+        c, s = np.where(unset, 1.0, c / norm), s / norm
+        if self.psi:
+            cp, sp = np.cos(self.psi), np.sin(self.psi)
+            c, s = c * cp - s * sp, s * cp + c * sp
+        return c, s
+
+    def _cs(self, heading: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        if heading is None:
+            return self._heading()
+        return np.cos(heading + self.psi), np.sin(heading + self.psi)
+
+    def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        c, s = self._cs(heading)
+        w = (-s * u[:, 0] + c * u[:, 1]) / self.b
+        v = c * u[:, 0] + s * u[:, 1] + self.lat * w
+        rim = np.stack([v - w * self.half, v + w * self.half], axis=1)
+        return rim * (self.sign / self.r)
+
+    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        c, s = self._cs(heading)
+        rim = qdot * (self.sign * self.r)
+        v = (rim[:, 0] + rim[:, 1]) / 2
+        w = (rim[:, 1] - rim[:, 0]) / (2 * self.half)
+        along, across = v - self.lat * w, self.b * w
+        return np.stack([c * along - s * across, s * along + c * across], axis=1)
+
+
+DRIVES: dict[str, type[Drive]] = {"holonomic": Holonomic, "diffdrive": DiffDrive}
