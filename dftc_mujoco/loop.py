@@ -26,7 +26,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from . import blocks as blocks_mod
-from . import mission
+from . import checks, mission
+from .checks import CLEARANCE
 from .errors import ScenarioError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team, TeamConfig
@@ -36,8 +37,6 @@ from .scenario import Scenario
 from .sim import faults as sim_faults
 from .sim import robots, scene
 from .sim.plant import NoiseStream, Plant
-
-CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
 
 
 def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
@@ -54,11 +53,20 @@ def team_config(
 
     A robot too big for a safe distance d (cylinder radius + its footprint +
     2 cm > d) gets the larger value, so no hull ever reaches a cylinder or an
-    excluded robot. ``command_limit`` is the per-axis planar command range.
+    excluded robot, and its activation distance is raised by as much (the
+    scenario's margin between the two is kept). ``command_limit`` is the per-axis
+    planar command range.
     """
     obs = s.obstacles
     f = s.fdir
     reach = robot.footprint_radius if robot is not None else 0.0
+    safe = np.array([max(o.safe_distance, o.radius + reach + CLEARANCE) for o in obs])
+    activation = np.array(
+        [
+            o.activation_distance + max(d - o.safe_distance, 0.0)
+            for o, d in zip(obs, safe, strict=True)
+        ]
+    )
     excluded_safe = max(f.excluded_safe_distance, 2 * reach + CLEARANCE)
     return TeamConfig(
         graph=s.team.graph,
@@ -72,8 +80,8 @@ def team_config(
         xi_bar=effective_xi_bar(s, robot),
         formation=s.mission.formation,
         obstacle_position=np.array([o.position for o in obs]).reshape(-1, 2),
-        obstacle_safe=np.array([max(o.safe_distance, o.radius + reach + CLEARANCE) for o in obs]),
-        obstacle_activation=np.array([o.activation_distance for o in obs]),
+        obstacle_safe=safe,
+        obstacle_activation=activation,
         detection_window=f.detection_window,
         dt_d_max=f.dt_d_max,
         isolation=f.isolation,
@@ -86,6 +94,7 @@ def team_config(
         command_limit=command_limit,
         fdir=f.enabled,
         compensate=f.compensate,
+        drift_bound=robot.drift_bound if robot is not None else 0.0,
     )
 
 
@@ -188,14 +197,17 @@ class Simulation:
         search: Sequence[str | Path] = (),
     ) -> None:
         wall0 = time.perf_counter()
+        checks.check_memory(scenario)  # before anything big is allocated
         self.scenario = scenario
         self.hook = hook
         self._search = [Path(p) for p in search]
         self._given = dict(blocks or {})
         self.block_names = block_names(scenario, self._given)
-        self.robot = robots.get(
-            scenario.team.robot_model, where=f"{scenario.source}: team.robot_model"
-        )
+        name = scenario.team.robot_model
+        path = robots.resolve(name, f"{scenario.source}: team.robot_model", scenario.directory)
+        self.robot = robots.load(path)
+        if name not in robots.available():  # a file: recorded by its absolute path
+            self.scenario = scenario = scenario.with_overrides(robot_model=str(path))
         self.scene = scene.build(scenario, self.robot)
         self._build_time = time.perf_counter() - wall0
         self.plant: Plant | None = None
@@ -243,8 +255,8 @@ class Simulation:
         self.plant = plant = Plant(
             sc, s.noise, dt, self.rng, xi_bar=max(xi_bar - model.mismatch, 0.0)
         )
-        self.adapter = model.adapter(sc, plant.data)
-        self.faults = sim_faults.ActuatorFaults(sc.model, s.faults, sc.actuator, self.adapter)
+        self.adapter = model.adapter(sc, plant.data, dt)
+        self.faults = sim_faults.ActuatorFaults(sc.model, s.faults, self.adapter)
         n = self.n = s.team.robots
         self.steps = round(s.duration / dt)
         self.log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
@@ -253,7 +265,6 @@ class Simulation:
         self.log = Log(
             rows,
             n,
-            n_act=sc.actuator.shape[1],
             matrix_every=matrix_every(n, rows, self.log_every, dt, s.physics.matrix_log_rate),
             obstacles=obstacles.reshape(-1, 4),
         )
@@ -269,19 +280,33 @@ class Simulation:
                     "false alarms"
                 ),
             )
+        for note in sc.notes:
+            self.events.add(0.0, "warning", message=note)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
-        limited = sc.model.actuator_ctrllimited[sc.actuator].all()
-        limit = self.adapter.command_limit if limited else np.inf
-        blocks = make_blocks(s, self._given, self._search)
-        self.team = Team(
-            team_config(s, model, limit), plant.measure(), self.path.position[0], blocks
+        self.command_limit = limit = self.adapter.command_limit
+        config = team_config(s, model, limit)
+        every = max(1, round(0.1 / dt))  # the path every 0.1 s is enough to check it
+        found = checks.preflight(
+            s,
+            model,
+            limit,
+            config.obstacle_safe,
+            config.obstacle_activation,
+            self.path.position[::every],
+            every * dt,
         )
+        found.raise_refusals()
+        for message in found.warnings:
+            self.events.add(0.0, "warning", message=message)
+        blocks = make_blocks(s, self._given, self._search)
+        self.team = Team(config, plant.measure(), self.path.position[0], blocks)
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
         self.noise = NoiseStream(plant)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
+        self.left: str | None = None  # a robot left the arena: the mission is over
         self._x = np.empty((n, 2))
         self._x_m = np.empty((n, 2))
         self._cmd = np.empty((n, 2))
@@ -304,6 +329,7 @@ class Simulation:
             or self.error is not None
             or self.team.ended is not None
             or self.stopped is not None
+            or self.left is not None
         )
 
     def request_stop(self, reason: str) -> None:
@@ -402,8 +428,10 @@ class Simulation:
                         team.events.clear()
                     ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
                     if k % log_every == 0 or team.ended:  # the last period of an ended mission too
-                        self._sample(t, x, ctrl, position[j])
-                    if k == steps or team.ended:
+                        self._sample(t, x, cmd, position[j])
+                        if np.abs(x).max() > checks.ARENA_HALF:
+                            self._left_arena(t, x)
+                    if k == steps or team.ended or self.left:
                         k += 1
                         break
                     plant.step(ctrl, nsub)
@@ -422,14 +450,21 @@ class Simulation:
             bar.close()
             self._wall += time.perf_counter() - wall0
 
-    def _sample(self, t: float, x: np.ndarray, ctrl: np.ndarray, c: np.ndarray) -> None:
+    def _left_arena(self, t: float, x: np.ndarray) -> None:
+        """End the mission: a robot is off the floor (``checks.ARENA_HALF``)."""
+        i = int(np.abs(x).max(axis=1).argmax())
+        self.left = f"robot {i + 1} left the arena (at {np.round(x[i], 1).tolist()} m)"
+        self.events.add(t, "mission_ended", reason=self.left, robots=[i + 1])
+
+    def _sample(self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray) -> None:
         """One log row: raw values only (everything else is derived after the run)."""
         log = self.log
         row, d = log.size, log.data
         d["t"][row] = t
         d["x"][row] = x
         d["c_d"][row] = c
-        d["ctrl"][row] = ctrl
+        lim = self.command_limit  # what the drives were asked for, within their range
+        np.clip(cmd, -lim, lim, out=d["v_cmd"][row])
         self.plant.poses(out=d["pose"][row])
         self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
         log.size += 1
@@ -439,7 +474,7 @@ class Simulation:
     def result(self) -> RunResult:
         """The records of the run so far (the log, the events and the summary)."""
         arrays = self.log.arrays()
-        arrays["phi"] = self.faults.phi_series(arrays["t"], arrays["ctrl"], arrays["pose"][..., 2])
+        arrays["phi"] = self.faults.phi_series(arrays["t"], arrays["v_cmd"])
         arrays["sigma_err"] = mission.task_errors(arrays["x"], arrays["x_d"], arrays["active"])
         summary = summarize(
             self.scenario,
@@ -452,7 +487,7 @@ class Simulation:
             error=self.error,
             sim_time=self.plant.time,
             finished=self.k > self.steps,
-            ended=self.team.ended,
+            ended=self.team.ended or self.left,
             stopped=self.stopped,
         )
         summary["build_time"] = self._build

@@ -142,19 +142,33 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
+class SignalStop:
+    """SIGINT and SIGTERM, caught from the start of a run: the simulation (once it exists)
+    stops before its next control period and keeps its records; ``caught`` lists them."""
+
+    def __init__(self) -> None:
+        self.caught: list[int] = []
+        self.sim = None
+
+    def attach(self, sim) -> None:
+        """Stop ``sim`` on a signal (at once if one already came while it was being built)."""
+        self.sim = sim
+        if self.caught:
+            sim.request_stop(f"interrupted by {signal.Signals(self.caught[0]).name}")
+
+    def _handler(self, signum, frame) -> None:
+        self.caught.append(signum)
+        if self.sim is not None:
+            self.sim.request_stop(f"interrupted by {signal.Signals(signum).name}")
+
+
 @contextlib.contextmanager
-def stop_on_signals(sim):
-    """While inside, SIGINT and SIGTERM stop ``sim`` before its next control period
-    (the run keeps its records); yields the list the caught signal numbers go to."""
-    caught: list[int] = []
-
-    def handler(signum, frame):
-        caught.append(signum)
-        sim.request_stop(f"interrupted by {signal.Signals(signum).name}")
-
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+def stop_on_signals():
+    """While inside, SIGINT and SIGTERM are caught by a :class:`SignalStop` (yielded)."""
+    stop = SignalStop()
+    previous = {sig: signal.signal(sig, stop._handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield caught
+        yield stop
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
@@ -275,8 +289,9 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
         out = args.out if args.out is not None else Path.cwd() / "renders" / s.name
-        with run_folder(out, args.overwrite) as work:
-            with Simulation(s) as sim, stop_on_signals(sim) as caught:
+        with run_folder(out, args.overwrite) as work, stop_on_signals() as stop:
+            with Simulation(s) as sim:
+                stop.attach(sim)
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
                 if args.viewer:
                     from .render.viewer import ViewerUnavailable, watch
@@ -286,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
                     except ViewerUnavailable as exc:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
                 result = sim.run(progress=progress)
-            return _finish(result, work, Path(out).absolute(), caught, options, progress)
+            return _finish(result, work, Path(out).absolute(), stop.caught, options, progress)
     except ScenarioError as exc:
         cli.print_error(exc)
         return EXIT_INPUT

@@ -95,7 +95,11 @@ def test_bias_too_large_to_compensate_is_isolated_like_a_stop():
     assert {x["by"] for x in d1} == {1, 2, 3, 4}
     assert _detections(out) == d1
     assert [e["robot"] for e in out["exclusions"]] == [1]
-    assert out["warnings"] == []
+    assert out["warnings"] == [  # said before the run: this bias is not recoverable
+        "<test>: faults[1].value: a bias of 1.6 m/s on robot 1 cannot be compensated within "
+        "the ±1 m/s command range while the team moves at 0.1 m/s: it acts as an "
+        "unrecoverable fault"
+    ]
     # the robot really could not be held: it drifted away at about 1.6 - 1 m/s
     x1 = r.log["x"][:, 0]
     assert x1[-1, 1] - x1[r.log["t"] == 20.0][0, 1] < -3.0

@@ -1,0 +1,277 @@
+"""Checks before a run: refuse what cannot be meaningful, warn about what may not be.
+
+Each finding is one line naming the scenario file and key, what is wrong and what to
+change. A *refusal* (:class:`~dftc_mujoco.errors.ScenarioError`, exit 2) is for a
+set-up whose run would say nothing (hulls that overlap in the formation, a robot that
+starts inside a cylinder, a mission faster than the actuators, a fault no actuator could
+produce, more memory than the machine has); a *warning* (an event at t = 0, listed in
+``summary.json``) is for one that can run but deserves a look (a bias the actuators
+cannot compensate, distances raised for a big robot, options of the robot's MJCF that
+the arena overrides).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import ScenarioError
+from .mission import formation_offsets
+from .scenario import Scenario
+
+CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
+ARENA_HALF = 50.0  # the floor is 100 m x 100 m (models/arena.xml)
+FAULT_CAP = 10.0  # a bias beyond this many command ranges has no physical meaning
+MEMORY_FRACTION = 0.8  # refuse a run estimated to need more of the available memory
+
+
+@dataclass
+class Findings:
+    """Refusals and warnings of the checks, each one line."""
+
+    refusals: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def raise_refusals(self) -> None:
+        """Raise one ScenarioError holding every refusal (one line each)."""
+        if self.refusals:
+            raise ScenarioError("\n".join(self.refusals))
+
+
+# --------------------------------------------------------------------------- memory
+
+
+def memory_estimate(s: Scenario) -> dict[str, int]:
+    """Bytes a run of ``s`` will hold at its peak, by part (an estimate, on the high side)."""
+    from .record import MATRIX_LOG_BUDGET
+
+    n = s.team.robots
+    dt = s.physics.control_period
+    periods = s.duration / dt + 2
+    rows = periods / max(1, round(1.0 / (s.physics.log_rate * dt))) + 2
+    per_row = 200 * n  # positions, inputs, estimates, poses, flags... in float64
+    nn = 16 * n * n  # float32 estimates (2), residuals, thresholds
+    if s.physics.matrix_log_rate == "auto":
+        matrix = min(rows * nn, MATRIX_LOG_BUDGET + nn)
+    else:
+        matrix = rows * nn / max(1.0, s.physics.log_rate / float(s.physics.matrix_log_rate))
+    return {
+        # the log, its derived fields and the copies written to log.npz
+        "log": int(2 * (rows * per_row + matrix)),
+        # every robot's estimate of the whole team: ~15 N x N x 2 float64 arrays
+        "team": int(15 * 16 * n * n),
+        "path": int(32 * periods),  # the desired centroid at every period
+        "physics": int(400_000 * n + 300 * 2**20),  # MuJoCo model and data, interpreter
+    }
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (MemAvailable on Linux)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 2**62
+
+
+def check_memory(s: Scenario, available: int | None = None) -> None:
+    """Refuse a run that would need more memory than the machine has (one line, with the
+    estimate and the knobs that reduce it), before anything big is allocated."""
+    parts = memory_estimate(s)
+    total = sum(parts.values())
+    free = available_memory() if available is None else available
+    if total <= MEMORY_FRACTION * free:
+        return
+    gb = 2**30
+    big = max(parts, key=parts.get)  # type: ignore[arg-type]
+    knob = {
+        "log": "duration, physics.log_rate or physics.matrix_log_rate",
+        "team": "team.robots (every robot estimates the whole team: memory grows as N²)",
+        "path": "duration",
+        "physics": "team.robots",
+    }[big]
+    raise ScenarioError(
+        f"{s.source}: duration, team.robots, physics.log_rate: this run needs about "
+        f"{total / gb:.1f} GB ({big} {parts[big] / gb:.1f} GB: {s.team.robots} robots, "
+        f"{s.duration:g} s at {s.physics.log_rate:g} Hz) and {free / gb:.1f} GB are "
+        f"available; reduce {knob}"
+    )
+
+
+# --------------------------------------------------------------------------- the set-up
+
+
+def preflight(
+    s: Scenario,
+    robot,
+    command_limit: float,
+    safe: np.ndarray,
+    activation: np.ndarray,
+    path: np.ndarray,
+    path_dt: float,
+) -> Findings:
+    """Check scenario ``s`` with robot model ``robot`` (footprint, drive) whose planar
+    command range is ``command_limit`` per axis; ``safe`` and ``activation`` are the
+    cylinders' distances after they were raised for the robot's footprint; ``path`` (T, 2)
+    the desired centroid every ``path_dt`` seconds."""
+    out = Findings()
+    src = s.source
+    reach = robot.footprint_radius
+    name = robot.name
+    contacts = s.physics.robot_contacts
+
+    def finding(key: str, message: str, refuse: bool) -> None:
+        (out.refusals if refuse else out.warnings).append(f"{src}: {key}: {message}")
+
+    # the formation, and the one re-planned without a robot: hulls must not overlap
+    need = 2 * reach + CLEARANCE
+    n = s.team.robots
+    for m in (n, n - 1) if s.fdir.enabled and n > 2 else (n,):
+        spacing = _closest_pair(formation_offsets(s.mission.formation, m))
+        if spacing < need:
+            which = "the formation" if m == n else f"the re-planned formation of {m} robots"
+            finding(
+                "mission.formation.side",
+                f"{which} puts two slots {spacing:.3f} m apart, but two {name} robots need "
+                f"{need:.3f} m (footprint radius {reach:.3f} m each, + {CLEARANCE:g} m): use "
+                f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}"
+                + ("" if contacts else " (robot contacts are off: hulls will pass through)"),
+                refuse=contacts,
+            )
+            break
+    # where the robots start: not inside a cylinder, not inside each other
+    x0 = np.asarray(s.team.initial_positions, float)
+    for k, ob in enumerate(s.obstacles):
+        gap = np.linalg.norm(x0 - ob.position, axis=1) - ob.radius - reach
+        for i in np.flatnonzero(gap < 0):
+            finding(
+                "team.initial_positions",
+                f"robot {i + 1} starts with its hull {-gap[i]:.3f} m inside cylinder {k + 1} "
+                f"(its {name} footprint radius is {reach:.3f} m); move it or the cylinder",
+                refuse=True,
+            )
+        inside = np.flatnonzero((gap >= 0) & (np.linalg.norm(x0 - ob.position, axis=1) < safe[k]))
+        for i in inside:
+            finding(
+                "team.initial_positions",
+                f"robot {i + 1} starts inside cylinder {k + 1}'s safe distance "
+                f"({safe[k]:.3f} m): its first command is to get out",
+                refuse=False,
+            )
+    pairs = sorted(cKDTree(x0).query_pairs(2 * reach)) if reach > 0 else []
+    for i, j in pairs[:3]:
+        d = float(np.linalg.norm(x0[i] - x0[j]))
+        finding(
+            "team.initial_positions",
+            f"robots {i + 1} and {j + 1} start {d:.3f} m apart: their hulls overlap "
+            f"(footprint radius {reach:.3f} m)"
+            + ("" if contacts else " (robot contacts are off: they pass through)"),
+            refuse=contacts,
+        )
+    if len(pairs) > 3:
+        finding("team.initial_positions", f"... {len(pairs) - 3} more overlapping pairs", contacts)
+    # the cylinders' distances, raised for a big robot
+    for k, ob in enumerate(s.obstacles):
+        if safe[k] > ob.safe_distance + 1e-12:
+            finding(
+                f"obstacles[{k + 1}].safe_distance",
+                f"raised from {ob.safe_distance:g} to {safe[k]:.3f} m for the {name} footprint "
+                f"({reach:.3f} m + {CLEARANCE:g} m), and activation_distance from "
+                f"{ob.activation_distance:g} to {activation[k]:.3f} m with it",
+                refuse=False,
+            )
+    # room to avoid a cylinder without running into a teammate (no teammate avoidance)
+    squeeze = _squeeze(s, safe, reach, path, path_dt)
+    if squeeze is not None:
+        k, t, depth, room = squeeze
+        finding(
+            f"obstacles[{k + 1}]",
+            f"near t = {t:.0f} s a formation slot passes {depth:.3f} m inside cylinder "
+            f"{k + 1}'s safe distance, but two {name} robots have only {max(room, 0):.3f} m "
+            "between their hulls in the formation: the robot that avoids it may run into a "
+            "teammate (the paper's controllers do not avoid teammates); a formation that "
+            "straddles the cylinder or passes it with more room avoids this",
+            refuse=False,
+        )
+    # the command range against the mission and the faults
+    speed = s.mission.centroid.speed
+    if speed > command_limit:
+        finding(
+            "mission.centroid.speed",
+            f"{speed:g} m/s is beyond the {name} robots' command range of "
+            f"±{command_limit:.3g} m/s per axis: the team cannot follow the path",
+            refuse=True,
+        )
+    cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))
+    for k, f in enumerate(s.faults):
+        if f.kind != "bias":
+            continue
+        size = float(np.abs(f.value).max())
+        key = f"faults[{k + 1}].value"
+        if size > cap:
+            finding(
+                key,
+                f"a bias of {size:g} m/s is {size / cap * FAULT_CAP:.0f} times the "
+                f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator offset "
+                f"produces that; expected at most {cap:g} m/s",
+                refuse=True,
+            )
+        elif size + speed > command_limit:
+            finding(
+                key,
+                f"a bias of {size:g} m/s on robot {f.robot + 1} cannot be compensated within "
+                f"the ±{command_limit:.3g} m/s command range while the team moves at "
+                f"{speed:g} m/s: it acts as an unrecoverable fault",
+                refuse=False,
+            )
+    # the path stays on the floor
+    w = np.asarray(s.mission.centroid.waypoints)
+    far = np.abs(w).max() + _radius(formation_offsets(s.mission.formation, n)) + reach
+    if far > ARENA_HALF:
+        finding(
+            "mission.centroid.waypoints",
+            f"the team would reach {far:.1f} m from the origin; the arena's floor ends at "
+            f"±{ARENA_HALF:g} m",
+            refuse=True,
+        )
+    return out
+
+
+def _squeeze(
+    s: Scenario, safe: np.ndarray, reach: float, path: np.ndarray, dt: float
+) -> tuple[int, float, float, float] | None:
+    """The deepest pass of a formation slot inside a cylinder's safe distance that is deeper
+    than the room between two robots' hulls: (cylinder, time, depth, room), or None."""
+    if not s.obstacles:
+        return None
+    offsets = formation_offsets(s.mission.formation, s.team.robots)
+    room = _closest_pair(offsets) - 2 * reach - CLEARANCE
+    slots = path[:, None, :] + offsets[None]  # (T, N, 2)
+    centres = np.array([ob.position for ob in s.obstacles])
+    dist = np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)  # (T, N, O)
+    depth = (safe[None, None, :] - dist).max(axis=1)  # (T, O)
+    t, k = np.unravel_index(int(depth.argmax()), depth.shape)
+    if depth[t, k] <= max(room, 0.0):
+        return None
+    return int(k), t * dt, float(depth[t, k]), float(room)
+
+
+def _closest_pair(points: np.ndarray) -> float:
+    if len(points) < 2:
+        return math.inf
+    d, _ = cKDTree(points).query(points, k=2)
+    return float(d[:, 1].min())
+
+
+def _radius(points: np.ndarray) -> float:
+    return float(np.linalg.norm(points, axis=1).max()) if len(points) else 0.0
