@@ -1,26 +1,45 @@
 """``python -m dftc_mujoco.calibrate MODEL``: measure a robot model's mismatch ‖ẋ − u‖.
 
-The paper models every robot as ẋ = u + φ + ξ with ‖ξ‖ ≤ ξ̄ (eqs. 1-2). A
-real body (mass, actuator lag, wheels, friction) is not an integrator: this
-drives one robot of the model, alone and noise-free, through representative
-planar velocity commands at the control rate, and measures how far the
-velocity of its controlled point is from the command. Command programme:
-ramps to the paper's speed (0.1 m/s) and beyond (0.3, 0.5 m/s) at 0.25 m/s²,
-turns on circles of 0.5 and 1 m, a figure-eight, and command jumps (steps,
-a 90° switch, a reversal). Samples within ``JUMP_WINDOW`` s after a jump
-count as "with jumps" only.
+The paper models every robot as ẋ = u + φ + ξ with ‖ξ‖ ≤ ξ̄ (eqs. 1-2). A real body
+(mass, actuator lag, wheels, friction) is not an integrator: this drives one robot of
+the model, alone and noise-free, from its initial pose through planar velocity
+commands at the control rate, and measures how far the velocity of its controlled
+point is from the command.
 
-The recommended ξ̄ is the largest mismatch on smooth commands, rounded up to
-0.5 mm/s, and never below the paper's 5 mm/s; ``--write`` stores the measured
-mismatch and the recommendation in the model file. Exit codes: 0, 2 bad input.
+What is measured, separately:
+
+* **start-up**: the robot settles from its initial pose under a zero command (a robot
+  on a free joint drops onto its wheels); the start-up lasts until the mismatch has
+  stayed below 2 mm/s for 0.5 s (at most :data:`STARTUP_MAX` s) and is reported on its
+  own, never counted as smooth;
+* **smooth commands**, scaled to the robot's command range: ramps to 0.1, 0.3 and
+  0.5 m/s at 0.25 m/s² (each at most 80 % of the range), circles of 0.5 and 1 m and a
+  figure-eight;
+* **command jumps** (a step, a 90° switch, a reversal, a stop), each held
+  :data:`JUMP_HOLD` s: the samples from a jump until the mismatch is back below the
+  smooth level count as jump-affected, however long that takes (the robot's own
+  response time, reported);
+* **saturation**: the share of the commands the actuators clamped.
+
+The recommended ξ̄ is the largest mismatch on smooth commands, rounded up to 0.5 mm/s,
+and never below the paper's 5 mm/s. With ``--scenario`` (default ``paper_case``) it
+also says which constant fault the scenario's thresholds then detect for sure (eq. 46)
+and warns when faults of the mission's size would go undetected. ``--write`` stores
+the results in the robot file's ``[calibration]`` table (for an MJCF of the older
+contract, in its ``<custom>`` numerics, through MjSpec); the MJCF of a robot file is
+never edited. Exit codes: 0, 2 bad input, 5 the file cannot be written.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
-import re
+import os
 import sys
-from dataclasses import dataclass
+import tempfile
+import tomllib
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,21 +47,27 @@ import numpy as np
 from .errors import ScenarioError
 
 PAPER_XI_BAR = 0.005
-JUMP_WINDOW = 0.5  # s after a command jump that count as jump-affected
 CONTROL_PERIOD = 0.01
 TIMESTEP = 0.002
+STARTUP_QUIET = 0.002  # m/s: the start-up is over once the mismatch stays below this
+STARTUP_MAX = 3.0  # s
+JUMP_HOLD = 4.0  # s each command jump is held
+SETTLED_FOR = 0.2  # s the mismatch must stay low for a response to count as settled
 
 
 @dataclass(frozen=True)
 class Programme:
-    """Planar commands (K, 2) at the control rate, and where they jump."""
+    """Planar commands (K, 2) at the control rate, and where each jump starts."""
 
     u: np.ndarray
-    jump: np.ndarray  # (K,) bool: sample within JUMP_WINDOW after a jump
+    jumps: tuple[int, ...]  # sample index of each command jump
+    startup: int  # samples of zero command at the start (the start-up window)
 
 
-def programme(dt: float = CONTROL_PERIOD) -> Programme:
-    """The command programme described in the module docstring."""
+def programme(limit: float = 1.0, dt: float = CONTROL_PERIOD) -> Programme:
+    """The command programme of the module docstring, within ±``limit`` m/s per axis."""
+    cap = 0.8 * min(limit, 1e9)
+    speeds = [min(v, cap) for v in (0.1, 0.3, 0.5)]
     parts: list[np.ndarray] = []
     jumps: list[int] = []
 
@@ -59,36 +84,35 @@ def programme(dt: float = CONTROL_PERIOD) -> Programme:
         k = max(1, round(np.linalg.norm(v1 - v0) / accel / dt))
         add(v0 + np.outer(np.arange(1, k + 1) / k, v1 - v0))
 
-    hold([0.0, 0.0], 1.0)
-    ramp([0, 0], [0.1, 0])
-    hold([0.1, 0.0], 3.0)
-    ramp([0.1, 0], [0.3, 0])
-    hold([0.3, 0.0], 2.0)
-    ramp([0.3, 0], [0.5, 0])
-    hold([0.5, 0.0], 1.0)
-    ramp([0.5, 0], [0.1, 0])
-    for radius, speed in ((0.5, 0.1), (1.0, 0.3)):  # turns: direction rotates at v/R
-        ramp([0.1, 0], [speed, 0])
+    hold([0.0, 0.0], STARTUP_MAX)
+    startup = len(parts[0])
+    v0 = speeds[0]
+    ramp([0, 0], [v0, 0])
+    hold([v0, 0.0], 3.0)
+    prev = v0
+    for v in speeds[1:]:
+        ramp([prev, 0], [v, 0])
+        hold([v, 0.0], 2.0 if v < speeds[-1] else 1.0)
+        prev = v
+    ramp([prev, 0], [v0, 0])
+    for radius, speed in ((0.5, speeds[0]), (1.0, speeds[1])):  # turns at v/R
+        ramp([v0, 0], [speed, 0])
         k = round(2 * np.pi * radius / speed / dt)
         ang = np.arange(1, k + 1) * dt * speed / radius
         add(speed * np.stack([np.cos(ang), np.sin(ang)], axis=1))
-        ramp([speed, 0], [0.1, 0])
-    k = round(20 / dt)  # figure-eight at up to ~0.25 m/s
+        ramp([speed, 0], [v0, 0])
+    k = round(20 / dt)  # figure-eight at up to ~2.5 v0
     tt = np.arange(1, k + 1) * dt
     w = 2 * np.pi / 20
-    fig8 = np.stack([0.1 * np.cos(w * tt), 0.2 * np.sin(2 * w * tt)], axis=1)
+    fig8 = np.stack([v0 * np.cos(w * tt), 2 * v0 * np.sin(2 * w * tt)], axis=1)
     add(fig8)
     ramp(fig8[-1], [0, 0])
-    hold([0.3, 0.0], 2.0, jump=True)  # step 0 -> 0.3 m/s
-    hold([0.0, 0.3], 2.0, jump=True)  # 90° switch
-    hold([0.0, -0.3], 2.0, jump=True)  # reversal
-    hold([0.0, 0.0], 1.0, jump=True)  # stop
-    u = np.vstack(parts)
-    jump = np.zeros(len(u), bool)
-    width = round(JUMP_WINDOW / dt)
-    for j in jumps:
-        jump[j : j + width] = True
-    return Programme(u, jump)
+    step = speeds[1]
+    hold([step, 0.0], JUMP_HOLD, jump=True)  # step 0 -> v
+    hold([0.0, step], JUMP_HOLD, jump=True)  # 90° switch
+    hold([0.0, -step], JUMP_HOLD, jump=True)  # reversal
+    hold([0.0, 0.0], JUMP_HOLD, jump=True)  # stop
+    return Programme(np.vstack(parts), tuple(jumps), startup)
 
 
 @dataclass(frozen=True)
@@ -102,11 +126,31 @@ class Calibration:
     all_p99: float
     samples: int
     jump_samples: int
+    startup_mismatch: float = 0.0
+    startup_time: float = 0.0
+    response_time: float = 0.0
+    saturation: float = 0.0  # share of commands that the actuators clamped
+    command_limit: float = math.inf
+    settled: bool = True  # every jump response settled within JUMP_HOLD
+    notes: tuple[str, ...] = field(default_factory=tuple)
+    compensation_G: float | None = None  # the smallest G (x I) whose loop does not ring
 
     @property
     def recommended_xi_bar(self) -> float:
         """ξ̄ that follows: the smooth-command maximum, up to 0.5 mm/s, at least the paper's."""
         return max(PAPER_XI_BAR, math.ceil(self.smooth_max / 0.0005 - 1e-9) * 0.0005)
+
+    def table(self) -> dict[str, float]:
+        """What ``--write`` stores (the robot file's ``[calibration]`` keys)."""
+        return {
+            "xi_bar": self.recommended_xi_bar,
+            "mismatch": round(self.smooth_max, 7),
+            "startup_mismatch": round(self.startup_mismatch, 6),
+            "startup_time": round(self.startup_time, 3),
+            "response_time": round(self.response_time, 3),
+            "saturation": round(self.saturation, 4),
+            **({"compensation_G": self.compensation_G} if self.compensation_G else {}),
+        }
 
 
 def measure(name: str) -> Calibration:
@@ -114,19 +158,28 @@ def measure(name: str) -> Calibration:
     import mujoco
 
     from .sim import robots, scene
+    from .sim.plant import Plant
 
     robot = robots.get(name, where="MODEL")
     sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
-    data = mujoco.MjData(sc.model)
-    adapter = robot.adapter(sc, data)
-    mujoco.mj_forward(sc.model, data)
-    prog = programme()
+    data = Plant.initial_data(sc)
+    drive = robot.adapter(sc, data, CONTROL_PERIOD)
+    limit = drive.command_limit
+    prog = programme(limit)
     nsub = round(CONTROL_PERIOD / TIMESTEP)
     mismatch = np.empty(len(prog.u))
+    clamped = np.zeros(len(prog.u), bool)
     vel = np.empty(6)
     site = int(sc.site[0])
+    ids = drive.controlled()[0]
+    driven = sc.actuator[0]
+    lo, hi = sc.model.actuator_ctrlrange[driven].T
+    limited = sc.model.actuator_ctrllimited[driven].astype(bool)
     for k, u in enumerate(prog.u):
-        data.ctrl[sc.actuator[0]] = adapter.command(u[None])[0]
+        ctrl = drive.command(u[None])[0]
+        data.ctrl[ids] = ctrl
+        c = ctrl[: len(driven)]
+        clamped[k] = bool((limited & ((c <= lo) | (c >= hi))).any())
         mujoco.mj_step(sc.model, data, nstep=nsub)
         mujoco.mj_objectVelocity(sc.model, data, mujoco.mjtObj.mjOBJ_SITE, site, vel, 0)
         mismatch[k] = np.hypot(vel[3] - u[0], vel[4] - u[1])
@@ -134,47 +187,313 @@ def measure(name: str) -> Calibration:
             raise ScenarioError(
                 f"{robot.path}: the physics failed during calibration at t = {data.time:.2f} s"
             )
-    smooth = mismatch[~prog.jump]
+    return _analyse(robot.name, prog, mismatch, clamped, limit)
+
+
+def _analyse(
+    name: str, prog: Programme, mismatch: np.ndarray, clamped: np.ndarray, limit: float
+) -> Calibration:
+    """Split the samples into start-up, smooth and jump-affected ones (module docstring)."""
+    dt = CONTROL_PERIOD
+    quiet = round(0.5 / dt)
+    start = prog.startup  # the start-up ends once the mismatch stays low for 0.5 s
+    low = mismatch[: prog.startup] < STARTUP_QUIET
+    for k in range(prog.startup - quiet + 1):
+        if low[k : k + quiet].all():
+            start = k
+            break
+    end_jumps = len(prog.u)
+    smooth_mask = np.zeros(len(prog.u), bool)
+    smooth_mask[prog.startup : prog.jumps[0]] = True
+    smooth = mismatch[smooth_mask]
+    level = max(float(smooth.max()), STARTUP_QUIET)  # "back to smooth"
+    jump = np.zeros(len(prog.u), bool)
+    response, settled = 0.0, True
+    need = round(SETTLED_FOR / dt)
+    bounds = [*prog.jumps, end_jumps]
+    for a, b in itertools.pairwise(bounds):
+        ok = mismatch[a:b] <= level
+        done = next((k for k in range(b - a - need + 1) if ok[k : k + need].all()), None)
+        if done is None:
+            settled = False
+            done = b - a
+        jump[a : a + done] = True
+        response = max(response, done * dt)
+    smooth_mask[prog.jumps[0] :] = ~jump[prog.jumps[0] :]
+    smooth = mismatch[smooth_mask]
+    measured = np.concatenate([mismatch[start : prog.startup], mismatch[prog.startup :]])
+    notes = []
+    if clamped[smooth_mask].any():
+        notes.append(
+            f"the actuators clamped {clamped[smooth_mask].mean():.1%} of the smooth commands "
+            f"(command range ±{limit:.3g} m/s per axis): those samples measure saturation, "
+            "not the robot"
+        )
+    if start == prog.startup:
+        notes.append(
+            f"the robot did not settle within {STARTUP_MAX:g} s of its start: its mismatch "
+            f"stayed above {STARTUP_QUIET * 1000:g} mm/s under a zero command"
+        )
+    if not settled:
+        notes.append(
+            f"a command jump did not settle within {JUMP_HOLD:g} s: the robot's response is "
+            "slower than the programme allows"
+        )
     return Calibration(
-        robot.name,
+        name,
         float(smooth.max()),
         float(np.percentile(smooth, 99)),
-        float(mismatch.max()),
-        float(np.percentile(mismatch, 99)),
-        len(mismatch),
-        int(prog.jump.sum()),
+        float(measured.max()),
+        float(np.percentile(measured, 99)),
+        len(measured),
+        int(jump.sum()),
+        startup_mismatch=float(mismatch[:start].max()) if start else 0.0,
+        startup_time=start * dt,
+        response_time=response,
+        saturation=float(clamped.mean()),
+        command_limit=limit,
+        settled=settled,
+        notes=tuple(notes),
     )
 
 
+def detectability(cal: Calibration, scenario_name: str, robot: str) -> tuple[str, bool]:
+    """What the recommended ξ̄ implies for the scenario's thresholds: the smallest constant
+    fault they can detect, and whether faults of the mission's size are below it.
+
+    A constant fault φ on robot k moves every residual block towards φ/k_o (NOTES 8), so
+    no robot can flag it unless ‖φ‖ > k_o ⁱμ_k; eq. 46 guarantees the detection above
+    twice that. The mission's largest fault is its largest bias, or for a stop the
+    robot's command range (a stopped robot's command grows as the team pulls away).
+    Returns (the line to print, whether it is a warning).
+    """
+    from .blocks import create
+    from .loop import team_config
+    from .scenario import load_scenario
+    from .sim import robots
+
+    s = load_scenario(scenario_name, {"noise.xi_bar": cal.recommended_xi_bar})
+    config = team_config(s, robots.get(robot, where="MODEL"), cal.command_limit)
+    th = create("thresholds", s.onboard.thresholds, s.onboard.params.get("thresholds", {}))
+    x0 = np.asarray(s.team.initial_positions)
+    th.reset(config, x0, x0)
+    mu = np.asarray(th.mu(1e9), float)
+    finite = mu[np.isfinite(mu)]
+    least = float(finite.min()) if len(finite) else math.inf
+    smallest = s.gains.ko * least  # the most sensitive robot's limit
+    faults = [float(np.linalg.norm(f.value)) for f in s.faults if f.kind == "bias"]
+    if any(f.kind == "stop" for f in s.faults) or not faults:
+        faults.append(math.sqrt(2) * min(cal.command_limit, 1e9))
+    largest = max(faults)
+    line = (
+        f"with xi_bar = {cal.recommended_xi_bar:g} m/s, {s.name}'s thresholds "
+        f"({s.onboard.thresholds}) let a robot detect a constant fault only above "
+        f"{smallest:.3g} m/s (k_o min μ, NOTES 8; eq. 46 guarantees it above twice that)"
+    )
+    if smallest < largest:
+        return line + f"; the mission's faults reach {largest:.3g} m/s", False
+    return (
+        line + f", but the mission's largest fault is {largest:.3g} m/s: faults of the "
+        "mission's size are undetectable; reduce the robot's mismatch (stiffer actuators, a "
+        "control point with less lag) or use a tighter threshold rule",
+        True,
+    )
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """How the fault estimator's compensation loop (eqs. 28-31) behaves on the robot."""
+
+    G: float  # the gain tried (G = g I)
+    phi_p99: float  # healthy ‖φ̂‖ on the robot, 99th percentile [m/s]
+    phi_max: float
+    ideal: float  # the bound Φ̄ of an ideal plant with the same gains (thresholds.estimator_gain)
+
+    @property
+    def rings(self) -> bool:
+        """The loop amplifies the robot's lag: healthy ‖φ̂‖ beyond 1.5 Φ̄ of an ideal plant."""
+        return self.phi_p99 > 1.5 * self.ideal
+
+
+G_CANDIDATES = (1.0, 1.5, 2.0, 3.0, 5.0, 10.0)  # multiples of the scenario's G tried
+
+
+def compensation(
+    name: str, scenario_name: str = "paper_case", seconds: float = 25.0, seed: int = 0
+) -> list[Compensation]:
+    """Run the paper's fault estimator in closed loop on one robot (smooth commands, η at
+    its bound) for the scenario's G and larger ones, until the loop no longer rings.
+
+    With a per-period gain h/G = 1 (the paper's G = 0.01 at h = 0.01 s) the loop is
+    deadbeat on an integrator and marginal on any robot with lag: healthy ‖φ̂‖ then
+    grows far beyond its ideal-plant bound and feeds the robot's commands.
+    """
+    import mujoco
+
+    from .onboard.fault_estimator import estimate_faults
+    from .onboard.thresholds import estimator_gain
+    from .scenario import load_scenario
+    from .sim import robots, scene
+    from .sim.plant import Plant
+
+    s = load_scenario(scenario_name)
+    robot = robots.get(name, where="MODEL")
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
+    nsub = round(CONTROL_PERIOD / TIMESTEP)
+    K = np.ascontiguousarray(s.gains.K, float)
+    g0 = float(np.asarray(s.gains.G)[0, 0])
+    eta_bar = s.noise.eta_bar
+    out = []
+    for factor in G_CANDIDATES:
+        g = g0 * factor
+        data = Plant.initial_data(sc)
+        drive = robot.adapter(sc, data, CONTROL_PERIOD)
+        prog = programme(drive.command_limit)
+        steps = min(len(prog.u) - prog.startup, round(seconds / CONTROL_PERIOD))
+        u_all = prog.u[prog.startup : prog.startup + steps]
+        rng = np.random.default_rng(seed)
+        ang = rng.uniform(0, 2 * np.pi, steps)
+        eta = eta_bar * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        site = int(sc.site[0])
+        x_m = data.site_xpos[site][:2][None] + eta[:1]
+        z, int_e = x_m.copy(), np.zeros((1, 2))
+        phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
+        g_inv = np.eye(2) / g
+        ids = drive.controlled()[0]
+        norms = np.empty(steps)
+        for k in range(steps):
+            x_m = data.site_xpos[site][:2][None] + eta[k]
+            u = u_all[k][None]
+            estimate_faults(
+                x_m,
+                u,
+                z,
+                int_e,
+                phi,
+                applied,
+                K,
+                g_inv,
+                CONTROL_PERIOD,
+                drive.command_limit,
+                1.0,
+                u_bar,
+            )
+            norms[k] = np.linalg.norm(phi)
+            data.ctrl[ids] = drive.command(u_bar)[0]
+            mujoco.mj_step(sc.model, data, nstep=nsub)
+        settled = norms[round(1.0 / CONTROL_PERIOD) :]  # after the first second
+        ideal = estimator_gain(K, g * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0)
+        result = Compensation(g, float(np.percentile(settled, 99)), float(settled.max()), ideal)
+        out.append(result)
+        if not result.rings:
+            break
+    return out
+
+
+def compensation_report(results: list[Compensation]) -> tuple[str, bool]:
+    """The line to print about the compensation loop, and whether it is a warning."""
+    first, last = results[0], results[-1]
+    if not first.rings:
+        return (
+            f"compensation loop (G = {first.G:g} I): healthy |phi_hat| p99 "
+            f"{first.phi_p99:.3g} m/s against {first.ideal:.3g} m/s on an ideal plant "
+            "(it does not ring)",
+            False,
+        )
+    fix = (
+        f"--set gains.G={last.G:g} keeps it at {last.phi_p99:.3g} m/s (ideal plant "
+        f"{last.ideal:.3g})"
+        if not last.rings
+        else f"even G = {last.G:g} I does not calm it"
+    )
+    return (
+        f"the compensation loop rings on this robot at G = {first.G:g} I: healthy |phi_hat| "
+        f"reaches {first.phi_p99:.3g} m/s (p99; max {first.phi_max:.3g}) against "
+        f"{first.ideal:.3g} m/s on an ideal plant, and the robot's commands carry it; {fix}",
+        True,
+    )
+
+
+# --------------------------------------------------------------------------- writing
+
+
 def write(path: Path, cal: Calibration) -> None:
-    """Store the measured mismatch and the recommended ξ̄ in the model file's <custom>."""
-    text = path.read_text()
-    for key, value in (("dftc_mismatch", cal.smooth_max), ("dftc_xi_bar", cal.recommended_xi_bar)):
-        line = f'<numeric name="{key}" data="{value:.6g}"/>'
-        pattern = re.compile(rf'<numeric name="{key}" data="[^"]*"\s*/>')
-        if pattern.search(text):
-            text = pattern.sub(line, text)
-        elif "<custom>" in text:
-            text = text.replace("<custom>", f"<custom>\n    {line}", 1)
+    """Store the calibration: the ``[calibration]`` table of a robot file, or the
+    ``<custom>`` numerics of an MJCF of the older contract (through MjSpec)."""
+    if path.name.endswith(".toml"):
+        _write_robot_file(path, cal.table())
+    else:
+        _write_mjcf(path, {"mismatch": cal.smooth_max, "xi_bar": cal.recommended_xi_bar})
+
+
+def _atomic(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _write_robot_file(path: Path, values: dict[str, float]) -> None:
+    """Replace (or add) the ``[calibration]`` table; every other line stays as it was."""
+    lines = path.read_text().splitlines()
+    start = next((i for i, ln in enumerate(lines) if ln.strip().startswith("[calibration]")), None)
+    body = [f"{k} = {v:.6g}" for k, v in values.items()]
+    table = ["[calibration]  # python -m dftc_mujoco.calibrate --write", *body]
+    if start is None:
+        new = [*lines, "", *table]
+    else:
+        end = next(
+            (i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")),
+            len(lines),
+        )
+        new = lines[:start] + table + ([""] if end < len(lines) else []) + lines[end:]
+    text = "\n".join(new) + "\n"
+    tomllib.loads(text)  # never write a file that does not read back
+    _atomic(path, text)
+
+
+def _write_mjcf(path: Path, values: dict[str, float]) -> None:
+    import mujoco
+
+    spec = mujoco.MjSpec.from_file(str(path))
+    for key, value in values.items():
+        name = f"dftc_{key}"
+        found = [n for n in spec.numerics if n.name == name]
+        for extra in found[1:]:  # an earlier tool may have left duplicates
+            spec.delete(extra)
+        if found:
+            found[0].data = [float(value)]
         else:
-            raise ScenarioError(f"{path}: no <custom> block to write {key} into")
-    path.write_text(text)
+            spec.add_numeric(name=name, data=[float(value)])
+    text = spec.to_xml()
+    _atomic(path, text)
 
 
 def report(cal: Calibration) -> str:
     """The table printed by the command."""
     mm = 1000.0
-    return "\n".join(
-        [
-            f"model {cal.model}: ‖ẋ − u‖ of the controlled point over {cal.samples} commands "
-            f"at {1 / CONTROL_PERIOD:g} Hz ({cal.jump_samples} within {JUMP_WINDOW:g} s of a jump)",
-            f"{'':24}{'max':>10}{'99th pct':>10}   [mm/s]",
-            f"{'smooth commands':24}{cal.smooth_max * mm:10.2f}{cal.smooth_p99 * mm:10.2f}",
-            f"{'with command jumps':24}{cal.all_max * mm:10.2f}{cal.all_p99 * mm:10.2f}",
-            f"recommended xi_bar: {cal.recommended_xi_bar:g} m/s "
-            f"(smooth maximum rounded up, at least the paper's {PAPER_XI_BAR:g})",
-        ]
-    )
+    lines = [
+        f"model {cal.model}: ‖ẋ − u‖ of the controlled point over {cal.samples} commands at "
+        f"{1 / CONTROL_PERIOD:g} Hz within ±{cal.command_limit:.3g} m/s per axis "
+        f"({cal.jump_samples} while responding to a jump)",
+        f"start-up: {cal.startup_time:.2f} s to settle, mismatch up to "
+        f"{cal.startup_mismatch * mm:.2f} mm/s (not counted below)",
+        f"{'':24}{'max':>10}{'99th pct':>10}   [mm/s]",
+        f"{'smooth commands':24}{cal.smooth_max * mm:10.2f}{cal.smooth_p99 * mm:10.2f}",
+        f"{'with command jumps':24}{cal.all_max * mm:10.2f}{cal.all_p99 * mm:10.2f}",
+        f"response to a jump: {cal.response_time:.2f} s; actuators clamped "
+        f"{cal.saturation:.1%} of the commands",
+        f"recommended xi_bar: {cal.recommended_xi_bar:g} m/s "
+        f"(smooth maximum rounded up, at least the paper's {PAPER_XI_BAR:g})",
+    ]
+    lines += [f"WARNING: {n}" for n in cal.notes]
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -185,23 +504,42 @@ def main(argv: list[str] | None = None) -> int:
     p = cli.parser(
         "dftc_mujoco.calibrate", "dftc-calibrate", "Measure a robot model's mismatch from ẋ = u."
     )
-    p.add_argument("model", help=f"a model name ({', '.join(robots.available())}) or an MJCF path")
+    p.add_argument(
+        "model",
+        help=f"a built-in model ({', '.join(robots.available())}), a robot file "
+        "(NAME.robot.toml) or an MJCF path",
+    )
     p.add_argument(
         "--write",
         action="store_true",
-        help="store the measured mismatch and the recommended xi_bar in the model file",
+        help="store the results in the robot file's [calibration] table",
+    )
+    p.add_argument(
+        "--scenario",
+        default="paper_case",
+        help="the scenario whose thresholds the detectability warning uses (default paper_case)",
     )
     args = p.parse_args(argv)
     try:
         cal = measure(args.model)
         print(report(cal))
+        line, warn = detectability(cal, args.scenario, args.model)
+        print(f"WARNING: {line}" if warn else line)
+        loop_results = compensation(args.model, args.scenario)
+        line, warn = compensation_report(loop_results)
+        print(f"WARNING: {line}" if warn else line)
+        cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
         if args.write:
-            path = robots.get(args.model, where="MODEL").path
+            path = robots.resolve(args.model, where="MODEL")
             write(path, cal)
+            robots.load(path)  # it must still load
             print(f"written to {path}")
     except ScenarioError as exc:
         cli.print_error(exc)
         return 2
+    except OSError as exc:
+        print(f"error: cannot write the calibration: {exc}", file=sys.stderr)
+        return 5
     return 0
 
 

@@ -12,6 +12,7 @@ from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.paths import MODELS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
+from dftc_mujoco.sim.plant import Plant
 from tests.conftest import make, scenario_dict
 
 BOX_ROBOT = """<mujoco model="boxbot">
@@ -48,8 +49,10 @@ def test_registry_lists_models_and_explains_unknown_names():
     ("change", "message"),
     [
         (
-            lambda t: t.replace("<custom>", "<option timestep='0.01'/>\n  <custom>"),
-            "<option> is not allowed in a robot file",
+            lambda t: t.replace('<site name="center"/>', "").replace(
+                "</worldbody>", '<site name="center"/></worldbody>'
+            ),
+            "site 'center' must be on body 'base'",
         ),
         (lambda t: t.replace('<site name="center"/>', ""), "no site named 'center'"),
         (
@@ -57,7 +60,7 @@ def test_registry_lists_models_and_explains_unknown_names():
             "dftc_adapter: expected one of holonomic, diffdrive",
         ),
         (lambda t: t.replace('name="vy"', 'name="vz"'), "missing: vy"),
-        (lambda t: t.replace("<worldbody>", "<worldbody"), "not valid XML"),
+        (lambda t: t.replace("<worldbody>", "<worldbody"), "MuJoCo cannot read bad.xml: XML"),
     ],
 )
 def test_contract_violations_are_one_clear_line(tmp_path, change, message):
@@ -104,12 +107,13 @@ def test_diffdrive_moves_only_through_wheel_contact():
             if model.geom(g).name.endswith(("tyre_l", "tyre_r")):
                 model.geom_friction[g] = floor_friction
                 model.geom_priority[g] = 1
-        data = mujoco.MjData(model)
+        data = Plant.initial_data(sc)
+        start = data.site_xpos[sc.site[0], 0]
         adapter = dd.adapter(sc, data)
         for _ in range(200):
             data.ctrl[sc.actuator[0]] = adapter.command(np.array([[0.2, 0.0]]))[0]
             mujoco.mj_step(model, data, nstep=5)
-        return data.site_xpos[sc.site[0], 0] - dd.params["offset"]
+        return data.site_xpos[sc.site[0], 0] - start
 
     assert drive([1.2, 0.01, 0.0005]) > 0.3  # 2 s at 0.2 m/s
     assert abs(drive([0.0, 0.0, 0.0])) < 0.01  # no friction, no motion: wheels spin in place
@@ -120,10 +124,10 @@ def test_diffdrive_faults_act_on_the_wheels(kind):
     s = make(scenario_dict())
     dd = robots.get("diffdrive")
     sc = scene.compose(dd, np.asarray(s.team.initial_positions))
-    data = mujoco.MjData(sc.model)
+    data = Plant.initial_data(sc)
     adapter = dd.adapter(sc, data)
     inj = sim_faults.ActuatorFaults(
-        sc.model, (scenario.Fault(1, kind, 1.0, np.array([0.1, -0.1]), 0.1),), sc.actuator, adapter
+        sc.model, (scenario.Fault(1, kind, 1.0, np.array([0.1, -0.1]), 0.1),), adapter
     )
     vel = np.zeros(6)
     u = np.tile([0.15, 0.05], (4, 1))
@@ -206,9 +210,12 @@ def _toml(d, prefix=""):
     return "\n".join(lines)
 
 
-@pytest.mark.parametrize("model", ["hexbot", "diffdrive"])
-def test_paper_case_outcome_with_every_robot_model(model):
-    s = scenario.load("paper_case").with_overrides(robot_model=model)
+@pytest.mark.parametrize(("model", "G"), [("hexbot", 0.01), ("diffdrive", 0.02)])
+def test_paper_case_outcome_with_every_robot_model(model, G):
+    """paper_case with each built-in model, at the G its calibration recommends (the
+    paper's 0.01 makes the diffdrive's compensation loop ring)."""
+    assert robots.get(model).calibration["compensation_G"] == G
+    s = scenario.load_scenario("paper_case", {"team.robot_model": model, "gains.G": G})
     r = loop.simulate(s)
     out = r.summary
     assert out["status"] == "ok" and out["warnings"] == []

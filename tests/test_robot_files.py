@@ -1,0 +1,478 @@
+"""Real robots unchanged: robot files, every actuator kind, keyframes, checks before the run.
+
+The test robots in ``tests/data/robots`` are written for this project with the
+conventions of published MJCF robots (<compiler angle="radian" meshdir>, <default>
+classes, unnamed collision geoms in group 3, keyframes, gear, position servos, a
+free-joint base carrying an arm); no third-party file is copied.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from dftc_mujoco import calibrate, checks, loop, run, scenario
+from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.sim import faults as sim_faults
+from dftc_mujoco.sim import robots, scene
+from dftc_mujoco.sim.plant import Plant
+from tests.conftest import make, scenario_dict
+
+DATA = Path(__file__).parent / "data" / "robots"
+HOLOBASE = DATA / "holobase.robot.toml"
+MOBILEARM = DATA / "mobilearm.robot.toml"
+# what a big robot needs in paper_case: room in the formation (the checks say how much)
+# and start positions at the slots
+BIG = {
+    "mission.formation.side": 1.0,
+    "team.initial_positions": {"layout": "formation", "jitter": 0.02},
+}
+
+MOTORBOX = """<mujoco model="motorbox">
+  <worldbody>
+    <body name="cart" pos="0 0 0.05">
+      <joint name="slide_x" type="slide" axis="1 0 0" damping="0.5"/>
+      <joint name="slide_y" type="slide" axis="0 1 0" damping="0.5"/>
+      <geom type="box" size="0.08 0.08 0.04" mass="3"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor name="fx" joint="slide_x" gear="2" ctrlrange="-40 40"/>
+    <motor name="fy" joint="slide_y" gear="2" ctrlrange="-40 40"/>
+  </actuator>
+</mujoco>
+"""
+
+POSITION_BOX = """<mujoco model="posbox">
+  <custom><text name="dftc_adapter" data="holonomic"/></custom>
+  <worldbody>
+    <body name="base" pos="0 0 0.04">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="y" type="slide" axis="0 1 0"/>
+      <geom type="box" size="0.07 0.05 0.04" mass="1.5"/>
+      <site name="center"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="vx" joint="x" kp="20000" kv="400"/>
+    <position name="vy" joint="y" kp="20000" kv="400"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def robot_file(tmp_path: Path, text: str, mjcf: str = "", name: str = "bot") -> Path:
+    if mjcf:
+        (tmp_path / f"{name}.xml").write_text(mjcf)
+    path = tmp_path / f"{name}.robot.toml"
+    path.write_text(text)
+    return path
+
+
+# --------------------------------------------------------------------------- the robot file
+
+
+HOLO_FILE = f"""mjcf = "{DATA / "holobase" / "holobase.xml"}"
+base = "base_link"
+drive = "holonomic"
+keyframe = "home"
+[holonomic]
+x = "joint_x"
+y = "joint_y"
+yaw = "joint_th"
+"""
+
+
+@pytest.mark.parametrize(
+    ("change", "key", "message"),
+    [
+        (lambda t: 'colour = "red"\n' + t, "colour", "unknown key"),
+        (lambda t: t.replace('base = "base_link"\n', ""), "base", "missing key"),
+        (lambda t: t.replace('"base_link"', '"base_lnk"'), "base", "no body 'base_lnk'"),
+        (lambda t: t.replace('x = "joint_x"', 'x = "jx"'), "holonomic.x", "no actuator 'jx'"),
+        (lambda t: t.replace('"home"', '"park"'), "keyframe", "no keyframe 'park'"),
+        (lambda t: t.replace('drive = "holonomic"', 'drive = "legs"'), "drive", "expected one of"),
+        (lambda t: t + "[diffdrive]\nleft = 'a'\n", "diffdrive", "goes with drive = 'diffdrive'"),
+        (lambda t: t.replace('x = "joint_x"', 'x = "joint_th"'), "holonomic.x", "slide joint"),
+        (
+            lambda t: t.replace('drive = "holonomic"', 'drive = "diffdrive"').replace(
+                '[holonomic]\nx = "joint_x"\ny = "joint_y"\nyaw = "joint_th"',
+                '[diffdrive]\nleft = "joint_x"\nright = "joint_y"',
+            ),
+            "drive",
+            "needs a free joint",
+        ),
+    ],
+)
+def test_robot_file_problems_are_one_line_naming_file_and_key(tmp_path, change, key, message):
+    path = robot_file(tmp_path, change(HOLO_FILE))
+    with pytest.raises(ScenarioError) as info:
+        robots.get(str(path))
+    text = str(info.value)
+    assert text.startswith(f"{path}: {key}:") and message in text, text
+    assert "\n" not in text
+
+
+def test_a_bad_robot_file_on_the_command_line_is_one_line_exit_2(tmp_path):
+    path = robot_file(tmp_path, HOLO_FILE.replace('"joint_y"', '"nope"'))
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dftc_mujoco.run",
+            "paper_case",
+            "--robot",
+            str(path),
+            "--no-video",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"error: {path}: holonomic.y: no actuator 'nope' in holobase.xml "
+        "(actuators: joint_x, joint_y, joint_th)"
+    ]
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_third_party_mjcf_without_a_robot_file_says_what_to_write(tmp_path):
+    path = tmp_path / "base.xml"
+    path.write_text((DATA / "holobase" / "holobase.xml").read_text())
+    with pytest.raises(ScenarioError, match=r"no body named 'base'.*write NAME\.robot\.toml"):
+        robots.get(str(path))
+
+
+# --------------------------------------------------------------------------- the model as it is
+
+
+def test_compiler_defaults_assets_and_options_of_the_model_are_kept():
+    holo = robots.get(str(HOLOBASE))
+    # the bumper is turned by 1.5708 rad: along x it reaches 0.32 m (in degrees: 0.25 m)
+    assert holo.footprint_radius == pytest.approx(0.32, abs=0.002)
+    assert [i.kind for i in holo.driven_infos] == ["position", "position"]
+    sc = scene.compose(holo, np.zeros((2, 2)))
+    m = sc.model
+    assert m.nmesh == 4 and sc.notes == ()  # meshes from meshdir; its <option> is the arena's
+    base = sc.body[0]
+    geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == base]
+    assert m.body_mass[base] == pytest.approx(25.0)  # <default><geom mass="0"/>, one of 25 kg
+    assert sorted(set(m.geom_group[geoms])) == [2, 3]  # the classes' groups
+    arm = robots.get(str(MOBILEARM))
+    notes = scene.compose(arm, np.zeros((1, 2))).notes
+    assert len(notes) == 1 and "cone=elliptic" in notes[0] and "arena's options apply" in notes[0]
+
+
+def test_unnamed_collision_geoms_meet_cylinders_and_follow_robot_contacts():
+    """Bug 1: collision bits by body membership, not by geom name."""
+    holo = robots.get(str(HOLOBASE))
+    cylinder = scenario.Obstacle(np.array([1.0, 0.0]), 0.1, 0.5, 0.6)
+
+    def drive(positions, commands, contacts, obstacles=()):
+        sc = scene.compose(holo, np.array(positions), obstacles, robot_contacts=contacts)
+        data = Plant.initial_data(sc)
+        d = holo.adapter(sc, data)
+        for _ in range(200):  # 2 s
+            data.ctrl[d.controlled().ravel()] = d.command(np.array(commands)).ravel()
+            mujoco.mj_step(sc.model, data, nstep=5)
+        return data.site_xpos[sc.site][:, :2]
+
+    x = drive([[0.0, 0.0]], [[0.5, 0.0]], True, (cylinder,))  # 1 m in 2 s, unless stopped
+    assert 0.6 < x[0, 0] < 1.0 - 0.1 - 0.2  # stopped at the cylinder by the shell's surface
+    # two robots driven at each other: stopped by contact, or through each other without it
+    start, push = [[-0.5, 0.0], [0.5, 0.0]], [[0.5, 0.0], [-0.5, 0.0]]
+    apart = np.linalg.norm(np.diff(drive(start, push, True), axis=0))
+    through = drive(start, push, False)
+    assert apart > 2 * 0.2 and through[0, 0] > through[1, 0] + 0.5
+
+
+def test_keyframe_pose_is_the_start_and_undriven_actuators_hold_it():
+    arm = robots.get(str(MOBILEARM))
+    s = make(scenario_dict()).with_overrides(robot_model=str(MOBILEARM), duration=3.0)
+    s = scenario.load_scenario(
+        "paper_case", {**BIG, "team.robot_model": str(MOBILEARM), "duration": 3.0, "gains.G": 0.05}
+    )
+    with loop.Simulation(s) as sim:
+        m, data = sim.model, sim.data
+        joints = [
+            m.joint(f"robot{i}/{j}").qposadr[0] for i in (1, 4) for j in ("shoulder_pitch", "elbow")
+        ]
+        np.testing.assert_allclose(data.qpos[joints], [-1.2, 2.0, -1.2, 2.0])
+        start = data.site_xpos[sim.scene.site][:, :2].copy()
+        np.testing.assert_allclose(start, np.asarray(s.team.initial_positions), atol=1e-9)
+        sim.run(progress=False)
+        assert np.abs(data.qpos[joints] - [-1.2, 2.0, -1.2, 2.0]).max() < 0.05  # held by ctrl
+        assert sim.result().summary["status"] == "ok"
+    holo = scenario.load_scenario(
+        "paper_case", {**BIG, "team.robot_model": str(HOLOBASE), "duration": 3.0}
+    )
+    with loop.Simulation(holo) as sim:
+        sim.run(progress=False)
+        yaw = sim.data.qpos[[sim.model.joint(f"robot{i}/joint_th").qposadr[0] for i in (1, 2)]]
+        np.testing.assert_allclose(yaw, 0.3, atol=0.01)  # the yaw is held at its keyframe
+    assert arm.init_qpos[-3:] == (0.0, -1.2, 2.0)
+
+
+def test_wheel_gear_and_axle_direction_are_read_from_the_model():
+    """Bug 4 (diffdrive): the adapter honours gear="3" and a wheel whose axis points back."""
+    arm = robots.get(str(MOBILEARM))
+    assert arm.params["sign_right"] == -1.0 and arm.params["sign_left"] == 1.0
+    assert arm.params["wheel_radius"] == pytest.approx(0.06)
+    assert arm.params["axle_width"] == pytest.approx(0.31)
+    assert arm.params["offset"] == pytest.approx(0.15)
+    assert [i.gear for i in arm.driven_infos] == [3.0, 3.0]
+    sc = scene.compose(arm, np.zeros((1, 2)))
+    data = Plant.initial_data(sc)
+    d = arm.adapter(sc, data)
+    x0 = data.site_xpos[sc.site[0], :2].copy()
+    for _ in range(300):  # 3 s at 0.2 m/s forward, then sideways
+        u = np.array([[0.2, 0.0]]) if data.time < 2.0 else np.array([[0.0, 0.2]])
+        data.ctrl[d.controlled()[0]] = d.command(u)[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+    moved = data.site_xpos[sc.site[0], :2] - x0
+    np.testing.assert_allclose(moved, [0.4, 0.2], atol=0.03)
+
+
+MOTOR_FILE = """mjcf = "bot.xml"
+base = "cart"
+drive = "holonomic"
+[holonomic]
+x = "fx"
+y = "fy"
+[motor]
+time_constant = 0.04
+"""
+
+
+@pytest.mark.parametrize("kind", ["velocity", "position", "motor"])
+@pytest.mark.parametrize("fault", ["stop", "bias"])
+def test_faults_act_through_every_actuator_kind(tmp_path, kind, fault):
+    model = {
+        "velocity": lambda: robots.get("disk"),
+        "position": lambda: robots.get(str(HOLOBASE)),
+        "motor": lambda: robots.get(str(robot_file(tmp_path, MOTOR_FILE, MOTORBOX))),
+    }[kind]()
+    assert {i.kind for i in model.driven_infos} == {kind}
+    sc = scene.compose(model, np.array([[0.0, 0.0], [2.0, 0.0]]))
+    data = Plant.initial_data(sc)
+    d = model.adapter(sc, data)
+    inj = sim_faults.ActuatorFaults(
+        sc.model, (scenario.Fault(1, fault, 1.0, np.array([0.1, -0.1]), 0.0),), d
+    )
+    u = np.array([[0.2, 0.1], [0.2, 0.1]])
+    x = []
+    for k in range(400):  # 4 s
+        inj.apply(k * 0.01)
+        if k in (200, 399):
+            x.append(data.site_xpos[sc.site][:, :2].copy())
+        data.ctrl[d.controlled().ravel()] = d.command(u).ravel()
+        mujoco.mj_step(sc.model, data, nstep=5)
+    v = (x[1] - x[0]) / 1.99  # mean velocity over the last 2 s
+    np.testing.assert_allclose(v[0], u[0], atol=0.01)  # the healthy robot
+    if fault == "stop":
+        assert np.linalg.norm(v[1]) < 0.005  # braked (or held) where it stopped
+    else:
+        np.testing.assert_allclose(v[1], u[1] + [0.1, -0.1], atol=0.01)
+    inj.clear()
+
+
+def test_position_servos_under_the_old_contract_are_driven_as_position_servos(tmp_path):
+    """Bug 4: position servos named vx / vy passed as velocity ones and the run died."""
+    path = tmp_path / "posbox.xml"
+    path.write_text(POSITION_BOX)
+    box = robots.get(str(path))
+    assert [i.kind for i in box.driven_infos] == ["position", "position"]
+    s = scenario.load_scenario("paper_case", {"team.robot_model": str(path), "duration": 48.0})
+    r = loop.simulate(s)
+    assert r.summary["status"] == "ok"
+    assert {d["robot"] for d in r.summary["detections"]} == {1}  # only the stopped robot
+    assert r.summary["min_obstacle_clearance"] > 0
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def test_calibrate_writes_the_robot_file_never_the_mjcf(tmp_path, capsys):
+    mjcf = (DATA / "holobase" / "holobase.xml").read_text()
+    (tmp_path / "assets").mkdir()
+    for f in (DATA / "holobase" / "assets").iterdir():
+        (tmp_path / "assets" / f.name).write_bytes(f.read_bytes())
+    path = robot_file(
+        tmp_path,
+        HOLO_FILE.replace(str(DATA / "holobase" / "holobase.xml"), "bot.xml") + "\n# the end\n",
+        mjcf,
+    )
+    before = (tmp_path / "bot.xml").read_bytes()
+    assert calibrate.main([str(path), "--write"]) == 0
+    out = capsys.readouterr().out
+    assert "start-up:" in out and "response to a jump" in out and "compensation loop" in out
+    assert (tmp_path / "bot.xml").read_bytes() == before
+    holo = robots.get(str(path))
+    assert 0.005 < holo.xi_bar < 0.05 and holo.calibration["mismatch"] > 0.005
+    assert path.read_text().count("[calibration]") == 1 and "# the end" in path.read_text()
+    assert calibrate.main([str(path), "--write"]) == 0  # again: replaced, not added
+    assert path.read_text().count("[calibration]") == 1
+
+
+def test_calibrate_writes_an_mjcf_saved_by_mjspec(tmp_path):
+    """Bug 2: a regex missed the size attribute MjSpec writes and duplicated the entry."""
+    spec = mujoco.MjSpec.from_string(POSITION_BOX)
+    spec.add_numeric(name="dftc_xi_bar", data=[0.005])
+    path = tmp_path / "saved.xml"
+    path.write_text(spec.to_xml())
+    assert 'size="1"' in path.read_text()
+    assert calibrate.main([str(path), "--write"]) == 0
+    again = mujoco.MjSpec.from_file(str(path))
+    assert [n.name for n in again.numerics].count("dftc_xi_bar") == 1
+    assert robots.get(str(path)).mismatch > 0
+
+
+def test_calibrate_finds_a_ringing_compensation_loop_and_the_gain_that_calms_it():
+    ring = calibrate.compensation("diffdrive")
+    assert ring[0].rings and ring[0].phi_p99 > 5 * ring[0].ideal  # G = 0.01: it rings
+    assert not ring[-1].rings and ring[-1].G > 0.01
+    calm = calibrate.compensation("disk")
+    assert len(calm) == 1 and not calm[0].rings
+
+
+def test_calibration_separates_start_up_jumps_and_saturation():
+    prog = calibrate.programme(limit=0.25)
+    assert np.abs(prog.u).max() <= 0.8 * 0.25 + 1e-12  # within the command range
+    mismatch = np.full(len(prog.u), 0.001)
+    mismatch[:50] = 0.3  # a robot that drops onto its wheels for 0.5 s
+    for j in prog.jumps:
+        mismatch[j : j + 150] = 0.2  # and takes 1.5 s to follow a jump
+    clamped = np.zeros(len(prog.u), bool)
+    clamped[prog.startup + 100 : prog.startup + 110] = True
+    cal = calibrate._analyse("x", prog, mismatch, clamped, 0.25)
+    assert cal.startup_time == pytest.approx(0.5) and cal.startup_mismatch == 0.3
+    assert cal.response_time == pytest.approx(1.5)
+    assert cal.smooth_max == 0.001 and cal.recommended_xi_bar == 0.005
+    assert any("clamped" in n for n in cal.notes)
+
+
+# --------------------------------------------------------------------------- before the run
+
+
+def test_a_big_footprint_raises_the_activation_distance_with_the_safe_distance():
+    """Bug 3: d was raised for the footprint but the activation distance was not."""
+    holo = robots.get(str(HOLOBASE))
+    s = scenario.load("paper_case")
+    cfg = loop.team_config(s, holo)
+    d = 0.12 + holo.footprint_radius + checks.CLEARANCE
+    np.testing.assert_allclose(cfg.obstacle_safe, d)
+    np.testing.assert_allclose(cfg.obstacle_activation - cfg.obstacle_safe, 0.45 - 0.37)
+
+
+def _refusals(overrides, robot="disk"):
+    s = scenario.load_scenario("paper_case", {"team.robot_model": robot, **overrides})
+    with pytest.raises(ScenarioError) as info:
+        loop.Simulation(s)
+    return str(info.value).splitlines()
+
+
+def test_impossible_set_ups_are_refused_before_simulating():
+    lines = _refusals({}, str(HOLOBASE))  # paper_case as it is, with a 0.64 m robot
+    assert any("mission.formation.side" in ln and "use side >= 0.66" in ln for ln in lines)
+    assert any("team.initial_positions" in ln and "hulls overlap" in ln for ln in lines)
+    inside = _refusals(
+        {"team.initial_positions": [[1.2, 0.55], [0.1, -0.45], [0.35, 0.1], [-0.1, 0.4]]}
+    )
+    assert inside == [
+        f"{scenario.resolve('paper_case')}: team.initial_positions: robot 1 starts with its hull "
+        "0.170 m inside cylinder 1 (its disk footprint radius is 0.100 m); move it or the cylinder"
+    ]
+    assert (
+        "beyond the disk robots' command range" in _refusals({"mission.centroid.speed": 100.0})[0]
+    )
+    assert (
+        "no actuator offset produces that"
+        in _refusals({"faults": [{"robot": 1, "kind": "bias", "t": 5.0, "value": [1e6, 0.0]}]})[0]
+    )
+    t0 = time.perf_counter()
+    big = _refusals(
+        {
+            "team.robots": 1000,
+            "team.initial_positions": {"layout": "formation"},
+            "team.graph": {"family": "ring_chords", "chords": [2]},
+            "duration": 1e9,
+        }
+    )
+    assert len(big) == 1 and "GB" in big[0] and "reduce" in big[0]
+    assert time.perf_counter() - t0 < 20
+
+
+def test_what_can_run_but_deserves_a_look_is_warned_about():
+    s = scenario.load_scenario(
+        "paper_case",
+        {
+            **BIG,
+            "team.robot_model": str(HOLOBASE),
+            "mission.formation.side": 0.7,
+            "faults": [{"robot": 2, "kind": "bias", "t": 0.5, "value": [0.95, 0.0]}],
+        },
+    )
+    with loop.Simulation(s) as sim:
+        warnings = [e["message"] for e in sim.events.items if e["kind"] == "warning"]
+    assert any("safe_distance: raised from 0.37 to 0.461" in w for w in warnings)
+    assert any("may run into a teammate" in w for w in warnings)  # the squeeze at a cylinder
+    assert any("cannot be compensated" in w for w in warnings)  # 0.95 + 0.1 > 1 m/s
+
+
+# --------------------------------------------------------------------------- the paper's outcome
+
+
+def _outcome(r):
+    out = r.summary
+    d1 = [d for d in out["detections"] if d["robot"] == 1]
+    assert sorted(d["by"] for d in d1) == [1, 2, 3, 4]  # flagged by every teammate
+    assert out["detections"] == d1  # nobody else flagged
+    assert [e["robot"] for e in out["exclusions"]] == [1]
+    tri = r.log["x"][-1, 1:]
+    sides = np.linalg.norm(tri - np.roll(tri, -1, axis=0), axis=1)
+    assert np.all(np.abs(sides - 1.0) <= 0.02), sides  # a triangle formed
+    assert out["min_obstacle_clearance"] > 0.0  # no hull inside a cylinder
+    assert out["margin"] < 1
+
+
+def test_a_published_style_holonomic_base_gives_the_paper_outcome(tmp_path):
+    """Done-when of issue 11, with the project's own model of a position-servo base."""
+    out = tmp_path / "run"
+    args = [
+        "paper_case",
+        "--robot",
+        str(HOLOBASE),
+        "--out",
+        str(out),
+        "--no-video",
+        "--no-progress",
+    ]
+    for k, v in BIG.items():
+        args += ["--set", f"{k}={json.dumps(v) if not isinstance(v, dict) else _inline(v)}"]
+    assert run.main(args) == 0
+    r = scenario.load_scenario(out / "scenario.toml")
+    assert r.team.robot_model == str(HOLOBASE.resolve())
+    from dftc_mujoco import open_run
+
+    _outcome(open_run(out))
+
+
+def test_a_mobile_manipulator_gives_the_paper_outcome_with_its_calibrated_gain():
+    s = scenario.load_scenario(
+        "paper_case", {**BIG, "team.robot_model": str(MOBILEARM), "gains.G": 0.05}
+    )
+    _outcome(loop.simulate(s))
+
+
+def _inline(d):
+    return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items()) + "}"
