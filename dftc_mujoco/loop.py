@@ -269,6 +269,16 @@ class Simulation:
             obstacles=obstacles.reshape(-1, 4),
         )
         self.events = Events()
+        if s.noise.xi_bar is None and "xi_bar" not in model.calibration:
+            self.events.add(
+                0.0,
+                "warning",
+                message=(
+                    f"the {model.name} model is not calibrated: xi_bar = {xi_bar:g} m/s is the "
+                    "paper's value, not a measurement of this robot (python -m "
+                    f"dftc_mujoco.calibrate {model.path} --write)"
+                ),
+            )
         if xi_bar < model.mismatch:
             self.events.add(
                 0.0,

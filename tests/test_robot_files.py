@@ -198,7 +198,6 @@ def test_unnamed_collision_geoms_meet_cylinders_and_follow_robot_contacts():
 
 def test_keyframe_pose_is_the_start_and_undriven_actuators_hold_it():
     arm = robots.get(str(MOBILEARM))
-    s = make(scenario_dict()).with_overrides(robot_model=str(MOBILEARM), duration=3.0)
     s = scenario.load_scenario(
         "paper_case", {**BIG, "team.robot_model": str(MOBILEARM), "duration": 3.0, "gains.G": 0.05}
     )
@@ -427,6 +426,7 @@ def test_what_can_run_but_deserves_a_look_is_warned_about():
     assert any("safe_distance: raised from 0.37 to 0.461" in w for w in warnings)
     assert any("may run into a teammate" in w for w in warnings)  # the squeeze at a cylinder
     assert any("cannot be compensated" in w for w in warnings)  # 0.95 + 0.1 > 1 m/s
+    assert any("holobase model is not calibrated" in w for w in warnings)
 
 
 # --------------------------------------------------------------------------- the paper's outcome
