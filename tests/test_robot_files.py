@@ -23,7 +23,6 @@ from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
-from tests.conftest import make, scenario_dict
 
 DATA = Path(__file__).parent / "data" / "robots"
 HOLOBASE = DATA / "holobase.robot.toml"
