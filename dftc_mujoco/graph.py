@@ -34,8 +34,9 @@ class Graph:
         return np.diag(a.sum(axis=1)) - a
 
     def in_degree(self) -> np.ndarray:
-        """In-degree ``d_i = |N_i|`` of every robot."""
-        return self.adjacency().sum(axis=1)
+        """In-degree ``d_i = |N_i|`` of every robot (from the edges: no N x N matrix)."""
+        dst = np.fromiter((i for _, i in self.edges), dtype=np.intp, count=len(self.edges))
+        return np.bincount(dst, minlength=self.n).astype(float)
 
     def in_neighbours(self, i: int) -> list[int]:
         """The robots whose messages robot ``i`` receives."""

@@ -398,15 +398,18 @@ def test_impossible_set_ups_are_refused_before_simulating():
         in _refusals({"faults": [{"robot": 1, "kind": "bias", "t": 5.0, "value": [1e6, 0.0]}]})[0]
     )
     t0 = time.perf_counter()
-    big = _refusals(
-        {
-            "team.robots": 1000,
-            "team.initial_positions": {"layout": "formation"},
-            "team.graph": {"family": "ring_chords", "chords": [2]},
-            "duration": 1e9,
-        }
-    )
-    assert len(big) == 1 and "GB" in big[0] and "reduce" in big[0]
+    ring = {"family": "ring_chords", "chords": [2]}
+    for n, duration in ((1000, 1e9), (100_000, 60.0)):  # log and N x N estimates, one line
+        lines = _refusals(
+            {
+                "team.robots": n,
+                "team.initial_positions": {"layout": "formation"},
+                "team.graph": ring,
+                "duration": duration,
+                "faults": [],
+            }
+        )
+        assert len(lines) == 1 and "GB" in lines[0] and "reduce" in lines[0], lines
     assert time.perf_counter() - t0 < 20
 
 
