@@ -478,3 +478,19 @@ def test_a_mobile_manipulator_gives_the_paper_outcome_with_its_calibrated_gain()
 
 def _inline(d):
     return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items()) + "}"
+
+
+def test_the_drift_split_keeps_slow_drift_and_bounds_jumps():
+    h, xi = 0.01, 0.005
+    t = np.arange(300) * h
+    slow = np.stack([0.003 * t, 0.0 * t], axis=1)  # 3 mm/s: within ξ̄, all slow
+    assert calibrate.split_drift(slow, h * xi).max() < 1e-12
+    jump = slow + np.where(t[:, None] >= 1.0, [0.0, 0.005], 0.0)  # a lag turns a jump into 5 mm
+    off = calibrate.split_drift(jump, h * xi)
+    assert off.max() == pytest.approx(0.005, abs=1e-4) and off[-1] < 1e-12  # then caught up
+
+
+def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
+    d = calibrate.drift("disk", runs=1)
+    assert d.period_max > 0.1  # per period the drift is far beyond h ξ̄ (compensation, start-up)
+    assert d.drift_bound < 0.005 < d.startup  # a bounded offset once started

@@ -48,7 +48,9 @@ CALIBRATION_KEYS = (
     "startup_mismatch",  # largest ‖ẋ − u‖ while the robot settles at the start [m/s]
     "startup_time",  # how long it settles [s]
     "response_time",  # time to follow a command jump [s]
-    "drift_bound",  # ē: bounded position offset of the drift (docs/thresholds.md) [m]
+    "drift_bound",  # ē: bounded offset of the drift after the start-up (docs/thresholds.md) [m]
+    "drift_startup",  # ē including the start-up [m]
+    "drift_settle",  # how long the start-up lasts [s]
     "saturation",  # fraction of the programme's commands the actuators clamped
     "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
 )
