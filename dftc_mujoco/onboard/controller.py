@@ -12,6 +12,12 @@ from numba import njit
 from .block import Block, TeamConfig
 
 
+@njit(inline="always")
+def collective_one(vd, kc, xd, xh):  # pragma: no cover - compiled
+    """One entry of ⁱû_g = ẋ_d + k_c(x_d − ⁱx̂) (eq. 15 with J square, NOTES 11)."""
+    return vd + kc * (xd - xh)
+
+
 @njit(cache=True)
 def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compiled
     """ⁱû_g = J⁻¹[σ̇_d + k_c(σ_d − J ⁱx̂)] for every robot i (eq. 15), into ``out`` (M, M, n).
@@ -24,7 +30,7 @@ def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compile
     xh, o = x_hat.reshape(m, m * n), out.reshape(m, m * n)
     for i in range(m):
         for a in range(m * n):
-            o[i, a] = vd[a] + kc * (xd[a] - xh[i, a])
+            o[i, a] = collective_one(vd[a], kc, xd[a], xh[i, a])
 
 
 @njit(cache=True)

@@ -22,38 +22,71 @@ from ..graph import Graph
 from .block import Block, TeamConfig
 
 
+@njit(inline="always")
+def estimate_one(y, s):  # pragma: no cover - compiled
+    """One entry of ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) (eq. 21)."""
+    return y + s
+
+
+@njit(inline="always")
+def advance_one(y, r, ko, dt):  # pragma: no cover - compiled
+    """One entry of ⁱŷ after a period: d/dt ⁱŷ = k_o ⁱr (eq. 19, y-form, forward Euler)."""
+    return y + ko * dt * r
+
+
+@njit(inline="always")
+def residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, i, row):  # pragma: no cover
+    """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ); returns
+    nothing. Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
+    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2)."""
+    m, _, n = y_hat.shape
+    y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
+    for a in range(m * n):
+        row[a] = -in_degree[i] * y[i, a]
+    for e in range(first_edge[i], first_edge[i + 1]):
+        j = src[e]
+        for a in range(m * n):
+            row[a] += y[j, a]
+    for d in range(n):
+        row[i * n + d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
+
+
+@njit(inline="always")
+def row_norms(row, i, n, r_norm):  # pragma: no cover - compiled
+    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``r_norm[i]``."""
+    for k in range(r_norm.shape[1]):
+        acc = 0.0
+        for d in range(n):
+            acc += row[k * n + d] ** 2
+        r_norm[i, k] = np.sqrt(acc)
+
+
 @njit(cache=True)
 def estimate(y_hat, int_u_hat, out):  # pragma: no cover - compiled
     """ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) for every robot (eq. 21), into ``out`` (M, M, n)."""
     y, s, o = y_hat.reshape(-1), int_u_hat.reshape(-1), out.reshape(-1)
     for a in range(y.shape[0]):
-        o[a] = y[a] + s[a]
+        o[a] = estimate_one(y[a], s[a])
 
 
 @njit(cache=True)
 def residual(y_hat, int_u_own, x_m, src, first_edge, in_degree, r, r_norm):  # pragma: no cover
-    """ⁱr = Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m − ⁱŷ) (eq. 35) into ``r`` (M, M, n), ‖ⁱr_k‖ into ``r_norm``.
-
-    Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
-    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2).
-    """
+    """ⁱr (eq. 35) of every robot into ``r`` (M, M, n), ‖ⁱr_k‖ into ``r_norm`` (M, M)."""
     m, _, n = y_hat.shape
-    y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     rr = r.reshape(m, m * n)
     for i in range(m):
-        for a in range(m * n):
-            rr[i, a] = -in_degree[i] * y[i, a]
-        for e in range(first_edge[i], first_edge[i + 1]):
-            j = src[e]
-            for a in range(m * n):
-                rr[i, a] += y[j, a]
+        residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, i, rr[i])
+        row_norms(rr[i], i, n, r_norm)
+
+
+@njit(inline="always")
+def integrate_inputs(int_u_hat, int_u_own, delta_u, u, dt):  # pragma: no cover - compiled
+    """∫ Γᵢᵀ Δuᵢ into robot i's own block of ∫ⁱû and ∫uᵢ for y_m (eqs. 20-21)."""
+    m, _, n = int_u_hat.shape
+    for i in range(m):
         for d in range(n):
-            r[i, i, d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
-        for k in range(m):
-            acc = 0.0
-            for d in range(n):
-                acc += r[i, k, d] ** 2
-            r_norm[i, k] = np.sqrt(acc)
+            int_u_hat[i, i, d] += dt * delta_u[i, d]  # ∫ Γᵢᵀ Δuᵢ
+            int_u_own[i, d] += dt * u[i, d]  # ∫ uᵢ, for y_m (eq. 21)
 
 
 @njit(cache=True)
@@ -63,17 +96,13 @@ def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt):  # prag
     ``u_hat_g`` (M, M, n) is ⁱû_g, ``delta_u`` (M, n) is Δuᵢ (eq. 22) and ``u``
     (M, n) the nominal input uᵢ of eq. 8 each robot applied.
     """
-    m, _, n = y_hat.shape
     s, g = int_u_hat.reshape(-1), u_hat_g.reshape(-1)
     for a in range(s.shape[0]):
         s[a] += dt * g[a]  # ∫ ⁱû_g
-    for i in range(m):
-        for d in range(n):
-            int_u_hat[i, i, d] += dt * delta_u[i, d]  # ∫ Γᵢᵀ Δuᵢ
-            int_u_own[i, d] += dt * u[i, d]  # ∫ uᵢ, for y_m (eq. 21)
+    integrate_inputs(int_u_hat, int_u_own, delta_u, u, dt)
     y, rr = y_hat.reshape(-1), r.reshape(-1)
     for a in range(y.shape[0]):
-        y[a] += ko * dt * rr[a]  # d/dt ⁱŷ = k_o ⁱr (eq. 19, y-form)
+        y[a] = advance_one(y[a], rr[a], ko, dt)
 
 
 class Messages:
@@ -130,6 +159,7 @@ class Observer(Block):
     def _connect(self, graph: Graph) -> None:
         self.messages = Messages(graph.edges, graph.n)
         m = self.y_hat.shape[0]
+        self.y_next = np.empty_like(self.y_hat)  # the compiled period writes ŷ⁺ here, then swaps
         self._x_hat = np.empty_like(self.y_hat)
         self._r = np.empty_like(self.y_hat)
         self._r_norm = np.empty((m, m))

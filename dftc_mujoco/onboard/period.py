@@ -1,25 +1,29 @@
 """One control period of the whole team with the paper's blocks, compiled as one call.
 
 This is not a second implementation: it calls, in the order of Fig. 1, the
-same compiled functions the blocks call one by one (observer
-:func:`~.observer.estimate` / :func:`~.observer.residual` /
-:func:`~.observer.update`, controller :func:`~.controller.collective_input` /
-:func:`~.controller.own_input`, supervisor :func:`~.supervisor.supervise`,
-fault estimator :func:`~.fault_estimator.estimate_faults`, decision
-:func:`~.fdir.decide`). Composed in one compiled call, the period costs no
-Python overhead per block; :class:`~.team.Team` uses it whenever the team runs
-the paper's blocks (any thresholds rule included: ⁱμ_k comes in as an array),
-and composes the blocks' Python methods otherwise.
+same compiled functions the blocks call (observer :func:`~.observer.estimate_one`,
+:func:`~.observer.residual_row`, :func:`~.observer.advance_one`,
+:func:`~.observer.integrate_inputs`; controller :func:`~.controller.collective_one`;
+supervisor :func:`~.supervisor.supervise`; fault estimator
+:func:`~.fault_estimator.estimate_faults`; decision :func:`~.fdir.decide`), each
+equation written once. Composed in one compiled call, the period costs no Python
+overhead per block, and the per-entry functions are fused into two passes over
+the team's N × N state instead of one pass per equation (the state is memory-bound
+at N = 400): ⁱx̂, ⁱû_g and ∫ⁱû_g in one, then each robot's residual, its norms and
+its next ŷ (written to a second buffer that the caller swaps in, since every robot
+reads its in-neighbours' current messages). :class:`~.team.Team` uses it whenever
+the team runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as
+an array), and composes the blocks' Python methods otherwise.
 """
 
 from __future__ import annotations
 
 from numba import njit
 
-from .controller import collective_input, own_input
+from .controller import collective_one
 from .fault_estimator import estimate_faults
 from .fdir import decide
-from .observer import estimate, residual, update
+from .observer import advance_one, estimate_one, integrate_inputs, residual_row, row_norms
 from .supervisor import supervise
 
 RAISED = 1  # some flag was raised (detection events to report)
@@ -38,6 +42,7 @@ def team_period(
     ko,
     dt,
     y_hat,
+    y_next,
     int_u_hat,
     int_u_own,
     src,
@@ -69,11 +74,10 @@ def team_period(
     x_d,
     xd_dot,
     x_hat,
-    u_hat_g,
     u_g,
     u_mem,
     du,
-    r,
+    row,
     r_norm,
     raised,
     u,
@@ -83,23 +87,36 @@ def team_period(
 
     ``x_m``, ``z``, ``int_e``, ``phi_hat``, ``applied``, ``u`` and ``u_bar`` are on
     the original robot axis (N); the others on the members' axis (M). Robots
-    that are not members get u = 0 and only run their fault estimator.
-    Returns RAISED | SWITCHED bits.
+    that are not members get u = 0 and only run their fault estimator. ŷ of the
+    next period goes to ``y_next`` (the caller swaps it with ``y_hat``); ``row``
+    (M·n,) is scratch. Returns RAISED | SWITCHED bits.
     """
-    m = rows.shape[0]
+    m, _, n = y_hat.shape
     code = 0
     for i in range(m):
-        for d in range(2):
+        for d in range(n):
             x_own[i, d] = x_m[rows[i], d]
             x_d[i, d] = c[d] + offsets[i, d]  # J⁻¹σ_d, the mission (eq. 14)
             xd_dot[i, d] = c_dot[d] + rates[i, d]
-    estimate(y_hat, int_u_hat, x_hat)  # eq. 21
-    collective_input(x_hat, x_d, xd_dot, kc, u_hat_g)  # eq. 15
-    own_input(u_hat_g, u_g)  # eq. 16
+    y, s = y_hat.reshape(m, m * n), int_u_hat.reshape(m, m * n)
+    xh, xd, vd = x_hat.reshape(m, m * n), x_d.reshape(-1), xd_dot.reshape(-1)
+    for i in range(m):  # pass 1, robot by robot
+        for d in range(n):  # u_g,i = Γᵢ ⁱû_g (eq. 16): robot i's own block, before ∫ moves
+            a = i * n + d
+            u_g[i, d] = collective_one(vd[a], kc, xd[a], estimate_one(y[i, a], s[i, a]))
+        for a in range(m * n):
+            e = estimate_one(y[i, a], s[i, a])  # eq. 21
+            xh[i, a] = e
+            s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
     if supervise(x_own, u_g, obs, safe, act, theta, release, active, u_mem, du):  # eqs. 8, 18
         code |= SWITCHED
-    residual(y_hat, int_u_own, x_own, src, first_edge, in_degree, r, r_norm)  # eq. 35
-    update(y_hat, int_u_hat, int_u_own, r, u_hat_g, du, u_mem, ko, dt)  # eqs. 19-21
+    yn = y_next.reshape(m, m * n)
+    for i in range(m):  # pass 2: every robot reads its in-neighbours' current messages
+        residual_row(y_hat, int_u_own, x_own, src, first_edge, in_degree, i, row)  # eq. 35
+        row_norms(row, i, n, r_norm)
+        for a in range(m * n):
+            yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
+    integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
     if m < u.shape[0]:
         u[:] = 0.0  # an excluded robot is told to stay where it is
     for i in range(m):

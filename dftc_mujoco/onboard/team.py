@@ -154,11 +154,10 @@ class Team:
         self.x_d = np.empty((m, 2))
         self.xd_dot = np.empty((m, 2))
         self.x_hat = np.empty((m, m, 2))
-        self._u_hat_g = np.empty((m, m, 2))
         self._u_g = np.empty((m, 2))
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
-        self._r = np.empty((m, m, 2))
+        self._row = np.empty(m * 2)  # one robot's residual (scratch of the compiled period)
         self.r_norm = np.empty((m, m))
         self._raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)
@@ -206,7 +205,7 @@ class Team:
         cfg, ob, sup = self.config, self.observer, self.supervisor
         est, dec = self.estimator, self.decision
         msg = ob.messages
-        return team_period(
+        code = team_period(
             x_m,
             self.members,
             c,
@@ -217,6 +216,7 @@ class Team:
             ob.ko,
             ob.dt,
             ob.y_hat,
+            ob.y_next,
             ob.int_u_hat,
             ob.int_u_own,
             msg.src,
@@ -248,16 +248,17 @@ class Team:
             self.x_d,
             self.xd_dot,
             self.x_hat,
-            self._u_hat_g,
             self._u_g,
             self._u_mem,
             self._du,
-            self._r,
+            self._row,
             self.r_norm,
             self._raised,
             self.u,
             self.u_bar,
         )
+        ob.y_hat, ob.y_next = ob.y_next, ob.y_hat  # ŷ of the next period (eq. 19)
+        return code
 
     def _general(self, x_m, c, c_dot, offsets, rates) -> int:
         """The same period through the blocks' Python methods (any block set)."""
