@@ -330,9 +330,9 @@ def _finish(result, work: Path, out: Path, signals: Signals, options, progress: 
             )
     except Interrupted as exc:
         kept = _drop_incomplete(work)
+        again = f"python -m dftc_mujoco.plot {out}" + (" --video" if options else "")
         print(
-            f"interrupted by {exc.name} while drawing: {kept} are in {out}; "
-            f"python -m dftc_mujoco.plot {out} --video draws the rest",
+            f"interrupted by {exc.name} while drawing: {kept} are in {out}; {again} draws the rest",
             file=sys.stderr,
         )
         return exc.exit_code
