@@ -101,3 +101,14 @@ def test_two_biases_on_one_robot_give_one_fault_estimate_line(tmp_path, capsys, 
     (estimate,) = json.loads((out / "summary.json").read_text())["fault_estimates"]
     assert estimate["faults"] == [7.0, second]
     assert len(estimate["windows"]) == (1 if second == 7.0 else 2)
+
+
+def test_a_scenario_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    from dftc_mujoco import run
+
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes((ROOT / "scenarios" / "paper_case.toml").read_bytes() + b"\n# caf\xe9\n")
+    assert run.main([str(bad), "--no-video", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {bad}: not UTF-8 text (byte 0xe9"), err
+    assert not (tmp_path / "out").exists()
