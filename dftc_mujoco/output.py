@@ -1,18 +1,28 @@
-"""Run folders that are never mixed, half-written or silently replaced.
+"""Output folders that are never mixed, half-written or silently replaced.
 
 A run writes into a private folder beside its destination
-(``.<name>.<random>.tmp``) and moves it into place only at the end, so a
-reader sees either the previous folder or the complete new one. A destination
-that holds another run is refused unless ``overwrite`` (which then replaces it
-as a whole); a folder that is not a run folder is never replaced. A lock file
-beside the destination refuses a second process while the first writes.
+(``.<name>.<random>.tmp``, with its owner's process id in ``.owner`` inside) and
+moves it into place only at the end, so a reader sees either the previous folder or
+the complete new one. A destination that holds another run is refused unless
+``overwrite`` (which then replaces it as a whole); a folder that is not a run folder
+is never replaced. A lock file beside the destination (``.<name>.lock``) refuses a
+second process while the first writes (runs, ``plot`` and campaigns alike).
+
+Whoever takes the lock first removes the private folders that killed processes left
+beside the destination (only those whose owner is dead), and puts back a destination
+that a process killed in the middle of a replacement had set aside.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
+import errno
 import os
+import re
 import shutil
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,10 +30,26 @@ from pathlib import Path
 from .errors import DftcError
 
 RUN_FILES = ("summary.json", "log.npz", "scenario.toml")
+OWNER = ".owner"  # inside a private folder: "<pid> <process start time>"
 
 
 class OutputError(DftcError):
     """The output folder cannot be used (exists, locked, not writable, no space)."""
+
+
+def os_problem(exc: OSError, what: str, where: Path | str | None = None) -> OutputError:
+    """An OutputError (one line) for an OSError met while doing ``what`` (naming
+    ``where``, default the file the error names); a full disk says so and how to get
+    out of it."""
+    where = str(where or exc.filename or "")
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return OutputError(
+            f"{where}: no space left on the device while {what}; free some space or "
+            "choose another --out".lstrip(": ")
+        )
+    lines = (exc.strerror or str(exc)).strip().splitlines()
+    reason = lines[0] if lines else type(exc).__name__
+    return OutputError(f"{where}: {what}: {reason}".lstrip(": "))
 
 
 def _holds_a_run(folder: Path) -> bool:
@@ -38,6 +64,29 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def _started(pid: int) -> str:
+    """When process ``pid`` started (clock ticks since boot, Linux), or '' if unknown:
+    tells a live owner from a new process that reuses its id."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return ""
+    return stat.rsplit(")", 1)[-1].split()[19]
+
+
+def _owner_alive(folder: Path) -> bool:
+    """Whether the process recorded in ``folder/.owner`` still runs (True when unknown)."""
+    try:
+        pid_text, _, started = (folder / OWNER).read_text().strip().partition(" ")
+        pid = int(pid_text)
+    except (OSError, ValueError):
+        return True  # no owner recorded (yet): leave it alone
+    if not _alive(pid):
+        return False
+    now = _started(pid)
+    return not (started and now and now != started)
 
 
 def check_destination(out: Path, overwrite: bool) -> Path:
@@ -60,30 +109,79 @@ def check_destination(out: Path, overwrite: bool) -> Path:
 
 
 @contextlib.contextmanager
+def locked(out: Path) -> Iterator[Path]:
+    """Hold the lock of destination ``out`` (``.<name>.lock`` beside it) while inside,
+    after tidying what killed writers left beside it; yields the absolute ``out``.
+
+    Raises OutputError when another live process holds the lock or the parent folder
+    cannot be created or written.
+    """
+    out = Path(out).absolute()
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise os_problem(exc, "creating the folder") from None
+    lock = out.parent / f".{out.name}.lock"
+    _acquire(lock, out)
+    try:
+        tidy(out)
+        yield out
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def _private_name(out: Path) -> re.Pattern[str]:
+    # tempfile's names: 8 characters from [a-z0-9_]; ".<name>.x.abcdefgh.tmp" is another
+    # destination's (named "<name>.x"), not this one's
+    return re.compile(rf"^\.{re.escape(out.name)}\.[a-z0-9_]{{8}}\.(tmp|old)$")
+
+
+def tidy(out: Path) -> list[Path]:
+    """Remove the private folders of dead writers beside ``out`` and put back a
+    destination left set aside by a replacement that was killed half-way (call with the
+    lock held). Returns what was removed."""
+    pattern = _private_name(out)
+    try:
+        beside = [p for p in out.parent.iterdir() if pattern.match(p.name) and p.is_dir()]
+    except OSError:
+        return []
+    removed = []
+    for p in sorted(beside, key=lambda p: p.stat().st_mtime, reverse=True):
+        if p.name.endswith(".old"):
+            if not out.exists():  # killed between setting the old one aside and the swap
+                os.rename(p, out)
+                continue
+        elif _owner_alive(p):
+            continue
+        shutil.rmtree(p, ignore_errors=True)
+        removed.append(p)
+    return removed
+
+
+def private_folder(out: Path) -> Path:
+    """A new private folder beside ``out``, owned (``.owner``) by this process."""
+    try:
+        work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+        (work / OWNER).write_text(f"{os.getpid()} {_started(os.getpid())}")
+    except OSError as exc:
+        raise os_problem(exc, "creating a private folder") from None
+    return work
+
+
+@contextlib.contextmanager
 def run_folder(out: Path, overwrite: bool = False) -> Iterator[Path]:
     """A private work folder for a run to write into; moved to ``out`` when the block
     ends normally, removed if it raises. Refuses (OutputError) a destination that
     holds another run (unless ``overwrite``), is not a run folder, or is being
     written by another process."""
     out = check_destination(out, overwrite)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{out.parent}: cannot create the folder: {exc.strerror}") from None
-    lock = out.parent / f".{out.name}.lock"
-    _acquire(lock, out)
-    try:
-        try:
-            work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
-        except OSError as exc:
-            raise OutputError(f"{out.parent}: cannot write there: {exc.strerror}") from None
+    with locked(out):
+        work = private_folder(out)
         try:
             yield work
             _move_into_place(work, out, overwrite)
         finally:
             shutil.rmtree(work, ignore_errors=True)
-    finally:
-        lock.unlink(missing_ok=True)
 
 
 def _acquire(lock: Path, out: Path) -> None:
@@ -97,15 +195,19 @@ def _acquire(lock: Path, out: Path) -> None:
                 pid = 0
             if pid and _alive(pid):
                 raise OutputError(
-                    f"{out}: another run (process {pid}) is writing this folder; wait for it "
+                    f"{out}: another process ({pid}) is writing this folder; wait for it "
                     "or choose another --out"
                 ) from None
             lock.unlink(missing_ok=True)  # left by a process that died: take it over
             continue
         except OSError as exc:
-            raise OutputError(f"{out.parent}: cannot write there: {exc.strerror}") from None
-        with os.fdopen(fd, "w") as fh:
-            fh.write(str(os.getpid()))
+            raise os_problem(exc, "writing the lock file") from None
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(str(os.getpid()))
+        except OSError as exc:
+            lock.unlink(missing_ok=True)
+            raise os_problem(exc, "writing the lock file", where=out) from None
         return
     raise OutputError(f"{out}: cannot lock the folder ({lock})")
 
@@ -113,6 +215,7 @@ def _acquire(lock: Path, out: Path) -> None:
 def _move_into_place(work: Path, out: Path, overwrite: bool) -> None:
     """Rename ``work`` to ``out``; an existing ``out`` is set aside first and removed after."""
     out = check_destination(out, overwrite)  # nothing else appeared there meanwhile
+    (work / OWNER).unlink(missing_ok=True)
     old = None
     if out.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
@@ -121,6 +224,41 @@ def _move_into_place(work: Path, out: Path, overwrite: bool) -> None:
     os.rename(work, out)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+
+
+_RENAME_EXCHANGE = 2
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux ``renameat2(RENAME_EXCHANGE)``); False when the
+    system cannot, so that the caller falls back to two renames."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    done = renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    return done == 0
+
+
+def replace_into(work: Path, out: Path, names: list[str]) -> None:
+    """Move each of ``names`` from ``work`` into ``out``, replacing what is there: a file
+    with one rename, a folder by swapping the two folders (the old one ends in ``work``,
+    removed with it). Each item appears whole or not at all."""
+    for name in names:
+        new, old = work / name, out / name
+        if new.is_dir() and old.is_dir():
+            if not exchange(new, old):
+                aside = work / f".{name}.old"
+                os.rename(old, aside)
+                os.rename(new, old)
+        else:
+            if old.is_dir():
+                shutil.rmtree(old)
+            os.replace(new, old)
 
 
 def free_space_check(work: Path, needed: int) -> None:

@@ -1,19 +1,27 @@
 """``python -m dftc_mujoco.plot RUN_DIR``: redraw a saved run's figures (and video).
 
 Reads ``log.npz`` and ``summary.json`` (and, for ``--video``, the
-``scenario.toml`` copy the run left) without re-simulating. Exit codes: 0
-success, 2 bad input (missing or unreadable records), 4 no OpenGL backend.
+``scenario.toml`` copy the run left) without re-simulating. Everything is drawn
+into a private folder beside the run and moved into the run folder only when
+complete (the figures as one folder, the video, each still), so a failure or an
+interruption leaves the previous figures and video as they were. Exit codes: 0
+success, 2 bad input (a missing, truncated or corrupt record file), 4 no OpenGL
+backend, 5 an output, disk or OS problem (the run folder is being written by
+another process, or the disk is full), 130 / 143 interrupted by SIGINT / SIGTERM.
 """
 
 from __future__ import annotations
 
+import shutil
 import sys
 from pathlib import Path
 
-from . import cli
+from . import cli, interrupt, output
 from .errors import ScenarioError
+from .interrupt import Interrupted
+from .output import OutputError
 from .render import gl
-from .run import EXIT_INPUT, EXIT_OK, EXIT_RENDER, add_video_options, setup_video
+from .run import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_RENDER, add_video_options, setup_video
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,12 +47,26 @@ def main(argv: list[str] | None = None) -> int:
         help="also write the video frame at time T as still_T.png (repeatable)",
     )
     args = p.parse_args(argv)
+    with interrupt.catch() as signals:
+        try:
+            with signals.deferred(check=False):
+                return _plot(args, signals)
+        except Interrupted as exc:
+            print(
+                f"interrupted by {exc.name}: the figures and video in {args.run_dir} are unchanged",
+                file=sys.stderr,
+            )
+            return exc.exit_code
+
+
+def _plot(args, signals: interrupt.Signals) -> int:
     wants_gl = not args.no_video or bool(args.still)
     try:
-        options = setup_video(args, wants_gl)
-        from .results import open_run
+        with signals.active():
+            options = setup_video(args, wants_gl)
+            from .results import open_run
 
-        run = open_run(args.run_dir)  # log.npz, summary.json and the scenario that ran
+            run = open_run(args.run_dir)  # log.npz, summary.json and the scenario that ran
         log, summary = run.log, run.summary
         scenario = run.scenario if options is not None else None
     except ScenarioError as exc:
@@ -55,23 +77,46 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_RENDER
     from .run import render_outputs
 
-    if args.still:
-        code = write_stills(scenario, log, summary, args.run_dir, options, args.still)
-        if code:
-            return code
-    code = render_outputs(
-        scenario,
-        log,
-        summary,
-        args.run_dir,
-        None if args.no_video else options,
-        progress=sys.stderr.isatty(),
-    )
-    return code if code else EXIT_OK
+    try:
+        with output.locked(args.run_dir) as out:
+            work = output.private_folder(out)
+            try:
+                with signals.active():
+                    code = EXIT_OK
+                    if args.still:
+                        code = write_stills(scenario, log, summary, work, options, args.still, out)
+                    if not code:
+                        code = render_outputs(
+                            scenario,
+                            log,
+                            summary,
+                            work,
+                            None if args.no_video else options,
+                            progress=sys.stderr.isatty(),
+                            shown=out,
+                        )
+                if code:
+                    return code
+                drawn = sorted(p.name for p in work.iterdir() if p.name != output.OWNER)
+                output.replace_into(work, out, drawn)
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+    except OutputError as exc:
+        cli.print_error(exc)
+        return EXIT_OUTPUT
+    except OSError as exc:
+        cli.print_error(output.os_problem(exc, "drawing the figures and video", args.run_dir))
+        print(f"note: the figures and video in {args.run_dir} are unchanged", file=sys.stderr)
+        return EXIT_OUTPUT
+    return EXIT_OK
 
 
-def write_stills(scenario, log, summary, out: Path, options, times: list[float]) -> int:
-    """Write the video frames at ``times`` as PNG files in ``out``."""
+def write_stills(
+    scenario, log, summary, out: Path, options, times: list[float], shown: Path | None = None
+) -> int:
+    """Write the video frames at ``times`` as PNG files in ``out`` (``shown``: the folder
+    the messages name, default ``out``)."""
+    shown = shown or out
     import imageio.v3 as iio
 
     from .render.video import FrameRenderer
@@ -87,7 +132,7 @@ def write_stills(scenario, log, summary, out: Path, options, times: list[float])
                     return EXIT_INPUT
                 path = out / f"still_{t:g}.png"
                 iio.imwrite(path, fr.frame(t))
-                print(f"still: {path}")
+                print(f"still: {shown / path.name}")
     except gl.RenderError as exc:
         cli.print_error(exc)
         return EXIT_RENDER

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import ScenarioError, SimulationError
-from .record import Events, matrix_rows, write_json, write_npz, write_text
+from .record import LOG_FIELDS, Events, matrix_rows, write_json, write_npz, write_text
 
 if TYPE_CHECKING:
     from .scenario import Scenario
@@ -91,20 +91,43 @@ def open_run(folder: str | Path) -> RunResult:
     try:
         summary = json.loads(files["summary.json"].read_text())
     except (OSError, ValueError) as exc:
-        raise ScenarioError(f"{files['summary.json']}: unreadable: {exc}") from None
-    try:
-        with np.load(files["log.npz"]) as npz:
-            log = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise ScenarioError(f"{files['log.npz']}: unreadable: {exc}") from None
+        raise ScenarioError(f"{files['summary.json']}: unreadable: {_one_line(exc)}") from None
+    if not isinstance(summary, dict) or not isinstance(summary.get("events", []), list):
+        raise ScenarioError(f"{files['summary.json']}: not a run summary (a JSON object)")
+    log = _read_log(files["log.npz"])
     try:
         data = tomllib.loads(files["scenario.toml"].read_text())
     except (OSError, ValueError) as exc:
-        raise ScenarioError(f"{files['scenario.toml']}: unreadable: {exc}") from None
+        raise ScenarioError(f"{files['scenario.toml']}: unreadable: {_one_line(exc)}") from None
     scenario = from_dict(data, source=str(files["scenario.toml"]))
     events = Events([dict(e) for e in summary.get("events", [])])
     error = SimulationError(summary["error"]) if summary.get("status") == "failed" else None
     return RunResult(scenario, log, events, summary, error)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _read_log(path: Path) -> dict[str, np.ndarray]:
+    """Every array of a saved ``log.npz``; a ScenarioError (one line) when the file is
+    truncated, corrupt or lacks a field the figures need."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            log = {k: npz[k] for k in npz.files}
+    except Exception as exc:  # zipfile, zlib and numpy each raise their own kind
+        raise ScenarioError(
+            f"{path}: unreadable ({type(exc).__name__}: {_one_line(exc)}); the file is "
+            "truncated or corrupt: run the scenario again"
+        ) from None
+    missing = [k for k in LOG_FIELDS if k not in log]
+    if missing:
+        raise ScenarioError(f"{path}: not a run log: missing {', '.join(missing)}")
+    t = log["t"]
+    if t.ndim != 1 or not len(t) or any(len(log[k]) != len(t) for k in ("x", "u", "pose")):
+        raise ScenarioError(f"{path}: not a run log: its arrays do not have one row per time")
+    return log
 
 
 # --------------------------------------------------------------------------- derived values
@@ -162,26 +185,42 @@ def reactive_spans(events: Events) -> list[dict[str, Any]]:
 
 
 def fault_estimates(s: Scenario, log: dict[str, np.ndarray], events: Events) -> list[dict]:
-    """Error of φ̂ against the injected φ per bias fault, from t_f + settle to the next event."""
+    """Error of φ̂ against the injected φ per robot with bias faults, once settled.
+
+    A bias is judged from its start + :data:`SETTLE` to the next fault, exclusion or
+    physics error (of any robot); a robot with several biases gets one entry over the
+    union of their windows (its φ is their sum), with every bias's start in
+    ``faults`` and each window in ``windows``.
+    """
     t = log["t"]
     marks = sorted(
         {e["t"] for e in events.items if e["kind"] in ("fault", "exclusion", "simulation_error")}
     )
-    rows = []
+    end_of_log = t[-1] + 1e-9 if len(t) else 0.0
+    by_robot: dict[int, list[float]] = {}
     for f in s.faults:
-        if f.kind != "bias":
-            continue
-        start = f.t + SETTLE
-        end = min([m for m in marks if m > f.t] + [t[-1] + 1e-9 if len(t) else start])
-        win = (t >= start) & (t < end)
+        if f.kind == "bias":
+            by_robot.setdefault(f.robot, []).append(float(f.t))
+    rows = []
+    for robot, starts in sorted(by_robot.items()):
+        win = np.zeros(len(t), bool)
+        windows = []
+        for t_f in sorted(set(starts)):
+            end = min([m for m in marks if m > t_f] + [end_of_log])
+            this = (t >= t_f + SETTLE) & (t < end)
+            if this.sum() >= 2:
+                win |= this
+                windows.append([t_f + SETTLE, float(t[this][-1])])
         if win.sum() < 2:
             continue
-        err = log["phi_hat"][win, f.robot] - log["phi"][win, f.robot]
+        err = log["phi_hat"][win, robot] - log["phi"][win, robot]
         rows.append(
             {
-                "robot": f.robot + 1,
-                "t": f.t,
-                "window": [start, float(t[win][-1])],
+                "robot": robot + 1,
+                "t": min(starts),
+                "faults": sorted(starts),
+                "window": [windows[0][0], windows[-1][1]],
+                "windows": windows,
                 "mean_error": np.abs(err.mean(axis=0)).tolist(),
                 "rms_error": np.sqrt((err**2).mean(axis=0)).tolist(),
             }
@@ -224,7 +263,9 @@ def summarize(
     window = t >= s.mission.transient
     err = log["sigma_err"]
     last = err[-1] if len(err) else (math.nan, math.nan)
-    simulated = float(t[-1]) if len(t) else 0.0
+    # the time the physics reached, not the last logged row: with a slow log rate
+    # (physics.log_rate = 0.001) the last row can be t = 0
+    simulated = round(float(sim_time), 9)
     gap, margin_d = obstacle_clearance(log, footprint, obstacle_safe)
     status = "ok" if error is None else "failed"
     if error is None and stopped and not finished:
@@ -243,7 +284,7 @@ def summarize(
         "status": status,
         "error": None if error is None else str(error),
         "end_reason": ended,
-        "simulated_time": round(sim_time, 9) if error else simulated,
+        "simulated_time": simulated,
         "wall_time": wall,
         "real_time_factor": (simulated / wall) if wall > 0 else None,
         "faults": [

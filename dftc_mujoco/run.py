@@ -6,10 +6,12 @@ overrides applied), the paper's figures and (unless ``--no-video``)
 of the run. ``--viewer`` also shows the run live in MuJoCo's viewer. Exit
 codes: 0 success, 2 bad input (scenario file or command line), 3 the physics
 failed (the records written so far are kept and ``summary.json`` says what
-went wrong), 4 no OpenGL backend for the video, 5 the output folder cannot be used
-(holds another run without ``--overwrite``, is being written by another process, is
-not writable or lacks space), 130 / 143 interrupted by SIGINT / SIGTERM (the records
-so far are kept).
+went wrong), 4 no OpenGL backend for the video, 5 an output, disk or OS problem (the
+folder holds another run without ``--overwrite``, is being written by another
+process, is not writable, or the disk is full, also while drawing the figures or the
+video: the records are then kept without them), 130 / 143 interrupted by SIGINT /
+SIGTERM (during the simulation the records so far are kept; during the figures or
+the video, the records and what was complete).
 
 MuJoCo reads ``MUJOCO_GL`` when it is imported, so this module imports the
 simulator only after ``--gl`` has been applied.
@@ -18,16 +20,16 @@ simulator only after ``--gl`` has been applied.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import signal
+import shutil
 import sys
 import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import cli
+from . import cli, interrupt
 from .errors import ScenarioError
-from .output import OutputError, free_space_check, run_folder
+from .interrupt import Interrupted, Signals
+from .output import OutputError, free_space_check, os_problem, run_folder
 from .render import gl
 
 if TYPE_CHECKING:
@@ -142,38 +144,6 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-class SignalStop:
-    """SIGINT and SIGTERM, caught from the start of a run: the simulation (once it exists)
-    stops before its next control period and keeps its records; ``caught`` lists them."""
-
-    def __init__(self) -> None:
-        self.caught: list[int] = []
-        self.sim = None
-
-    def attach(self, sim) -> None:
-        """Stop ``sim`` on a signal (at once if one already came while it was being built)."""
-        self.sim = sim
-        if self.caught:
-            sim.request_stop(f"interrupted by {signal.Signals(self.caught[0]).name}")
-
-    def _handler(self, signum, frame) -> None:
-        self.caught.append(signum)
-        if self.sim is not None:
-            self.sim.request_stop(f"interrupted by {signal.Signals(signum).name}")
-
-
-@contextlib.contextmanager
-def stop_on_signals():
-    """While inside, SIGINT and SIGTERM are caught by a :class:`SignalStop` (yielded)."""
-    stop = SignalStop()
-    previous = {sig: signal.signal(sig, stop._handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield stop
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
 def _fmt_event(e: dict) -> str:
     k = e["kind"]
     r = e.get("robot", 0)
@@ -237,12 +207,15 @@ def report(result: RunResult, out: Path) -> str:
         )
     if s.get("margin") is not None:
         lines.append(f"largest residual / threshold on robots without a fault: {s['margin']:.3f}")
-    for f in s.get("fault_estimates", []):
+    for f in s.get("fault_estimates", []):  # one entry per robot, however many biases
         mean = ", ".join(f"{v:.4f}" for v in f["mean_error"])
-        lines.append(
-            f"fault estimate on robot {f['robot']} (from {f['window'][0]:g} s): "
-            f"mean error [{mean}] m/s"
+        windows = f.get("windows", [f["window"]])
+        when = (
+            f"from {windows[0][0]:g} s"
+            if len(windows) == 1
+            else f"{len(f['faults'])} biases, " + ", ".join(f"{a:g}-{b:g} s" for a, b in windows)
         )
+        lines.append(f"fault estimate on robot {f['robot']} ({when}): mean error [{mean}] m/s")
     o = s.get("onboard", {})
     custom = {k: v for k, v in o.get("blocks", {}).items() if v != "paper"}
     lines.append(
@@ -262,9 +235,23 @@ def write_records(result: RunResult, out: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = build_parser().parse_args(argv)
+    with interrupt.catch() as signals:
+        try:
+            with signals.deferred(check=False):  # the records are never cut in two
+                return _main(args, signals)
+        except Interrupted as exc:
+            print(
+                f"interrupted by {exc.name} before the run started: nothing was written",
+                file=sys.stderr,
+            )
+            return exc.exit_code
+
+
+def _main(args: argparse.Namespace, signals: Signals) -> int:
     progress = not args.no_progress and sys.stderr.isatty()
     try:
-        options = setup_video(args, not args.no_video)
+        with signals.active():
+            options = setup_video(args, not args.no_video)
     except ScenarioError as exc:
         cli.print_error(exc)
         return EXIT_INPUT
@@ -272,16 +259,19 @@ def main(argv: list[str] | None = None) -> int:
         cli.print_error(exc)
         return EXIT_RENDER
 
-    from . import scenario as scenario_mod
-    from .loop import Simulation
-    from .sim import robots
-
     try:
-        overrides = parse_overrides(args.overrides)
-        original = scenario_mod.load_scenario(args.scenario, overrides)
-        if args.robot is not None:
-            robots.get(args.robot, where="--robot")
-        s = original.with_overrides(seed=args.seed, duration=args.duration, robot_model=args.robot)
+        with signals.active():
+            from . import scenario as scenario_mod
+            from .loop import Simulation
+            from .sim import robots
+
+            overrides = parse_overrides(args.overrides)
+            original = scenario_mod.load_scenario(args.scenario, overrides)
+            if args.robot is not None:
+                robots.get(args.robot, where="--robot")
+            s = original.with_overrides(
+                seed=args.seed, duration=args.duration, robot_model=args.robot
+            )
         for f in scenario_mod.dropped_faults(original, s):
             print(
                 f"note: the {f.kind} fault on robot {f.robot + 1} at {f.t:g} s is after "
@@ -289,19 +279,20 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
         out = args.out if args.out is not None else Path.cwd() / "renders" / s.name
-        with run_folder(out, args.overwrite) as work, stop_on_signals() as stop:
-            with Simulation(s) as sim:
-                stop.attach(sim)
+        with run_folder(out, args.overwrite) as work:
+            with signals.active(), Simulation(s) as sim:
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
                 if args.viewer:
                     from .render.viewer import ViewerUnavailable, watch
 
                     try:
-                        watch(sim)
+                        with signals.stopping(sim):
+                            watch(sim)
                     except ViewerUnavailable as exc:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
-                result = sim.run(progress=progress)
-            return _finish(result, work, Path(out).absolute(), stop.caught, options, progress)
+                with signals.stopping(sim):
+                    result = sim.run(progress=progress)
+            return _finish(result, work, Path(out).absolute(), signals, options, progress)
     except ScenarioError as exc:
         cli.print_error(exc)
         return EXIT_INPUT
@@ -309,34 +300,61 @@ def main(argv: list[str] | None = None) -> int:
         cli.print_error(exc)
         return EXIT_OUTPUT
     except OSError as exc:
-        print(f"error: cannot write the run: {exc}", file=sys.stderr)
+        cli.print_error(os_problem(exc, "writing the run"))
         return EXIT_OUTPUT
 
 
-def _finish(result, work: Path, out: Path, caught: list[int], options, progress: bool) -> int:
+def _finish(result, work: Path, out: Path, signals: Signals, options, progress: bool) -> int:
     """Write the records (and figures, video) into ``work``, print the report; the exit code.
 
-    ``out`` is where ``work`` is moved once this returns (the paths printed)."""
+    ``out`` is where ``work`` is moved once this returns (the paths printed). A signal
+    during the figures or the video, or a full disk there, keeps the records (and the
+    figures when they were complete) and drops the rest."""
     write_records(result, work)
     print(report(result, out))
-    if caught:
-        signum = caught[0]
+    if signals.signum is not None:
         print(
-            f"interrupted by {signal.Signals(signum).name}: the records up to "
+            f"interrupted by {interrupt.Interrupted(signals.signum).name}: the records up to "
             f"t = {result.summary['simulated_time']:.2f} s are in {out} (no figures or video)",
             file=sys.stderr,
         )
-        return 128 + signum  # 130 for SIGINT, 143 for SIGTERM
+        return 128 + signals.signum  # 130 for SIGINT, 143 for SIGTERM
     code = EXIT_OK
     if not result.ok:
         print(f"error: {result.error}", file=sys.stderr)
         code = EXIT_PHYSICS
-    return max(
-        code,
-        render_outputs(
-            result.scenario, result.log, result.summary, work, options, progress, shown=out
-        ),
-    )
+    try:
+        with signals.active():
+            drawn = render_outputs(
+                result.scenario, result.log, result.summary, work, options, progress, shown=out
+            )
+    except Interrupted as exc:
+        kept = _drop_incomplete(work)
+        again = f"python -m dftc_mujoco.plot {out}" + (" --video" if options else "")
+        print(
+            f"interrupted by {exc.name} while drawing: {kept} are in {out}; {again} draws the rest",
+            file=sys.stderr,
+        )
+        return exc.exit_code
+    except OSError as exc:
+        kept = _drop_incomplete(work)
+        cli.print_error(os_problem(exc, "drawing the figures and video", where=out))
+        print(f"note: {kept} are in {out}", file=sys.stderr)
+        return EXIT_OUTPUT
+    return max(code, drawn)
+
+
+def _drop_incomplete(work: Path) -> str:
+    """Remove a figure set or video that is not complete from ``work``; says what is left."""
+    from .render.figures import FIGURES
+
+    figures = work / "figures"
+    complete = figures.is_dir() and all((figures / f"{n}.png").is_file() for n in FIGURES)
+    if figures.exists() and not complete:
+        shutil.rmtree(figures, ignore_errors=True)
+    for tmp in work.glob(".*.tmp*"):
+        tmp.unlink(missing_ok=True)
+    return "the records and figures" if complete else "the records (no figures)"
 
 
 def render_outputs(

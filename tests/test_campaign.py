@@ -50,7 +50,8 @@ def test_small_campaign_on_two_local_workers(local_run):
 
 def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # a new private instance, whatever else runs here (or a stale ray_current_cluster says)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         s = spec.load(TINY)
         runner.run(s, tmp_path, ray_address=None, progress=False)
@@ -183,3 +184,192 @@ def test_report_rates_from_rows():
     assert s["false_alarm_rate_fault_free"] == 1.0
     assert s["false_alarms_per_robot_hour"] == pytest.approx(1 / 12)  # 1 robot in 12 robot-hours
     assert s["delay_median"] == 2.0
+
+
+# --------------------------------------------------------------------------- interruption
+
+LONG = ["--runs", "40", "--workers", "2", "--no-progress"]
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc: no psutil)."""
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry.name))
+    return kids
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie waiting to be reaped."""
+    try:
+        os.kill(pid, 0)
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (ProcessLookupError, FileNotFoundError):
+        return False
+    return state not in ("Z", "X")
+
+
+def _start_long_campaign(out: Path) -> tuple[subprocess.Popen, list[int]]:
+    """40 runs on two workers, started in a session of its own (like a terminal's job);
+    returns once two rows are on disk, with the campaign's child processes."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dftc_mujoco.campaign", str(TINY), "--out", str(out), *LONG],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    jsonl = out / "results.jsonl"
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if jsonl.exists() and jsonl.read_text().count("\n") >= 2:
+            break
+        time.sleep(0.05)
+    kids = _children(proc.pid)
+    assert proc.poll() is None and len(kids) >= 2, "the campaign did not get going"
+    return proc, kids
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_stops_a_campaign_at_once_and_keeps_every_finished_row(tmp_path, sig, code):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or SIGTERM (to
+    the campaign alone): it used to run ~30 more queued runs, throw them away with a
+    traceback and leave the pool's workers behind."""
+    proc, kids = _start_long_campaign(tmp_path)
+    seen = len(_rows(tmp_path))
+    sent = time.perf_counter()
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert time.perf_counter() - sent < 5.0
+    assert proc.returncode == code, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"interrupted by {sig.name}:"), err
+    assert "run the same command to resume" in lines[0]
+    rows = _rows(tmp_path)
+    assert seen <= len(rows) < 40  # the queued runs were cancelled
+    table = pq.read_table(tmp_path / "results.parquet")
+    assert sorted(table.column("run").to_pylist()) == sorted(rows)  # same rows as the JSON lines
+    assert f"{len(rows)} runs: {len(rows)} finished" in (tmp_path / "report.md").read_text()
+    assert f"{len(rows)}/40 runs recorded" in lines[0]
+    deadline = time.time() + 5
+    while time.time() < deadline and any(_running(k) for k in kids):
+        time.sleep(0.1)
+    assert not [k for k in kids if _running(k)]  # workers and resource tracker are gone
+
+
+def test_workers_do_not_outlive_a_killed_campaign(tmp_path):
+    """kill -9 of the campaign alone: its workers (and multiprocessing's resource
+    tracker) used to stay alive for 10+ minutes, ~230 MB each."""
+    proc, kids = _start_long_campaign(tmp_path)
+    proc.kill()
+    proc.communicate(timeout=30)
+    deadline = time.time() + 5
+    while time.time() < deadline and any(_running(k) for k in kids):
+        time.sleep(0.1)
+    assert not [k for k in kids if _running(k)]
+
+
+# --------------------------------------------------------------------------- one folder, one spec
+
+
+def _tiny_variant(tmp_path: Path, name: str, old: str, new: str) -> Path:
+    text = TINY.read_text().replace('scenario = "paper_case"', 'scenario = "paper_case"')
+    assert old in text
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_a_campaign_folder_belongs_to_one_spec(tmp_path, capsys):
+    """Two specs used to merge silently into one --out ("6/6 runs recorded (2 new)",
+    30 s rows beside 60 s rows, spec.toml overwritten)."""
+    out = tmp_path / "out"
+    common = ["--workers", "1", "--no-progress", "--out", str(out)]
+    assert campaign_main([str(TINY), "--runs", "2", *common]) == 0
+    before = (out / "results.jsonl").read_text()
+    spec_copy = (out / "spec.toml").read_text()
+    longer = _tiny_variant(tmp_path, "longer", "duration = 30.0", "duration = 12.0")
+    capsys.readouterr()
+    assert campaign_main([str(longer), "--runs", "2", *common]) == 5
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds the campaign 'tiny' of another spec" in err[0]
+    assert "differs in: set.duration" in err[0] and "--overwrite" in err[0]
+    assert (out / "results.jsonl").read_text() == before
+    assert (out / "spec.toml").read_text() == spec_copy
+    # the same spec resumes, also with more runs (run i does not depend on --runs)
+    assert campaign_main([str(TINY), "--runs", "3", *common]) == 0
+    assert sorted(_rows(out)) == [0, 1, 2]
+    # an edited base scenario is another campaign too
+    base = tmp_path / "base.toml"
+    base.write_text(
+        (ROOT / "scenarios" / "paper_case.toml").read_text().replace("seed = 1", "seed = 2")
+    )
+    edited = _tiny_variant(tmp_path, "edited", 'scenario = "paper_case"', f'scenario = "{base}"')
+    capsys.readouterr()
+    assert campaign_main([str(edited), "--runs", "2", *common]) == 5
+    assert "differs in: base scenario: seed" in capsys.readouterr().err
+    # --overwrite replaces the folder as a whole
+    assert campaign_main([str(longer), "--runs", "2", "--overwrite", *common]) == 0
+    rows = _rows(out)
+    assert sorted(rows) == [0, 1] and all(r["duration"] == 12.0 for r in rows.values())
+    assert "duration = 12.0" in (out / "spec.toml").read_text()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out.")]
+
+
+def test_campaign_output_problems_are_one_line_exit_5(tmp_path, capsys):
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "thesis").mkdir()
+    (tmp_path / "thesis" / "thesis.tex").write_text("precious")
+    for out in ("file", "thesis"):
+        for extra in ([], ["--overwrite"]):
+            code = campaign_main([str(TINY), "--out", str(tmp_path / out), "--no-progress", *extra])
+            assert code == 5
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and err[0].startswith("error:")
+            assert ("names a file" if out == "file" else "holds no campaign") in err[0]
+    assert (tmp_path / "thesis" / "thesis.tex").read_text() == "precious"
+    assert sorted(p.name for p in (tmp_path / "thesis").iterdir()) == ["thesis.tex"]
+
+
+@pytest.mark.parametrize(
+    ("change", "expect"),
+    [
+        (
+            ('faulty_robot = "any"', "faulty_robot = [5]"),
+            "vary.faulty_robot: robot 5 does not exist",
+        ),
+        (('faulty_robot = "any"', "faulty_robot = [5]\nrobots = [3, 4]"), "in a team of 3"),
+        (("base", "duration = [oops"), "not valid TOML"),
+        (("base", b'name = "caf\xe9"\n'), "not UTF-8 text"),
+        (("base", "robots_typo = 3\n"), "robots_typo"),
+    ],
+)
+def test_bad_campaign_inputs_are_one_line_before_running(tmp_path, capsys, change, expect):
+    old, new = change
+    if old == "base":
+        base = tmp_path / "base.toml"
+        if isinstance(new, bytes):
+            base.write_bytes(new)
+        else:
+            base.write_text((ROOT / "scenarios" / "paper_case.toml").read_text() + new)
+        spec_path = _tiny_variant(tmp_path, "s", 'scenario = "paper_case"', f'scenario = "{base}"')
+    else:
+        spec_path = _tiny_variant(tmp_path, "s", old, new)
+    out = tmp_path / "out"
+    assert campaign_main([str(spec_path), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and expect in err[0], err
+    assert "Traceback" not in err[0]
+    assert (
+        str(spec_path if old != "base" else tmp_path / "base.toml") in err[0] or "run 0" in err[0]
+    )
+    assert not out.exists()

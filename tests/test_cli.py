@@ -1,5 +1,6 @@
 """Command lines: version, program names, names that would write outside renders/, limits."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -59,3 +60,55 @@ def test_a_negative_limit_is_refused(tmp_path, capsys):
     assert code == 2
     assert "--limit: expected at least 1, got -3" in capsys.readouterr().err
     assert not (tmp_path / "results.jsonl").exists()
+
+
+def test_a_slow_log_rate_reports_the_time_simulated(tmp_path, capsys):
+    """physics.log_rate = 0.001 logs only t = 0: the run used to say "0.00 s simulated"."""
+    from dftc_mujoco import run
+
+    out = tmp_path / "run"
+    args = ["--duration", "3", "--no-video", "--out", str(out), "--set", "physics.log_rate=0.001"]
+    code = run.main(["paper_case", *args])
+    assert code == 0
+    assert "paper_case (seed 1, 4 x disk): 3.00 s simulated" in capsys.readouterr().out
+    assert json.loads((out / "summary.json").read_text())["simulated_time"] == 3.0
+
+
+@pytest.mark.parametrize("second", [7.0, 15.0])
+def test_two_biases_on_one_robot_give_one_fault_estimate_line(tmp_path, capsys, second):
+    from dftc_mujoco import run
+
+    faults = (
+        '[{robot = 2, kind = "bias", t = 7.0, value = [0.1, 0.0], time_constant = 0.45}, '
+        f'{{robot = 2, kind = "bias", t = {second}, value = [0.0, 0.1], time_constant = 0.45}}]'
+    )
+    out = tmp_path / "run"
+    code = run.main(
+        [
+            "paper_case",
+            "--duration",
+            "25",
+            "--no-video",
+            "--out",
+            str(out),
+            "--set",
+            f"faults={faults}",
+        ]
+    )
+    assert code == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if x.startswith("fault estimate")]
+    assert len(lines) == 1 and lines[0].startswith("fault estimate on robot 2 ("), lines
+    (estimate,) = json.loads((out / "summary.json").read_text())["fault_estimates"]
+    assert estimate["faults"] == [7.0, second]
+    assert len(estimate["windows"]) == (1 if second == 7.0 else 2)
+
+
+def test_a_scenario_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    from dftc_mujoco import run
+
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes((ROOT / "scenarios" / "paper_case.toml").read_bytes() + b"\n# caf\xe9\n")
+    assert run.main([str(bad), "--no-video", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {bad}: not UTF-8 text (byte 0xe9"), err
+    assert not (tmp_path / "out").exists()

@@ -94,7 +94,8 @@ def test_campaign_workers_import_the_users_blocks(two_workers):
 
 def test_campaign_on_ray_imports_the_users_blocks_too(two_workers, tmp_path):
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # a new private instance, whatever else runs here (or a stale ray_current_cluster says)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         runner.run(spec.load(CAMPAIGN), tmp_path, ray_address=None, progress=False)
     finally:

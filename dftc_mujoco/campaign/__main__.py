@@ -3,18 +3,30 @@
 Runs a Monte-Carlo campaign (see :mod:`dftc_mujoco.campaign.spec`), appending
 each finished run to ``DIR/results.jsonl`` and ``DIR/results.parquet``, and
 writes ``DIR/report.md`` with its figures. Running it again resumes: runs
-already recorded are skipped. Exit codes: 0, 2 bad input.
+already recorded are skipped. The folder belongs to one campaign
+(:mod:`dftc_mujoco.campaign.folder`): another spec is refused unless ``--overwrite``.
+SIGINT (Ctrl-C) or SIGTERM stops it within seconds, keeping every finished run and
+an up-to-date report. Exit codes: 0 done, 2 bad input (the spec, its base scenario,
+the options), 5 an output, disk or OS problem (the folder is a file, holds something
+else or another campaign, is being written by another process, the disk is full, Ray
+is missing or the cluster cannot be joined), 130 / 143 interrupted by SIGINT / SIGTERM.
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import os
-import shutil
 import sys
 from pathlib import Path
+from typing import Any
 
-from .. import cli
+from .. import cli, interrupt, output
 from ..errors import ScenarioError
+from ..interrupt import Interrupted, Signals
+from ..output import OutputError
+
+EXIT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 2, 5
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,53 +45,106 @@ def main(argv: list[str] | None = None) -> int:
         const="",
         default=None,
         metavar="ADDRESS",
-        help="run on Ray: a local instance, or the cluster at ADDRESS",
+        help="run on Ray: alone, the Ray instance running here (ray start --head) or a new "
+        "private one with --workers CPUs; or the cluster at ADDRESS (HOST:PORT, or "
+        "ray://HOST:PORT with the cluster extra)",
     )
     p.add_argument("--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)")
     p.add_argument("--runs", type=int, help="override the spec's number of runs")
     p.add_argument("--limit", type=int, help="stop after this many new runs (resume later)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a folder that holds another campaign (as a whole; never a folder "
+        "that holds no campaign)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = p.parse_args(argv)
-    from . import report, runner
+    with interrupt.catch() as signals:
+        try:
+            with signals.deferred(check=False):
+                return _main(args, signals)
+        except Interrupted as exc:
+            print(
+                f"interrupted by {exc.name} before the campaign started: no run was started",
+                file=sys.stderr,
+            )
+            return exc.exit_code
+
+
+def _main(args: argparse.Namespace, signals: Signals) -> int:
+    from . import folder, report, runner
     from . import spec as spec_mod
+    from .cluster import ClusterError
 
+    engine: Any = False
     try:
-        spec = spec_mod.load(args.spec)
-        if args.runs is not None:
-            if args.runs < 1:
-                raise ScenarioError(f"--runs: expected at least 1, got {args.runs}")
-            import dataclasses
+        with signals.active():
+            spec = spec_mod.load(args.spec)
+            if args.runs is not None:
+                if args.runs < 1:
+                    raise ScenarioError(f"--runs: expected at least 1, got {args.runs}")
+                spec = dataclasses.replace(spec, runs=args.runs)
+            if args.limit is not None and args.limit < 1:
+                raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
+            if args.workers < 1:
+                raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
+        out = Path(args.out or Path.cwd() / "renders" / "campaigns" / spec.name).absolute()
+        if args.ray is not None:  # join the cluster first: a failure leaves no folder behind
+            from . import cluster
 
-            spec = dataclasses.replace(spec, runs=args.runs)
-        if args.limit is not None and args.limit < 1:
-            raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
-        if args.workers < 1:
-            raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
-        out = args.out or Path.cwd() / "renders" / "campaigns" / spec.name
-        out.mkdir(parents=True, exist_ok=True)
-        if args.spec.resolve() != (out / "spec.toml").resolve():
-            shutil.copyfile(args.spec, out / "spec.toml")
-        before = len(runner.Results(out).rows)
-        results = runner.run(
-            spec,
-            out,
-            workers=args.workers,
-            ray_address=False if args.ray is None else args.ray,
-            progress=not args.no_progress and sys.stderr.isatty(),
-            limit=args.limit,
-        )
+            with signals.active():
+                engine = cluster.connect(args.ray or None, args.workers)
+            signals.install()  # ray.init replaces the SIGTERM handler with its own
+        with output.locked(out):
+            with signals.active():
+                state = folder.prepare(out, spec, args.overwrite)
+            if state == "replaced":
+                print(f"note: {out} held another campaign; replaced (--overwrite)", file=sys.stderr)
+            before = len(runner.Results(out).rows)
+            outcome = runner.Outcome()
+            results = runner.run(
+                spec,
+                out,
+                workers=args.workers,
+                ray_address=engine,
+                progress=not args.no_progress and sys.stderr.isatty(),
+                limit=args.limit,
+                signals=signals,
+                outcome=outcome,
+            )
+            rows = [r for r in results.rows if r["run"] < spec.runs]
+            path = report.write(rows, out, spec.name, spec.description)
     except ScenarioError as exc:
         cli.print_error(exc)
-        return 2
-    rows = [r for r in results.rows if r["run"] < spec.runs]
-    path = report.write(rows, out, spec.name, spec.description)
+        return EXIT_INPUT
+    except (OutputError, ClusterError) as exc:
+        cli.print_error(exc)
+        return EXIT_OUTPUT
+    except OSError as exc:
+        cli.print_error(output.os_problem(exc, "writing the campaign"))
+        return EXIT_OUTPUT
+    finally:
+        if engine is not False:  # left by runner.run already, unless it never started
+            from .cluster import disconnect
+
+            disconnect(engine)
     failed = sum(r.get("status") == "failed" for r in rows)
+    if outcome.stopped_by is not None:
+        name = Interrupted(outcome.stopped_by).name
+        print(
+            f"interrupted by {name}: {len(rows)}/{spec.runs} runs recorded in {out} "
+            f"({outcome.new} new, {failed} failed; report updated); {outcome.running} running "
+            f"and {outcome.queued} queued runs cancelled; run the same command to resume",
+            file=sys.stderr,
+        )
+        return 128 + outcome.stopped_by
     print(
         f"{spec.name}: {len(rows)}/{spec.runs} runs recorded ({len(rows) - before} new, "
-        f"{failed} failed) in {out}"
+        f"{failed} failed) on {outcome.engine} in {out}"
     )
     print(f"report: {path}")
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -4,36 +4,49 @@ Results live in ``OUT/results.jsonl`` (one JSON object per line, appended and
 fsync'ed as soon as a run finishes: the source of truth) and
 ``OUT/results.parquet`` (the same rows, columnar, rewritten atomically after
 each run). Running a campaign again skips every run already in the JSON lines
-(a torn last line from a crash is dropped). Engines: ``local`` (a process
-pool), ``ray`` (``ray.init(address=...)``); the rows do not depend on the engine.
+(a torn last line from a crash is dropped). Engines: one run after another in
+this process (one worker), local worker processes (:mod:`pool`) or Ray
+(:mod:`cluster`); the rows do not depend on the engine. A stop request (a SIGINT or
+SIGTERM caught by the command line) ends the campaign within a second or so: queued
+runs are not started, running ones are ended and not recorded, finished ones are all
+kept.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
 import traceback
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
 from .spec import Spec, draw, scenario_for
 
+if TYPE_CHECKING:
+    from ..interrupt import Signals
+    from .cluster import Connection
+
 TIMING_COLUMNS = ("wall_time",)
 
 
-def run_one(spec: Spec, params: dict[str, Any]) -> dict[str, Any]:
-    """Simulate one run and reduce it to a row of facts; never raises."""
-    from ..loop import simulate
+def run_one(spec: Spec, params: dict[str, Any], signals: Signals | None = None) -> dict[str, Any]:
+    """Simulate one run and reduce it to a row of facts; never raises (a signal caught by
+    ``signals`` stops the simulation: the row then says "interrupted")."""
+    from ..loop import Simulation
 
     t0 = time.perf_counter()
     row: dict[str, Any] = dict(params)
     try:
         s = scenario_for(spec, params)
-        result = simulate(s, search=spec_folders(spec))
+        with Simulation(s, search=spec_folders(spec)) as sim:
+            with signals.stopping(sim) if signals is not None else contextlib.nullcontext():
+                result = sim.run(progress=False)
         row.update(_facts(params, result.summary, s.fdir.dt_d_max))
         row["status"] = result.summary["status"]
         row["error"] = result.summary["error"]
@@ -154,48 +167,32 @@ class Results:
 # --------------------------------------------------------------------------- engines
 
 
-def _local(spec: Spec, todo: list[dict[str, Any]], workers: int) -> Iterator[dict[str, Any]]:
-    if workers <= 1:
-        for p in todo:
-            yield run_one(spec, p)
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+@dataclass
+class Outcome:
+    """How :func:`run` ended: ``stopped_by`` the signal that stopped it (or None), with
+    the runs that were ``running`` (ended, not recorded) and ``queued`` (not started)."""
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(run_one, spec, p) for p in todo]
-        for f in as_completed(futures):
-            yield f.result()
+    new: int = 0
+    stopped_by: int | None = None
+    running: int = 0
+    queued: int = 0
+    engine: str = "local"
 
 
-def _ray(
-    spec: Spec, todo: list[dict[str, Any]], address: str | None, workers: int
+def _here(
+    spec: Spec, todo: list[dict[str, Any]], signals: Signals | None, outcome: Outcome
 ) -> Iterator[dict[str, Any]]:
-    try:
-        import ray
-    except ImportError:
-        from ..errors import ScenarioError
-
-        raise ScenarioError(
-            "--ray: Ray is not installed; install the cluster extra: pip install -e '.[cluster]'"
-        ) from None
-    started_here = not ray.is_initialized()
-    if started_here:
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
-            ray.init(num_cpus=workers if workers > 0 else None, **kwargs)
-    try:
-        remote = ray.remote(num_cpus=1)(run_one)
-        spec_ref = ray.put(spec)
-        pending = [remote.remote(spec_ref, p) for p in todo]
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(ready[0])
-    finally:
-        if started_here:
-            ray.shutdown()
+    """One run after another in this process."""
+    for i, p in enumerate(todo):
+        if signals is not None and signals.signum is not None:
+            outcome.queued = len(todo) - i
+            return
+        row = run_one(spec, p, signals)
+        if row.get("status") == "interrupted":
+            outcome.running = 1
+            outcome.queued = len(todo) - i - 1
+            return
+        yield row
 
 
 def run(
@@ -203,26 +200,57 @@ def run(
     out: Path,
     *,
     workers: int = 2,
-    ray_address: str | bool | None = False,
+    ray_address: str | bool | Connection | None = False,
     progress: bool = True,
     on_row: Callable[[dict[str, Any]], None] | None = None,
     limit: int | None = None,
+    signals: Signals | None = None,
+    outcome: Outcome | None = None,
 ) -> Results:
     """Run every run of ``spec`` not yet in ``out``; returns the results.
 
-    ``ray_address``: False for the local pool, None (or "") for a local Ray
-    instance, or a cluster address. ``limit`` stops after that many new runs
-    (to split a campaign in parts).
+    ``ray_address``: False for local workers (``workers`` of them; 1 runs in this
+    process), None (or "") for the local Ray instance or a new one, a cluster
+    address, or a :class:`~dftc_mujoco.campaign.cluster.Connection` already made
+    (left at the end either way). ``limit`` stops after that many new runs (to split a
+    campaign in parts).
+    ``signals`` (:class:`dftc_mujoco.interrupt.Signals`): a signal it catches stops
+    the campaign early, keeping every finished run; ``outcome`` (an :class:`Outcome`)
+    is filled in with how it ended.
     """
+    outcome = outcome if outcome is not None else Outcome()
     results = Results(out)
     done = results.done()
     todo = [draw(spec, i) for i in range(spec.runs) if i not in done]
     if limit is not None:
         todo = todo[:limit]
-    if ray_address is False:
-        rows = _local(spec, todo, workers)
+
+    def stop() -> bool:
+        return signals is not None and signals.signum is not None
+
+    engine: Any = None
+    connection = None
+    if ray_address is not False:
+        from . import cluster
+
+        if isinstance(ray_address, cluster.Connection):
+            connection = ray_address  # joined by the caller (before preparing the folder)
+        else:
+            connection = cluster.connect(ray_address or None, workers)
+        if signals is not None:
+            signals.install()  # ray.init replaces the SIGTERM handler with its own
+        engine = cluster.RayRuns(spec, stop)
+        rows: Iterator[dict[str, Any]] = engine.rows(todo)
+        outcome.engine = f"Ray at {connection.address}"
+    elif workers > 1 and len(todo) > 1:
+        from .pool import Pool
+
+        engine = Pool(spec, workers, stop)
+        rows = engine.rows(todo)
+        outcome.engine = f"{min(workers, len(todo))} local workers"
     else:
-        rows = _ray(spec, todo, ray_address or None, workers)
+        rows = _here(spec, todo, signals, outcome)
+        outcome.engine = "this process"
     failures = sum(r.get("status") == "failed" for r in results.rows)
     bar = tqdm(
         total=spec.runs,
@@ -235,11 +263,23 @@ def run(
     try:
         for row in rows:
             results.append(row)
+            outcome.new += 1
             failures += row.get("status") == "failed"
             bar.set_postfix(failures=failures)
             bar.update(1)
             if on_row is not None:
                 on_row(row)
     finally:
+        rows.close()  # ends the workers (or cancels the Ray tasks) at once
         bar.close()
+        if connection is not None:
+            from . import cluster
+
+            cluster.disconnect(connection)
+    if stop():
+        outcome.stopped_by = signals.signum if signals is not None else None
+        if engine is not None and hasattr(engine, "running"):
+            outcome.running, outcome.queued = engine.running, engine.queued
+        elif engine is not None:
+            outcome.queued = engine.cancelled
     return results

@@ -31,7 +31,6 @@ the dotted key and applied last, with :func:`dftc_mujoco.scenario.apply_override
 from __future__ import annotations
 
 import copy
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,10 +65,7 @@ def load(path: str | Path) -> Spec:
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: no such campaign spec")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    data = scenario_mod._read(path)  # not TOML, not UTF-8, unreadable: one line
     top = _Table(str(path), data, "")
     name = top.string("name")
     if scenario_mod.name_problem(name):
@@ -79,7 +75,7 @@ def load(path: str | Path) -> Spec:
     candidate = path.parent / base_name
     base_path = candidate if candidate.suffix == ".toml" and candidate.is_file() else None
     base_file = scenario_mod.resolve(base_path or base_name)
-    base = tomllib.loads(base_file.read_text())
+    base = scenario_mod._read(base_file)  # not TOML, not UTF-8, unreadable: one line
     runs = top.integer("runs", low=1)
     seed = top.integer("seed", 0, low=0)
     overrides = top.raw("set", {})
@@ -87,12 +83,37 @@ def load(path: str | Path) -> Spec:
         top.fail("set", f"expected a table of scenario keys, got {_describe(overrides)}")
     vary = _vary(top.table("vary", {}))
     top.finish()
+    _check_faulty_robots(path, vary, base)
     spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
     scenario_for(spec, draw(spec, 0))  # the scenarios it makes must be valid
     _check_choices(spec)
     for i in range(1, min(runs, 3)):
         scenario_for(spec, draw(spec, i))
     return spec
+
+
+def _check_faulty_robots(path: Path, vary: dict[str, Any], base: dict[str, Any]) -> None:
+    """``vary.faulty_robot`` must name robots that exist in every team size drawn."""
+    robots = vary["faulty_robot"]
+    if robots == "any" or set(vary.get("fault_kind", ["base"])) <= {"none", "base"}:
+        return
+    team = base.get("team", {})
+    if "robots" not in vary:
+        n = team.get("robots") if isinstance(team, dict) else None
+        bad = [r for r in robots if isinstance(n, int) and r > n]
+        if bad:
+            which = f"robot {bad[0]} does" if len(bad) == 1 else f"robots {bad} do"
+            raise ScenarioError(
+                f"{path}: vary.faulty_robot: {which} not exist in a team of {n} (the base "
+                f"scenario's team.robots); expected robot numbers from 1 to {n}"
+            )
+        return
+    for n in vary["robots"]:
+        if not any(r <= n for r in robots):
+            raise ScenarioError(
+                f"{path}: vary.faulty_robot: none of robots {robots} exists in a team of {n} "
+                f"(vary.robots = {vary['robots']}); give at least one from 1 to {n}"
+            )
 
 
 def _check_choices(spec: Spec) -> None:

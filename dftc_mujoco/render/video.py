@@ -11,6 +11,8 @@ robot numbers, legend) drawn with Pillow.
 
 from __future__ import annotations
 
+import errno
+import shutil
 import warnings
 from pathlib import Path
 from typing import Any
@@ -376,22 +378,38 @@ def write_video(
                 pixelformat="yuv420p",
                 macro_block_size=8,
                 ffmpeg_params=params,
-                ffmpeg_log_level="error",
+                ffmpeg_log_level="quiet",  # a failure is reported once, by encoder_error
             )
             try:
-                for t in tqdm(
-                    times,
-                    disable=not progress,
-                    unit="frame",
-                    desc="video",
-                    leave=False,
-                    mininterval=0.5,
-                ):
-                    writer.append_data(fr.frame(float(t)))
-            finally:
-                writer.close()
+                try:
+                    for t in tqdm(
+                        times,
+                        disable=not progress,
+                        unit="frame",
+                        desc="video",
+                        leave=False,
+                        mininterval=0.5,
+                    ):
+                        writer.append_data(fr.frame(float(t)))
+                finally:
+                    writer.close()
+            except (OSError, RuntimeError) as exc:
+                raise encoder_error(tmp, exc) from None
         tmp.replace(path)
     finally:
         if tmp.exists():
             tmp.unlink()
     return len(times)
+
+
+def encoder_error(path: Path, exc: BaseException) -> OSError:
+    """A one-line OSError for a failed ffmpeg encode into ``path``: ENOSPC when the
+    disk is full (ffmpeg itself only shows up as a broken pipe), else what was said."""
+    try:
+        full = shutil.disk_usage(path.parent).free < 2**20
+    except OSError:
+        full = False
+    if full:
+        return OSError(errno.ENOSPC, "No space left on device", str(path))
+    first = str(exc).strip().splitlines()
+    return OSError(errno.EIO, f"the video encoder (ffmpeg) failed: {first[0] if first else exc}")
