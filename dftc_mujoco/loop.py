@@ -437,7 +437,7 @@ class Simulation:
                             events.add(e.pop("t"), e.pop("kind"), **e)
                         team.events.clear()
                     ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
-                    if k % log_every == 0 or team.ended:  # the last period of an ended mission too
+                    if k % log_every == 0 or team.ended or k == steps:  # the last period too
                         self._sample(t, x, cmd, position[j])
                         if np.abs(x).max() > checks.ARENA_HALF:
                             self._left_arena(t, x)

@@ -230,3 +230,10 @@ def test_given_builtin_blocks_keep_their_names_and_the_compiled_path():
     assert r.summary["onboard"]["path"] == "compiled"
     assert r.summary["onboard"]["blocks"]["controller"] == "paper"
     assert r.summary["onboard"]["blocks"]["thresholds"] == "drive"
+
+
+def test_the_last_period_is_logged_whatever_the_log_rate():
+    s = load_scenario("paper_case", {"duration": 3.0, "physics.log_rate": 0.3, "faults": []})
+    r = simulate(s)
+    assert r.log["t"][-1] == pytest.approx(3.0)  # the final errors are the final state's
+    assert r.summary["simulated_time"] == pytest.approx(3.0)

@@ -85,6 +85,15 @@ def test_interrupted_campaign_resumes_without_duplicates(local_run, tmp_path):
     assert len(text) == 4 and len({json.loads(t)["run"] for t in text}) == 4
 
 
+def test_bytes_that_are_not_utf8_in_the_results_cost_their_line_only(local_run, tmp_path):
+    lines = (local_run / "results.jsonl").read_bytes().splitlines()
+    torn = lines[0] + b"\n" + lines[1][:30] + b"\xff\xfe\n" + b"[1, 2]\n"
+    (tmp_path / "results.jsonl").write_bytes(torn)
+    results = runner.Results(tmp_path)
+    assert [r["run"] for r in results.rows] == [json.loads(lines[0])["run"]]
+    assert (tmp_path / "results.jsonl").read_bytes() == lines[0] + b"\n"
+
+
 def test_a_killed_campaign_loses_no_finished_run(tmp_path):
     """SIGKILL a real campaign process after its first rows, then run it again."""
     cmd = [

@@ -132,10 +132,13 @@ def test_an_installed_wheel_runs_from_an_empty_directory(wheel, tmp_path):
     mine = tmp_path / "mine"
     mine.mkdir()
     shutil.copy(ROOT / "scenarios" / "paper_case.toml", mine / "case.toml")
-    shutil.copy(ROOT / "models" / "robots" / "disk.xml", mine / "bot.xml")
-    done = run("../mine/case.toml", "--robot", "../mine/bot.xml", "--duration", "1", "--out", "two")
+    shutil.copy(ROOT / "models" / "robots" / "disk.xml", mine / "disk.xml")
+    shutil.copy(ROOT / "models" / "robots" / "disk.robot.toml", mine / "bot.robot.toml")
+    robot = "../mine/bot.robot.toml"
+    done = run("../mine/case.toml", "--robot", robot, "--duration", "1", "--out", "two")
     assert done.returncode == 0, done.stderr
-    assert "x ../mine/bot.xml)" in done.stdout and (work / "two" / "summary.json").is_file()
+    assert f"x {mine / 'bot.robot.toml'})" in done.stdout  # recorded by its absolute path
+    assert (work / "two" / "summary.json").is_file()
     # an MJCF file that MuJoCo cannot load (its mesh is elsewhere): one line, exit 2
     shutil.copy(ROOT / "models" / "robots" / "hexbot.xml", mine / "hex.xml")
     bad = run("paper_case", "--robot", "../mine/hex.xml", "--duration", "1", "--out", "three")

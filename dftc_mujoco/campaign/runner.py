@@ -123,12 +123,15 @@ class Results:
         if not self.jsonl.exists():
             return []
         rows, good = [], []
-        text = self.jsonl.read_text()
+        # bytes that are not UTF-8 (a torn write) make their line unreadable, not the file
+        text = self.jsonl.read_bytes().decode("utf-8", errors="replace")
         for line in text.splitlines():
             try:
                 row = json.loads(line)
             except json.JSONDecodeError:
                 continue  # a line torn by a crash: that run is run again
+            if not isinstance(row, dict) or "run" not in row:
+                continue  # not a row of ours
             if row.get("run") in {r["run"] for r in rows}:
                 continue
             rows.append(row)
