@@ -15,6 +15,7 @@ callers check it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -225,3 +226,70 @@ def advance_crossing(
     for b in range(kk):
         if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
             cert[b] = t0 + steps - 1
+
+
+@njit(cache=True)
+def _step_rows(cur, nxt, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
+    """nxt = B_k cur column by column (as :func:`apply`), flushing entries below TINY."""
+    n, kk = cur.shape
+    for i in range(n):
+        d = 1.0 - beta * deg[i]
+        o = nxt[i]
+        vi = cur[i]
+        for b in range(kk):
+            o[b] = d * vi[b]
+        for e in range(first[i], first[i + 1]):
+            vj = cur[src[e]]
+            for b in range(kk):
+                o[b] += beta * vj[b]
+        cb = col_of_row[i]
+        if cb >= 0:
+            o[cb] -= beta * vi[cb]
+        for b in range(kk):
+            o[b] = o[b] if abs(o[b]) > TINY else 0.0
+
+
+@njit(cache=True)
+def advance_sums(
+    a, a2, u, u2, src, first, dst, out_first, deg, col_of_row, beta, steps, amax, umax
+):  # pragma: no cover - compiled
+    """``steps`` periods of the row sums a ← B_k a and column sums u ← B_kᵀ u (N, K),
+    recording ‖B_k^n‖_∞ = max_i a_i and ‖B_k^n‖₁ = max_i u_i of every new n in
+    ``amax[s]``, ``umax[s]`` (steps, K). The newest sums are in ``a``, ``u`` if ``steps``
+    is even, else in ``a2``, ``u2``; entries below :data:`TINY` are flushed to 0."""
+    n, kk = a.shape
+    ca, na, cu, nu = a, a2, u, u2
+    for s in range(steps):
+        _step_rows(ca, na, src, first, deg, col_of_row, beta)
+        _step_rows(cu, nu, dst, out_first, deg, col_of_row, beta)
+        for b in range(kk):
+            ma = 0.0
+            mu = 0.0
+            for i in range(n):
+                ma = max(ma, na[i, b])
+                mu = max(mu, nu[i, b])
+            amax[s, b] = ma
+            umax[s, b] = mu
+        ca, na = na, ca
+        cu, nu = nu, cu
+
+
+@njit(cache=True)
+def best_rate(log_a, log_u, q, lam_cert, fractions):  # pragma: no cover - compiled
+    """κ, λ minimising κ/λ over λ = ``lam_cert`` × ``fractions``, with
+    κ(λ) = √(max_n ‖B^n‖_∞ σ^{−n} · max_n ‖B^n‖₁ σ^{−n}), σ = 1 − λ/q (logs given)."""
+    best, kap, lam = np.inf, np.inf, 0.0
+    for f in fractions:
+        lm = lam_cert * f
+        if lm <= 0.0:
+            continue
+        theta = -math.log1p(-lm / q)
+        ma = -np.inf
+        mu = -np.inf
+        for m in range(len(log_a)):
+            ma = max(ma, log_a[m] + m * theta)
+            mu = max(mu, log_u[m] + m * theta)
+        k = math.exp(0.5 * (ma + mu))
+        if k / lm < best:
+            best, kap, lam = k / lm, k, lm
+    return kap, lam
