@@ -57,6 +57,8 @@ MAX_PERIODS = 1_000_000
 MAX_WORK = 1e10
 SETTLED = 0.9  # a column stops once min_i/max_i of c_i/R_i (its decay rate) is above this
 CHECK = 32  # periods between two looks at the certificates (even: see _crossing_periods)
+#: Δt_d: crossings are found period by period up to this much work, then bounded
+EXACT_CROSSING_WORK = 5e8
 #: block_row tabulates N² row norms per monitored robot and period (~N³ per period)
 BLOCK_ROW_MAX = 64
 _EPS = 2.3e-16
@@ -1041,7 +1043,9 @@ def _crossing_periods(
         open_ = (when < 0) & np.isfinite(goal)
         crossed = ~open_.any(axis=0)
         out_of_budget = work > max_work or t >= MAX_PERIODS
-        done = crossed | (cert >= 0) | out_of_budget
+        # past its certificate a column's crossings are bounded from R's decay; while the
+        # sweep is cheap it goes on to find them exactly
+        done = crossed | ((cert >= 0) & (work > EXACT_CROSSING_WORK)) | out_of_budget
         if not done.any():
             continue
         idx = np.flatnonzero(done)
