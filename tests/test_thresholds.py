@@ -133,6 +133,31 @@ def test_rules_hold_through_an_exclusion(rule, compensate):
     assert checked_after > 1000
 
 
+def test_the_restart_bounds_the_new_residuals_initial_part():
+    """At an exclusion, l1 and drive restart from ρ_k >= max_l ‖(P'_k ε'_k)_l‖ (the initial
+    part of the residual on the reduced graph), from the bounds ˡμ_k of the residuals at t_r
+    and P_k⁻¹. Checked on an adversarial state: residuals of 1 mm arranged so that the
+    out-neighbour l of the excluded robot p disagrees with p by far more (ε = −P_k⁻¹ r)."""
+    graph = ring_with_chords(16, (2,))
+    n, p, k, l = graph.n, 0, 2, 2  # p -> l
+    pk = graph.laplacian()
+    pk[k, k] += 1.0
+    g = np.linalg.inv(pk)
+    r = np.outer(np.sign(g[l] - g[p]), [1e-3, 0.0])  # every ‖ᵐr_k‖ = 1 mm
+    eps = -g @ r  # drive's identity: r_k = −P_k ε_k
+    rule = Drive.for_graph(graph, 6.0, ETA, XI, np.ones(n))
+    mu = np.ones((n, n))
+    mu[:, k] = np.linalg.norm(r, axis=1)
+    rule.mu = lambda t: mu
+    rule.drop(p, graph.without(p), 1.0)
+    reduced = graph.without(p)
+    p_new = reduced.laplacian()
+    p_new[k - 1, k - 1] += 1.0
+    need = np.linalg.norm(p_new @ np.delete(eps, p, axis=0), axis=1).max()
+    assert rule.start.alpha[k - 1] >= need * (1 - 1e-12)  # attained: the bound is tight
+    assert need > 3 * mu[:, k].max()  # the disagreement, not the residuals, dominates
+
+
 def test_drift_offset_term_covers_actuator_lag():
     """An ideal plant behind a first-order actuator lag τ, commands that jump every 4 s:
     the drift of y_k is a slow part plus an offset of about τ × (largest jump), checked
