@@ -54,7 +54,7 @@ RATIO = 1.25
 #: a sweep stops after this many periods even if a column is not certified (then a
 #: looser, still rigorous tail bound is used), or after MAX_WORK column-entry updates
 MAX_PERIODS = 1_000_000
-MAX_WORK = 1e10
+MAX_WORK = 4e9
 SETTLED = 0.9  # a column stops once min_i/max_i of c_i/R_i (its decay rate) is above this
 CHECK = 32  # periods between two looks at the certificates (even: see _crossing_periods)
 #: Δt_d: crossings are found period by period up to this much work, then bounded
