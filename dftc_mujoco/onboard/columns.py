@@ -78,6 +78,17 @@ def rotation_invariant(graph: Graph) -> bool:
     return n > 1 and {((j + 1) % n, (i + 1) % n) for j, i in edges} == edges
 
 
+def ratios(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """new / old entrywise (0/0 = 0, x/0 = inf): the factors of a certificate new ≤ s old."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(old > 0, new / old, np.where(new > 0, np.inf, 0.0))
+
+
+def ratio_max(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """Per column, the smallest s with new ≤ s old componentwise (see :func:`ratios`)."""
+    return ratios(new, old).max(axis=0)
+
+
 #: entries below this are set to 0 in the recursions: the wavefront of a column
 #: otherwise passes through subnormal numbers, 10-100x slower. The error is at most
 #: TINY per entry and period, so at most t·TINY on c and t²·TINY on S after t

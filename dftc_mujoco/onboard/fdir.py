@@ -28,6 +28,7 @@ from .columns import (
     advance_sums,
     best_rate,
     column_of_row,
+    ratios,
     reaches_all,
     rotation_invariant,
 )
@@ -166,7 +167,7 @@ def _decay_bounds_fast(
             hist.append(full)
         steps_done += chunk
         # chunk is even: the newest sums are in a, u and the previous ones in a2, u2
-        ra, ru = _ratios(a, a2), _ratios(u, u2)
+        ra, ru = ratios(a, a2), ratios(u, u2)
         s_a, s_u = ra.max(axis=0), ru.max(axis=0)
         settled = (
             (1.0 - s_a >= (1.0 - settle) * (1.0 - ra.min(axis=0)))
@@ -199,12 +200,6 @@ def _decay_bounds_fast(
         a, a2, u, u2 = (np.ascontiguousarray(x[:, keep]) for x in (a, a2, u, u2))
         cols = cols[keep]
     return kappa, lam
-
-
-def _ratios(new: np.ndarray, old: np.ndarray) -> np.ndarray:
-    """new / old entrywise (0/0 = 0, x/0 = inf)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(old > 0, new / old, np.where(new > 0, np.inf, 0.0))
 
 
 def _decay_bounds(

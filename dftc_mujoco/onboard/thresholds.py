@@ -1,28 +1,31 @@
 """Threshold rules beside the paper's eq. 40, derived for the discrete-time observer.
 
 ``docs/thresholds.md`` has the derivations. The observer runs by forward Euler at
-the control period h; with P_k = L + e_k e_kᵀ, M_k = k_o P_k, A_k = I − h M_k and
-c_j = [A_k^j]_{ik} (≥ 0 when h k_o (d_max + 1) ≤ 1), TV(t) = Σ_{1≤m≤t} |c_m − c_{m−1}|,
-O(t) = TV(t − 1) + c_{t−1} (O(0) = 0), S(t) = Σ_{m<t} c_m → 1/(h k_o):
+the control period h; with P_k = L + e_k e_kᵀ, β = h k_o, A_k = I − β P_k,
+c_t = [A_k^t]_{ik} (≥ 0 when β (d_max + 1) ≤ 1), d_t = (c_t − c_{t+1})/β,
+TV(t) = Σ_{1≤m≤t} |c_m − c_{m−1}|, O(t) = TV(t − 1) + c_{t−1} (O(0) = 0) and
+S(t) = Σ_{m<t} c_m → 1/β:
 
-* ``l1``: with ‖η_k‖ ≤ η̄ and the drift y_k(t) − y_k(0) = S_k(t) + E_k(t) of
+* ``l1`` (eq. L1): with ‖η_k‖ ≤ η̄ and the drift y_k(t) − y_k(0) = S_k(t) + E_k(t) of
   y_k = x_k − ∫u_k split into a slow part (‖ΔS_k‖ ≤ h ξ̄ per period) and a bounded
-  offset (‖E_k‖ ≤ ē: actuator lag, compensation jitter),
-  ⁱμ_k(t) = y0_k ι_ik(t) + η̄(δ_ik + TV_ik(t)) + ē(δ_ik + O_ik(t)) + h ξ̄ S_ik(t)    (eq. L1)
-  with ι_ik(t) = h k_o (|P_k| R_k(t))_i, R_k(t) = 1/(h k_o) − S_k(t) (A_k^t 1 = h k_o R_k(t)).
-* ``drive``: robot k's measured y_m,k − y_m,k(0) = G φ̂_k exactly (the fault
+  offset (‖E_k‖ ≤ ē: actuator lag, compensation),
+  ⁱμ_k(t) = |c_t − d_t| ε̄ + |d_t| η̄ + η̄(δ_ik + TV_ik(t)) + ē(δ_ik + O_ik(t)) + h ξ̄ S_ik(t).
+* ``drive`` (eq. D): robot k's measured y_m,k − y_m,k(0) = G φ̂_k exactly (the fault
   estimator's algebra), a pure offset of size ‖G‖ Φ̄:
-  ⁱμ_k(t) = ε0_k ι_ik(t) + ‖G‖ Φ̄ (δ_ik + O_ik(t)).                                   (eq. D)
-* ``block_row``: ⁱμ_k(t) = ‖e_iᵀ P_k A_k^t‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{j<t} ‖e_iᵀ P_k A_k^j‖
-  + δ_ik η̄ + ē(δ_ik + O_ik(t))                                                        (eq. B)
+  ⁱμ_k(t) = |c_t − d_t| (ε̄ + η̄) + ‖G‖ Φ̄ (δ_ik + O_ik(t)).
+* ``block_row`` (eq. B): ⁱμ_k(t) = ‖e_iᵀ P_k A_k^t‖ y0_k + h(k_o η̄ + √N ξ̄) Σ_{j<t}
+  ‖e_iᵀ P_k A_k^j‖ + δ_ik η̄ + ē(δ_ik + O_ik(t)).
 
-``l1`` and ``drive`` need only the columns A_k^j e_k: one sparse recursion per
-monitored robot, batched and compiled (:mod:`.columns`), stopped once every entry
-of the column is certified non-increasing, with exact tails from there on. The
-thresholds are stored as an envelope on a geometric grid of periods (a bound for
-every period of each interval), not per period. ``block_row`` needs the rows of
-P_k A_k^j, N² numbers per monitored robot and period: it is exact and limited to
-teams of at most :data:`BLOCK_ROW_MAX` robots.
+The initial terms above are those of the start (every robot's first estimates have a
+known structure); after an exclusion l1 and drive restart from the residuals' bound
+(:meth:`_Enveloped.drop`). ``l1`` and ``drive`` need only the columns A_k^j e_k: one
+sparse recursion per monitored robot, batched and compiled (:mod:`.columns`), stopped
+once every entry of the column is certified non-increasing (exact tails from there
+on) or at a work budget (rigorous looser tails). The thresholds are stored as an
+envelope on a geometric grid of periods (a bound for every period of each interval),
+not per period. ``block_row`` needs the rows of P_k A_k^j, N² numbers per monitored
+robot and period: it is exact and limited to teams of at most :data:`BLOCK_ROW_MAX`
+robots.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from .columns import (
     advance_crossing,
     apply,
     column_of_row,
+    ratio_max,
     reaches_all,
     rotation_invariant,
 )
@@ -116,13 +120,6 @@ def check_nonnegative(graph: Graph, ko: float, h: float, rule: str) -> None:
 
 
 # --------------------------------------------------------------------------- column sweep
-
-
-def _ratio_max(new: np.ndarray, old: np.ndarray) -> np.ndarray:
-    """max_i new_i / old_i per column (0/0 = 0, x/0 = inf): new ≤ s old componentwise."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(old > 0, new / old, np.where(new > 0, np.inf, 0.0))
-    return r.max(axis=0)
 
 
 @dataclass(frozen=True)
@@ -797,7 +794,7 @@ class _RowSweep:
         gn, un = np.empty_like(self.g), np.empty_like(self.u)
         apply(self.g, gn, a.src, a.first, a.deg, cor, self.beta)
         apply(self.u, un, a.dst, a.out_first, a.deg, cor, self.beta)
-        s_u, s_g = _ratio_max(un, self.u), _ratio_max(gn, self.g)
+        s_u, s_g = ratio_max(un, self.u), ratio_max(gn, self.g)
         with np.errstate(divide="ignore", invalid="ignore"):
             ax = np.abs(self.x)
             ut = self.u.T[:, None, :]
