@@ -33,6 +33,7 @@ BUILTIN: dict[str, dict[str, str]] = {
         "paper": "dftc_mujoco.blocks.paper:Thresholds",
         "block_row": "dftc_mujoco.onboard.thresholds:BlockRow",
         "drive": "dftc_mujoco.onboard.thresholds:Drive",
+        "l1": "dftc_mujoco.onboard.thresholds:L1",
     },
     "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
 }

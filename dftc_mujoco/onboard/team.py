@@ -117,15 +117,10 @@ class Team:
             return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
         from .thresholds import predicted_delays
 
-        th = self.thresholds
-        delays = predicted_delays(
-            cfg.graph,
-            cfg.ko,
-            cfg.dt,
-            np.asarray(th.mu(1e9)),
-            cfg.reference_fault,
-            getattr(th, "_tables", None),
-        )
+        # the steady thresholds of the run's rule, whatever it is; the signature of a
+        # constant fault comes from the columns A_k^j e_k alone (no tables)
+        steady = np.array(self.thresholds.mu(1e9), dtype=float)
+        delays = predicted_delays(cfg.graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
         worst = float(delays.max()) + cfg.detection_window
         info = {
             "source": "analysis (eq. 46)",

@@ -1,0 +1,306 @@
+"""Vector recursions on the observer matrices, batched over the monitored robots.
+
+Every monitored robot k has its own matrix M_k = k_o(L + e_k e_kᵀ) (NOTES 5). The
+threshold rules (``docs/thresholds.md``) and the fast κ, λ of eq. 41 need only
+vectors pushed through B_k = I − β(L + e_k e_kᵀ), never B_k's powers:
+
+* the columns c = B_k^j e_k (with β = h k_o, B_k is the discrete observer's A_k),
+* the row sums B_k^j 1 and the column sums (B_kᵀ)^j 1 (κ, λ with β = k_o / q).
+
+Arrays are laid out (N, K): row i, one column per monitored robot (``rows[b]`` is
+the robot of column b), so that one pass over the in-neighbour lists serves all
+columns at once. B_k ≥ 0 elementwise when β (d_i + δ_ik) ≤ 1 for every i; the
+callers check it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order
+
+from ..graph import Graph
+
+
+@dataclass(frozen=True)
+class Adjacency:
+    """In- and out-neighbour lists of a graph, for the compiled recursions.
+
+    ``src[first[i]:first[i + 1]]`` are robot i's in-neighbours (Lv)_i = d_i v_i − Σ v_j;
+    ``dst[out_first[j]:out_first[j + 1]]`` the robots j sends to (for Lᵀ);
+    ``deg`` the in-degrees d_i (float).
+    """
+
+    n: int
+    src: np.ndarray
+    first: np.ndarray
+    dst: np.ndarray
+    out_first: np.ndarray
+    deg: np.ndarray
+
+    @classmethod
+    def of(cls, graph: Graph) -> Adjacency:
+        """The lists of ``graph``."""
+        e = np.array(graph.edges, dtype=np.int64).reshape(-1, 2)
+        by_to = np.lexsort((e[:, 0], e[:, 1]))
+        by_from = np.lexsort((e[:, 1], e[:, 0]))
+        first = np.searchsorted(e[by_to, 1], np.arange(graph.n + 1)).astype(np.int64)
+        out_first = np.searchsorted(e[by_from, 0], np.arange(graph.n + 1)).astype(np.int64)
+        deg = np.bincount(e[:, 1], minlength=graph.n).astype(float)
+        return cls(graph.n, e[by_to, 0].copy(), first, e[by_from, 1].copy(), out_first, deg)
+
+    def transposed(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lists, offsets) that make :func:`apply` compute with Lᵀ instead of L."""
+        return self.dst, self.out_first
+
+
+def reaches_all(graph: Graph) -> np.ndarray:
+    """(N,) bool: robot k reaches every robot along the edges, i.e. M_k is positive
+    stable (the grounded Laplacian L + e_k e_kᵀ is then a non-singular M-matrix)."""
+    n = graph.n
+    if graph.is_strongly_connected():
+        return np.ones(n, bool)
+    e = np.array(graph.edges, dtype=np.int64).reshape(-1, 2)
+    m = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return np.array([len(breadth_first_order(m, k, directed=True)[0]) == n for k in range(n)])
+
+
+def rotation_invariant(graph: Graph) -> bool:
+    """The graph is invariant under the rotation i -> i + 1 (rings, rings with chords):
+    M_k = R^k M_0 R^{-k} with R the rotation, so every monitored robot sees the same
+    matrices and [f(M_k)]_{ik} = [f(M_0)]_{(i − k) mod N, 0}."""
+    n = graph.n
+    edges = set(graph.edges)
+    return n > 1 and {((j + 1) % n, (i + 1) % n) for j, i in edges} == edges
+
+
+def ratios(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """new / old entrywise (0/0 = 0, x/0 = inf): the factors of a certificate new ≤ s old."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(old > 0, new / old, np.where(new > 0, np.inf, 0.0))
+
+
+def ratio_max(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """Per column, the smallest s with new ≤ s old componentwise (see :func:`ratios`)."""
+    return ratios(new, old).max(axis=0)
+
+
+#: entries below this are set to 0 in the recursions: the wavefront of a column
+#: otherwise passes through subnormal numbers, 10-100x slower. The error is at most
+#: TINY per entry and period, so at most t·TINY on c and t²·TINY on S after t
+#: periods (‖A‖_∞ ≤ 1): the callers add it to their rounding slack.
+TINY = 1e-250
+
+
+def column_of_row(rows: np.ndarray, n: int) -> np.ndarray:
+    """(N,) the column whose monitored robot is row i, or −1."""
+    out = np.full(n, -1, dtype=np.int64)
+    out[rows] = np.arange(len(rows))
+    return out
+
+
+@njit(cache=True)
+def apply(v, out, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
+    """out[:, b] = B_k v[:, b] with B_k = I − β(L + e_k e_kᵀ), k the robot of column b.
+
+    With the out-neighbour lists (:meth:`Adjacency.transposed`) it applies B_kᵀ.
+    """
+    n, kk = v.shape
+    for i in range(n):
+        a = 1.0 - beta * deg[i]
+        o = out[i]
+        vi = v[i]
+        for b in range(kk):
+            o[b] = a * vi[b]
+        for e in range(first[i], first[i + 1]):
+            vj = v[src[e]]
+            for b in range(kk):
+                o[b] += beta * vj[b]
+        cb = col_of_row[i]
+        if cb >= 0:
+            o[cb] -= beta * vi[cb]
+
+
+@njit(cache=True)
+def advance_columns(
+    v,
+    prev,
+    tot,
+    tv,
+    imax,
+    alpha,
+    gamma,
+    structured,
+    src,
+    first,
+    deg,
+    col_of_row,
+    beta,
+    steps,
+    t0,
+    cert,
+):  # pragma: no cover - compiled
+    """``steps`` periods of c ← B_k c for every column, accumulating as it goes.
+
+    On entry ``v`` holds c(t0) = B^{t0} e_k (column k), ``tot`` = S(t0) = Σ_{m<t0} c_m
+    and ``tv`` = TV(t0) = Σ_{1≤m≤t0} |c_m − c_{m−1}|. On return the newest column
+    c(t0 + steps) is in ``v`` if ``steps`` is even, else in ``prev`` (the other buffer
+    then holds c(t0 + steps − 1)); entries below :data:`TINY` are flushed to 0. With
+    ``structured``, ``imax`` takes the largest
+    alpha_b |c_t − d_t| + gamma |d_t|, d_t = (c_t − c_{t+1}) / β, over the periods
+    stepped from. ``cert[b]`` (−1 until then) is set to t0 + steps − 1 if at that last
+    period c(t + 1) ≤ c(t) with c(t) > 0 componentwise: from then on every entry of
+    column b is non-increasing, since B ≥ 0.
+    """  # fmt: skip
+    n, kk = v.shape
+    inv = 1.0 / beta
+    worst = np.full(kk, -np.inf)
+    low = np.full(kk, np.inf)
+    cur, nxt = v, prev
+    for s in range(steps):
+        for i in range(n):
+            a = 1.0 - beta * deg[i]
+            o = nxt[i]
+            vi = cur[i]
+            for b in range(kk):
+                o[b] = a * vi[b]
+            for e in range(first[i], first[i + 1]):
+                vj = cur[src[e]]
+                for b in range(kk):
+                    o[b] += beta * vj[b]
+            cb = col_of_row[i]
+            if cb >= 0:
+                o[cb] -= beta * vi[cb]
+            for b in range(kk):  # no subnormal arithmetic (see TINY)
+                o[b] = o[b] if abs(o[b]) > TINY else 0.0
+            ti, si = tv[i], tot[i]
+            for b in range(kk):
+                ti[b] += abs(o[b] - vi[b])
+                si[b] += vi[b]
+            if structured:
+                mi = imax[i]
+                for b in range(kk):
+                    d = (vi[b] - o[b]) * inv
+                    mi[b] = max(mi[b], alpha[b] * abs(vi[b] - d) + gamma * abs(d))
+            if s == steps - 1:
+                for b in range(kk):
+                    worst[b] = max(worst[b], o[b] - vi[b])
+                    low[b] = min(low[b], vi[b])
+        cur, nxt = nxt, cur
+    for b in range(kk):
+        if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
+            cert[b] = t0 + steps - 1
+
+
+@njit(cache=True)
+def advance_crossing(
+    v, prev, tot, need, when, src, first, deg, col_of_row, beta, steps, t0, cert
+):  # pragma: no cover - compiled
+    """``steps`` periods of c ← B_k c accumulating S = Σ_{m<t} c_m (``tot``); ``when[i, b]``
+    (−1 until then) records the first t with S_ib(t) ≥ ``need[i, b]``. Buffers and
+    ``cert`` as in :func:`advance_columns`."""
+    n, kk = v.shape
+    worst = np.full(kk, -np.inf)
+    low = np.full(kk, np.inf)
+    cur, nxt = v, prev
+    for s in range(steps):
+        t1 = t0 + s + 1
+        for i in range(n):
+            a = 1.0 - beta * deg[i]
+            o = nxt[i]
+            vi = cur[i]
+            for b in range(kk):
+                o[b] = a * vi[b]
+            for e in range(first[i], first[i + 1]):
+                vj = cur[src[e]]
+                for b in range(kk):
+                    o[b] += beta * vj[b]
+            cb = col_of_row[i]
+            if cb >= 0:
+                o[cb] -= beta * vi[cb]
+            for b in range(kk):
+                o[b] = o[b] if abs(o[b]) > TINY else 0.0
+            si, ni, wi = tot[i], need[i], when[i]
+            for b in range(kk):
+                si[b] += vi[b]
+                hit = (wi[b] < 0) & (si[b] >= ni[b])
+                wi[b] = t1 if hit else wi[b]
+            if s == steps - 1:
+                for b in range(kk):
+                    worst[b] = max(worst[b], o[b] - vi[b])
+                    low[b] = min(low[b], vi[b])
+        cur, nxt = nxt, cur
+    for b in range(kk):
+        if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
+            cert[b] = t0 + steps - 1
+
+
+@njit(cache=True)
+def _step_rows(cur, nxt, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
+    """nxt = B_k cur column by column (as :func:`apply`), flushing entries below TINY."""
+    n, kk = cur.shape
+    for i in range(n):
+        d = 1.0 - beta * deg[i]
+        o = nxt[i]
+        vi = cur[i]
+        for b in range(kk):
+            o[b] = d * vi[b]
+        for e in range(first[i], first[i + 1]):
+            vj = cur[src[e]]
+            for b in range(kk):
+                o[b] += beta * vj[b]
+        cb = col_of_row[i]
+        if cb >= 0:
+            o[cb] -= beta * vi[cb]
+        for b in range(kk):
+            o[b] = o[b] if abs(o[b]) > TINY else 0.0
+
+
+@njit(cache=True)
+def advance_sums(
+    a, a2, u, u2, src, first, dst, out_first, deg, col_of_row, beta, steps, amax, umax
+):  # pragma: no cover - compiled
+    """``steps`` periods of the row sums a ← B_k a and column sums u ← B_kᵀ u (N, K),
+    recording ‖B_k^n‖_∞ = max_i a_i and ‖B_k^n‖₁ = max_i u_i of every new n in
+    ``amax[s]``, ``umax[s]`` (steps, K). The newest sums are in ``a``, ``u`` if ``steps``
+    is even, else in ``a2``, ``u2``; entries below :data:`TINY` are flushed to 0."""
+    n, kk = a.shape
+    ca, na, cu, nu = a, a2, u, u2
+    for s in range(steps):
+        _step_rows(ca, na, src, first, deg, col_of_row, beta)
+        _step_rows(cu, nu, dst, out_first, deg, col_of_row, beta)
+        for b in range(kk):
+            ma = 0.0
+            mu = 0.0
+            for i in range(n):
+                ma = max(ma, na[i, b])
+                mu = max(mu, nu[i, b])
+            amax[s, b] = ma
+            umax[s, b] = mu
+        ca, na = na, ca
+        cu, nu = nu, cu
+
+
+@njit(cache=True)
+def best_rate(log_a, log_u, q, lam_cert, fractions):  # pragma: no cover - compiled
+    """κ, λ minimising κ/λ over λ = ``lam_cert`` × ``fractions``, with
+    κ(λ) = √(max_n ‖B^n‖_∞ σ^{−n} · max_n ‖B^n‖₁ σ^{−n}), σ = 1 − λ/q (logs given)."""
+    best, kap, lam = np.inf, np.inf, 0.0
+    for f in fractions:
+        lm = lam_cert * f
+        if lm <= 0.0:
+            continue
+        theta = -math.log1p(-lm / q)
+        ma = -np.inf
+        mu = -np.inf
+        for m in range(len(log_a)):
+            ma = max(ma, log_a[m] + m * theta)
+            mu = max(mu, log_u[m] + m * theta)
+        k = math.exp(0.5 * (ma + mu))
+        if k / lm < best:
+            best, kap, lam = k / lm, k, lm
+    return kap, lam
