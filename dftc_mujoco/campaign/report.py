@@ -16,6 +16,10 @@ def _pct(a: float | None) -> str:
     return "n/a" if a is None else f"{100 * a:.1f} %"
 
 
+def _num(a: float | None, digits: int) -> str:
+    return "n/a" if a is None else f"{a:.{digits}f}"
+
+
 def _rate(xs: list[bool]) -> float | None:
     return float(np.mean(xs)) if xs else None
 
@@ -54,6 +58,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "dt_d_max": dt_max,
         "success_after_recovery": _rate([r["success"] for r in excluded_stop]),
         "success_all": _rate([r["success"] for r in ok]),
+        "margin_max": max((r["margin"] for r in ok if r.get("margin") is not None), default=None),
     }
 
 
@@ -93,6 +98,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"{s['fault_free_runs']} |",
         f"| false alarms per robot-hour | {per_hour} |",
         f"| wrong isolations (a healthy robot excluded) | {s['wrong_isolations']} |",
+        f"| largest healthy residual / threshold (margin) | {_num(s['margin_max'], 3)} |",
     ]
     if s["delay_median"] is not None:
         lines.append(
@@ -143,36 +149,59 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
             "![bias detection](figures/bias_detection.png)",
             "",
         ]
-    groups = _by([r for r in ok if r["fault_kind"] == "stop"], "robots", "graph_family")
-    if len(groups) > 1:
-        lines += [
-            "| N | graph | stop runs | detected | by all | median delay [s] |",
-            "|---|---|---|---|---|---|",
-        ]
-        fig, ax = new_figure(figsize=(6, 3.5))
-        for fam in sorted({k[1] for k in groups}):
-            ns = sorted(k[0] for k in groups if k[1] == fam)
-            rates = [np.mean([r["detected"] for r in groups[(n, fam)]]) for n in ns]
-            ax.plot(ns, rates, "o-", label=fam)
-        for (n, fam), rs in groups.items():
-            d = [r["delay_first"] for r in rs if r["delay_first"] is not None]
-            lines.append(
-                f"| {n} | {fam} | {len(rs)} | {_pct(_rate([r['detected'] for r in rs]))}"
-                f" | {_pct(_rate([r['detected_by'] == r['robots'] for r in rs]))} | "
-                f"{'n/a' if not d else f'{np.median(d):.2f}'} |"
-            )
-        ax.set_xlabel("N")
-        ax.set_ylabel("stop detection rate")
-        ax.set_ylim(-0.05, 1.05)
-        ax.legend()
-        ax.set_title("Detection against team size and graph")
-        _save(fig, figs / "scale.png")
-        lines += ["", "![scale](figures/scale.png)", ""]
+    lines += _scale_table(ok, figs)
     path = out / "report.md"
     tmp = out / ".report.md.tmp"
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)
     return path
+
+
+def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
+    """Stop detection by threshold rule, team size and graph family, with the figure."""
+    stops = [r for r in ok if r["fault_kind"] == "stop"]
+    for r in stops:
+        r.setdefault("thresholds", "paper")
+    groups = _by(stops, "thresholds", "robots", "graph_family")
+    if len(groups) <= 1:
+        return []
+    lines = [
+        "| rule | N | graph | stop runs | detected | by all | first flag: median / p95 / max "
+        "[s] | last flag: max [s] | false alarms per robot-hour | margin |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (rule, n, fam), rs in groups.items():
+        s = summarise(rs)
+        d = (
+            "n/a"
+            if s["delay_median"] is None
+            else f"{s['delay_median']:.2f} / {s['delay_p95']:.2f} / {s['delay_max']:.2f}"
+        )
+        lines.append(
+            f"| {rule} | {n} | {fam} | {len(rs)} | {_pct(s['detection_rate'])} | "
+            f"{_pct(s['detected_by_all_rate'])} | {d} | {_num(s['delay_last_max'], 2)} | "
+            f"{_num(s['false_alarms_per_robot_hour'], 2)} | {_num(s['margin_max'], 2)} |"
+        )
+    fig, axes = new_figure(figsize=(9, 3.5), ncols=2)
+    for rule, fam in sorted({(k[0], k[2]) for k in groups}):
+        ns = sorted(k[1] for k in groups if k[0] == rule and k[2] == fam)
+        rates = [np.mean([r["detected"] for r in groups[(rule, n, fam)]]) for n in ns]
+        med = [
+            np.median([r["delay_first"] for r in groups[key] if r["detected"]] or [np.nan])
+            for key in ((rule, n, fam) for n in ns)
+        ]
+        axes[0].plot(ns, rates, "o-", label=f"{rule}, {fam}")
+        axes[1].plot(ns, med, "o-", label=f"{rule}, {fam}")
+    axes[0].set_ylabel("stop detection rate")
+    axes[0].set_ylim(-0.05, 1.05)
+    axes[1].set_ylabel("median first-flag delay [s]")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("N")
+    axes[1].legend(fontsize=7)
+    fig.suptitle("Detection against team size, graph and threshold rule")
+    _save(fig, figs / "scale.png")
+    return [*lines, "", "![scale](figures/scale.png)", ""]
 
 
 def _save(fig, path: Path) -> None:

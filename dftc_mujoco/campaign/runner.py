@@ -101,6 +101,7 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
         "min_obstacle_clearance": summary["min_obstacle_clearance"],
         "warnings": len(summary["warnings"]),
         "onboard_path": summary.get("onboard", {}).get("path"),
+        "thresholds": summary.get("onboard", {}).get("blocks", {}).get("thresholds"),
         "blocks": json.dumps(summary.get("onboard", {}).get("blocks", {}), sort_keys=True),
         "duration": summary["duration"],
     }

@@ -18,6 +18,9 @@ eta_bar = [0.0005, 0.002]        # uniform ranges
 xi_bar = [0.002, 0.01]
 "gains.ko" = [3.0, 6.0]          # any scenario key by dotted path (quoted): a list
 "onboard.thresholds" = ["paper", "mylab.fdi:Mine"]   # of choices, one drawn per run
+design = "random"                # or "grid": every combination of the lists above
+                                 # (robots, graph_family, fault_kind, dotted keys) in
+                                 # turn, run i taking combination i mod their count
 [vary.graph]                     # parameters of generated graphs
 chords = [2]
 in_degree = 2
@@ -128,6 +131,7 @@ def _check_choices(spec: Spec) -> None:
 
 def _vary(t: _Table) -> dict[str, Any]:
     v: dict[str, Any] = {"seed": t.boolean("seed", True)}
+    v["design"] = t.string("design", "random", choices=("random", "grid"))
     dotted: dict[str, list[Any]] = {}
     for key in t.data:
         if "." in key:
@@ -183,22 +187,41 @@ def _choices(t: _Table, key: str, allowed: tuple[str, ...]) -> list[str]:
     return value
 
 
+def grid_choice(vary: dict[str, Any], index: int) -> dict[str, Any]:
+    """For ``design = "grid"``: the combination of run ``index`` (mixed radix over the lists
+    robots, graph_family, fault_kind and the dotted keys, in that order); {} otherwise."""
+    if vary.get("design") != "grid":
+        return {}
+    factors = [(k, vary[k]) for k in ("robots", "graph_family", "fault_kind") if k in vary]
+    factors += list(vary.get("scenario_keys", {}).items())
+    out, rest = {}, index
+    for key, choices in factors:
+        rest, digit = divmod(rest, len(choices))
+        out[key] = choices[digit]
+    return out
+
+
 def draw(spec: Spec, index: int) -> dict[str, Any]:
     """The parameters of run ``index`` (0-based): drawn from (campaign seed, index) only."""
     rng = np.random.default_rng([spec.seed, index])
     v = spec.vary
+    grid = grid_choice(v, index)
+
+    def pick(key: str) -> Any:
+        return grid[key] if key in grid else rng.choice(v[key])
+
     base_team = spec.base.get("team", {})
-    n = int(rng.choice(v["robots"])) if "robots" in v else int(base_team.get("robots", 4))
+    n = int(pick("robots")) if "robots" in v else int(base_team.get("robots", 4))
     p: dict[str, Any] = {"run": index, "robots": n}
     p["seed"] = (
         int(rng.integers(0, 2**31 - 1)) if v.get("seed", True) else int(spec.base.get("seed", 0))
     )
     p["graph_family"] = (
-        str(rng.choice(v["graph_family"]))
+        str(pick("graph_family"))
         if "graph_family" in v
         else ("generated" if "robots" in v else "base")
     )
-    kind = str(rng.choice(v["fault_kind"])) if "fault_kind" in v else "base"
+    kind = str(pick("fault_kind")) if "fault_kind" in v else "base"
     p["fault_kind"] = kind
     if kind in ("stop", "bias"):
         choices = (
@@ -217,7 +240,8 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
         if key in v:
             p[key] = round(float(rng.uniform(*v[key])), 6)
     for key, choices in v.get("scenario_keys", {}).items():  # after the draws above
-        p[key] = copy.deepcopy(choices[int(rng.integers(len(choices)))])
+        chosen = grid[key] if key in grid else choices[int(rng.integers(len(choices)))]
+        p[key] = copy.deepcopy(chosen)
     return p
 
 
