@@ -629,6 +629,7 @@ def main(argv: list[str] | None = None) -> int:
         overrides = parse_overrides(args.overrides)
         if loop_results[0].rings and "gains.G" not in overrides:
             overrides["gains.G"] = loop_results[-1].G
+        overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
         try:
             d = drift(args.model, args.scenario, overrides, max(1, args.runs))
         except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is

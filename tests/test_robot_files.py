@@ -33,6 +33,10 @@ BIG = {
     "mission.formation.side": 1.0,
     "team.initial_positions": {"layout": "formation", "jitter": 0.02},
 }
+# with the robots' measured mismatch (15-20 mm/s: position servos lag) eq. 40's thresholds
+# are too wide to catch the stop in time; the block_row rule, with the calibrated drift
+# offset, is the README's recipe for such robots (issue 10)
+TIGHT = {**BIG, "onboard.thresholds": "block_row"}
 
 MOTORBOX = """<mujoco model="motorbox">
   <worldbody>
@@ -413,12 +417,13 @@ def test_impossible_set_ups_are_refused_before_simulating():
     assert time.perf_counter() - t0 < 20
 
 
-def test_what_can_run_but_deserves_a_look_is_warned_about():
+def test_what_can_run_but_deserves_a_look_is_warned_about(tmp_path):
+    uncalibrated = robot_file(tmp_path, HOLO_FILE)  # the test model, without [calibration]
     s = scenario.load_scenario(
         "paper_case",
         {
             **BIG,
-            "team.robot_model": str(HOLOBASE),
+            "team.robot_model": str(uncalibrated),
             "mission.formation.side": 0.7,
             "faults": [{"robot": 2, "kind": "bias", "t": 0.5, "value": [0.95, 0.0]}],
         },
@@ -428,7 +433,7 @@ def test_what_can_run_but_deserves_a_look_is_warned_about():
     assert any("safe_distance: raised from 0.37 to 0.461" in w for w in warnings)
     assert any("may run into a teammate" in w for w in warnings)  # the squeeze at a cylinder
     assert any("cannot be compensated" in w for w in warnings)  # 0.95 + 0.1 > 1 m/s
-    assert any("holobase model is not calibrated" in w for w in warnings)
+    assert any("bot model is not calibrated" in w for w in warnings)
 
 
 # --------------------------------------------------------------------------- the paper's outcome
@@ -459,7 +464,7 @@ def test_a_published_style_holonomic_base_gives_the_paper_outcome(tmp_path):
         "--no-video",
         "--no-progress",
     ]
-    for k, v in BIG.items():
+    for k, v in TIGHT.items():
         args += ["--set", f"{k}={json.dumps(v) if not isinstance(v, dict) else _inline(v)}"]
     assert run.main(args) == 0
     r = scenario.load_scenario(out / "scenario.toml")
@@ -470,8 +475,11 @@ def test_a_published_style_holonomic_base_gives_the_paper_outcome(tmp_path):
 
 
 def test_a_mobile_manipulator_gives_the_paper_outcome_with_its_calibrated_gain():
+    arm = robots.get(str(MOBILEARM))
+    G = arm.calibration["compensation_G"]
+    assert G == 0.05  # calibrate: the paper's G = 0.01 makes this robot's compensation ring
     s = scenario.load_scenario(
-        "paper_case", {**BIG, "team.robot_model": str(MOBILEARM), "gains.G": 0.05}
+        "paper_case", {**TIGHT, "team.robot_model": str(MOBILEARM), "gains.G": G}
     )
     _outcome(loop.simulate(s))
 
