@@ -412,11 +412,13 @@ def test_set_up_is_fast_at_n_100():
     assert time.perf_counter() - t0 < 5.0
 
 
-@pytest.mark.parametrize(("rule", "within"), [("block_row", 0.8), ("drive", 0.5)])
+@pytest.mark.parametrize(("rule", "within"), [("block_row", 1.5), ("l1", 1.5), ("drive", 0.5)])
 def test_paper_case_keeps_its_outcome_with_the_tight_rules(rule, within):
-    """MuJoCo disk robots: robot 1's stop is flagged by all four robots within 1.5 s
-    (eq. 40: 3.3-6.0 s), robot 2's compensated bias by nobody, no healthy residual
-    above its threshold, and robot 1 is the only robot excluded."""
+    """MuJoCo disk robots, with the disk's calibrated drift offset (2.72 mm): robot 1's
+    stop is flagged by all four robots within 1.5 s (issue 10's target; measured 0.55-0.80 s
+    with block_row, 0.35-0.55 s with l1; eq. 40: 3.3-6.0 s), robot 2's compensated bias by
+    nobody, no healthy residual above 0.8 of its threshold, and robot 1 is the only robot
+    excluded."""
     from dftc_mujoco import load_scenario, simulate
 
     r = simulate(load_scenario("paper_case", {"onboard.thresholds": rule}))
@@ -440,7 +442,10 @@ def test_dt_d_max_from_the_analysis_covers_every_robots_detection():
     r = simulate(s)
     info = r.summary["dt_d_max"]
     assert info["source"] == "analysis (eq. 46)" and info["reference_fault"] == 0.1
-    assert 0.5 < info["value"] < 2.0  # 1.37 s, against the paper's guessed 5 s
+    assert 0.5 < info["value"] < 2.0  # 1.66 s, against the paper's guessed 5 s
+    # with the disk's calibrated drift offset robot k's own residual (δ_ik terms) cannot be
+    # guaranteed to cross twice its threshold: reported, and not waited for
+    assert info["self_detection_guaranteed"] is False
     (excl,) = r.summary["exclusions"]
     first = min(d["t"] for d in r.summary["detections"])
     assert excl["t"] == pytest.approx(first + info["value"], abs=0.011)

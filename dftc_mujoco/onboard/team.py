@@ -121,11 +121,16 @@ class Team:
         # constant fault comes from the columns A_k^j e_k alone (no tables)
         steady = np.array(self.thresholds.mu(1e9), dtype=float)
         delays = predicted_delays(cfg.graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
+        # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
+        # reported, not waited for (its own residual sits on its noise and drift offset)
+        self_ok = bool(np.isfinite(np.diag(delays)).all())
+        np.fill_diagonal(delays, 0.0)
         worst = float(delays.max()) + cfg.detection_window
         info = {
             "source": "analysis (eq. 46)",
             "reference_fault": cfg.reference_fault,
             "predicted_delays_max": worst if np.isfinite(worst) else None,
+            "self_detection_guaranteed": self_ok,
         }
         if np.isfinite(worst):
             info["value"] = worst
@@ -133,7 +138,7 @@ class Team:
         info["value"] = 5.0
         info["warning"] = (
             f"a constant fault of {cfg.reference_fault:g} m/s is not guaranteed detectable by "
-            "every robot with these thresholds (eq. 46); Δt_d,max falls back to 5 s"
+            "every teammate with these thresholds (eq. 46); Δt_d,max falls back to 5 s"
         )
         return 5.0, info
 
