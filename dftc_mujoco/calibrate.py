@@ -630,6 +630,10 @@ def main(argv: list[str] | None = None) -> int:
         if loop_results[0].rings and "gains.G" not in overrides:
             overrides["gains.G"] = loop_results[-1].G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
+        cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
+        path = robots.resolve(args.model, where="MODEL") if args.write else None
+        if path is not None:  # the drift runs then see the robot's new mismatch
+            write(path, cal)
         try:
             d = drift(args.model, args.scenario, overrides, max(1, args.runs))
         except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is
@@ -647,9 +651,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"a bounded offset of {d.drift_bound * 1000:.2f} mm from {d.settle:g} s on "
                 f"({d.startup * 1000:.2f} mm with the start-up)"
             )
-        cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G, drift=d)
-        if args.write:
-            path = robots.resolve(args.model, where="MODEL")
+        cal = dataclasses.replace(cal, drift=d)
+        if path is not None:
             write(path, cal)
             robots.load(path)  # it must still load
             print(f"written to {path}")
