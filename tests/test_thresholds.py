@@ -486,3 +486,27 @@ def test_fdir_options_are_validated():
     assert len(lines) == 2
     assert 'fdir.dt_d_max: expected a number of seconds or "auto"' in lines[0]
     assert "fdir.isolation: expected one of 'pairwise', 'exclusive'" in lines[1]
+
+
+@pytest.mark.parametrize(("model", "G"), [("disk", 0.01), ("hexbot", 0.01), ("diffdrive", 0.02)])
+def test_block_row_raises_no_false_flag_on_physics_at_the_noise_bounds(model, G):
+    """Issue 10's honesty target on MuJoCo, with each robot's calibrated xi_bar and drift
+    offset: fault-free 60 s paper_case runs at the noise bounds flag nobody and keep every
+    residual below 0.8 of its threshold (the campaigns false_alarms_block_row_* run 200 such
+    runs per robot: 0 false alarms, margins 0.41 / 0.41 / 0.48)."""
+    from dftc_mujoco import load_scenario, simulate
+
+    for seed in (1, 2):
+        s = load_scenario(
+            "paper_case",
+            {
+                "team.robot_model": model,
+                "gains.G": G,
+                "onboard.thresholds": "block_row",
+                "noise.at_bound": True,
+                "faults": [],
+                "seed": seed,
+            },
+        )
+        r = simulate(s)
+        assert r.summary["detections"] == [] and r.summary["margin"] < 0.8
