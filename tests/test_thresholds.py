@@ -510,3 +510,36 @@ def test_block_row_raises_no_false_flag_on_physics_at_the_noise_bounds(model, G)
         )
         r = simulate(s)
         assert r.summary["detections"] == [] and r.summary["margin"] < 0.8
+
+
+def test_a_team_of_100_detects_and_excludes_a_stopped_robot_within_dt_d_max():
+    """Issue 10's done-when at scale, on MuJoCo: 100 disk robots in a rank (nobody drives
+    into the stopped robot: in a grid the robot behind it pushes it along and its flags come
+    and go), ring + chord 2, robot 37 stops at 12 s; with l1 (block_row's exact rows stop at
+    N = 64) it is flagged within Δt_d,max of its stop, excluded at t_r = first flag +
+    Δt_d,max, and nobody else is flagged (eq. 40 flags nobody at this size)."""
+    from dftc_mujoco import load_scenario, simulate
+
+    s = load_scenario(
+        "paper_case",
+        {
+            "duration": 22.0,
+            "obstacles": [],
+            "team.robots": 100,
+            "team.initial_positions": {"layout": "formation", "jitter": 0.05},
+            "team.graph": {"family": "ring_chords", "chords": [2]},
+            "mission.formation": {"shape": "line", "side": 0.6},
+            "onboard.thresholds": "l1",
+            "faults": [{"robot": 37, "kind": "stop", "t": 12.0}],
+        },
+    )
+    r = simulate(s)
+    out = r.summary
+    dt_d_max = out["dt_d_max"]["value"]
+    flags = [d for d in out["detections"] if d["robot"] == 37]
+    assert flags and out["detections"] == flags  # the stopped robot, and nobody else
+    first = min(d["t"] for d in flags)
+    assert first - 12.0 < dt_d_max
+    (excl,) = out["exclusions"]
+    assert excl["robot"] == 37 and excl["t"] == pytest.approx(first + dt_d_max, abs=0.011)
+    assert out["margin"] < 1

@@ -55,6 +55,10 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "delay_p95": float(np.percentile(delays, 95)) if delays else None,
         "delay_max": float(np.max(delays)) if delays else None,
         "delay_last_max": float(np.max(delays_last)) if delays_last else None,
+        "exclusion_delay_max": max(
+            (r["exclusion_delay"] for r in ok if r.get("exclusion_delay") is not None),
+            default=None,
+        ),
         "dt_d_max": dt_max,
         "success_after_recovery": _rate([r["success"] for r in excluded_stop]),
         "success_all": _rate([r["success"] for r in ok]),
@@ -149,12 +153,48 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
             "![bias detection](figures/bias_detection.png)",
             "",
         ]
+    lines += _rule_table(ok)
     lines += _scale_table(ok, figs)
     path = out / "report.md"
     tmp = out / ".report.md.tmp"
     tmp.write_text("\n".join(lines) + "\n")
     os.replace(tmp, path)
     return path
+
+
+def _bias_limits(rows: list[dict[str, Any]]) -> tuple[float | None, float | None]:
+    """Smallest bias detected and largest bias missed among bias runs."""
+    hit = [r["bias_magnitude"] for r in rows if r["fault_kind"] == "bias" and r["detected"]]
+    miss = [r["bias_magnitude"] for r in rows if r["fault_kind"] == "bias" and not r["detected"]]
+    return (min(hit) if hit else None), (max(miss) if miss else None)
+
+
+def _rule_table(ok: list[dict[str, Any]]) -> list[str]:
+    """The campaign's measures per threshold rule, when its runs used several."""
+    groups = _by([{**r, "thresholds": r.get("thresholds") or "paper"} for r in ok], "thresholds")
+    if len(groups) <= 1:
+        return []
+    lines = [
+        "| rule | runs | stops detected | by all | first flag: median / p95 / max [s] | "
+        "biases detected | smallest detected / largest missed bias [m/s] | runs with a "
+        "false alarm | false alarms per robot-hour | margin |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (rule,), rs in groups.items():
+        m = summarise(rs)
+        d = (
+            "n/a"
+            if m["delay_median"] is None
+            else f"{m['delay_median']:.2f} / {m['delay_p95']:.2f} / {m['delay_max']:.2f}"
+        )
+        hit, miss = _bias_limits(rs)
+        lines.append(
+            f"| {rule} | {len(rs)} | {_pct(m['detection_rate'])} | "
+            f"{_pct(m['detected_by_all_rate'])} | {d} | {_pct(m['bias_detection_rate'])} | "
+            f"{_num(hit, 3)} / {_num(miss, 3)} | {_pct(m['false_alarm_rate_per_run'])} | "
+            f"{_num(m['false_alarms_per_robot_hour'], 3)} | {_num(m['margin_max'], 3)} |"
+        )
+    return [*lines, ""]
 
 
 def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
@@ -167,8 +207,8 @@ def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
         return []
     lines = [
         "| rule | N | graph | stop runs | detected | by all | first flag: median / p95 / max "
-        "[s] | last flag: max [s] | false alarms per robot-hour | margin |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "[s] | last flag: max [s] | excluded: max [s] | false alarms per robot-hour | margin |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (rule, n, fam), rs in groups.items():
         s = summarise(rs)
@@ -180,6 +220,7 @@ def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
         lines.append(
             f"| {rule} | {n} | {fam} | {len(rs)} | {_pct(s['detection_rate'])} | "
             f"{_pct(s['detected_by_all_rate'])} | {d} | {_num(s['delay_last_max'], 2)} | "
+            f"{_num(s['exclusion_delay_max'], 2)} | "
             f"{_num(s['false_alarms_per_robot_hour'], 2)} | {_num(s['margin_max'], 2)} |"
         )
     fig, axes = new_figure(figsize=(9, 3.5), ncols=2)

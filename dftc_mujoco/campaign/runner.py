@@ -74,6 +74,7 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
     on_faulty = [d for d in det if d["robot"] == faulty]
     false_pairs = [d for d in det if d["robot"] != faulty]
     excluded = [e["robot"] for e in summary["exclusions"]]
+    t_excl = next((e["t"] for e in summary["exclusions"] if e["robot"] == faulty), None)
     err = summary["errors"]
     first = min((d["t"] for d in on_faulty), default=None)
     last = max((d["t"] for d in on_faulty), default=None)
@@ -88,6 +89,7 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
         "false_alarm_robots": len({d["robot"] for d in false_pairs}),
         "excluded": json.dumps(excluded),
         "excluded_faulty": faulty in excluded,
+        "exclusion_delay": None if t_excl is None or t_f is None else t_excl - t_f,
         "wrong_isolation": any(r != faulty for r in excluded),
         "final_centroid": err["final_centroid"],
         "final_formation": err["final_formation"],
