@@ -332,6 +332,12 @@ def test_a_campaign_folder_belongs_to_one_spec(tmp_path, capsys):
     assert sorted(rows) == [0, 1] and all(r["duration"] == 12.0 for r in rows.values())
     assert "duration = 12.0" in (out / "spec.toml").read_text()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out.")]
+    # ... also when it holds the same campaign: --overwrite starts over
+    (out / "results.jsonl").write_text(
+        "\n".join(json.dumps({**r, "duration": -1.0}) for r in rows.values()) + "\n"
+    )
+    assert campaign_main([str(longer), "--runs", "2", "--overwrite", *common]) == 0
+    assert all(r["duration"] == 12.0 for r in _rows(out).values())  # run again, not kept
 
 
 def test_campaign_output_problems_are_one_line_exit_5(tmp_path, capsys):

@@ -55,8 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace a folder that holds another campaign (as a whole; never a folder "
-        "that holds no campaign)",
+        help="start over: replace the campaign folder as a whole, whichever campaign it holds "
+        "(never a folder that holds no campaign); without it the same spec resumes",
     )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = p.parse_args(argv)
@@ -100,7 +100,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             with signals.active():
                 state = folder.prepare(out, spec, args.overwrite)
             if state == "replaced":
-                print(f"note: {out} held another campaign; replaced (--overwrite)", file=sys.stderr)
+                print(f"note: {out} held a campaign; replaced (--overwrite)", file=sys.stderr)
             before = len(runner.Results(out).rows)
             outcome = runner.Outcome()
             results = runner.run(

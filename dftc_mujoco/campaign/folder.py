@@ -107,14 +107,14 @@ def prepare(out: Path, spec: Spec, overwrite: bool) -> str:
     state = "new"
     if out.is_dir() and any(out.iterdir()):
         stored = _stored(out)
-        if stored is not None and stored.get("fingerprint") == mine:
+        if stored is not None and stored.get("fingerprint") == mine and not overwrite:
             return "resumed"
         if stored is None and not (out / "results.jsonl").exists():
             raise OutputError(
                 f"{out}: the folder is not empty and holds no campaign; choose another --out "
                 "(it is never replaced, even with --overwrite)"
             )
-        if stored is None and _matches_rows(out, spec):
+        if stored is None and _matches_rows(out, spec) and not overwrite:
             _write_identity(out, spec, mine)
             return "resumed"
         if not overwrite:
