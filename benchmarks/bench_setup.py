@@ -10,7 +10,8 @@ over ``--repeat`` runs (numba's cache loaded first, κ/λ's per-graph cache clea
 
 * ``kappa``: κ_k, λ_k of eq. 41 for every robot (what ``thresholds = "paper"`` needs),
 * for each rule (paper, l1, drive, block_row up to N = 64): its set-up on the graph, the
-  predicted ⁱΔt_d of eq. 46 for a constant 0.1 m/s fault (``fdir.dt_d_max = "auto"``)
+  predicted ⁱΔt_d of eq. 46 for a constant 0.1 m/s fault over the faulty robot's teammates
+  (what ``fdir.dt_d_max = "auto"`` takes)
   and the restart after robot 1 is excluded at t = 60 s;
 
 and, once, each rule's steady thresholds (min-max over i, k) and the largest ⁱΔt_d.
@@ -112,7 +113,8 @@ def one(family: str, n: int, repeat: int) -> dict:
         entry["delays_s"], delays = median_time(
             lambda steady=steady: predicted_delays(graph, KO, H, steady, FAULT), repeat
         )
-        entry["dt_d_max_s"] = float(delays.max()) if np.isfinite(delays).all() else None
+        off = delays[~np.eye(len(delays), dtype=bool)]  # the teammates: as dt_d_max = "auto"
+        entry["dt_d_max_s"] = float(off.max()) if np.isfinite(off).all() else None
 
         # the restart replaces the rule's tables: rebuild it (untimed) before each repeat
         times = []

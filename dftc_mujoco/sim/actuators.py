@@ -158,6 +158,8 @@ class Actuation:
         self.target = np.zeros(ids.shape)  # position servos' integrated targets [joint units]
         self.bias_integral = np.zeros(ids.shape)  # ∫φ for position servos' bias faults
         self._out = np.zeros(ids.shape)
+        self._velocity_only = bool(self.vel.all())  # the common case: one multiply per period
+        self._bias_per_velocity = self.kv * self.gear
         if self.motor.any():  # make the bias term usable (affine with zero coefficients)
             m = ids[:, self.motor]
             model.actuator_biastype[m] = _AFFINE
@@ -176,6 +178,8 @@ class Actuation:
         """Actuator commands (N, A) for joint velocities ``v`` (N, A) held over one period."""
         out = self._out
         np.multiply(v, self.per_velocity, out=out)
+        if self._velocity_only:
+            return out
         if self.pos.any():
             self.target += self.dt * np.where(self.pos, v, 0.0)
             out += self.target * self.per_position
@@ -203,6 +207,8 @@ class Actuation:
         Position servos take the integral of φ; ``advance`` adds one control period of
         it (call with True once per period while a bias acts).
         """
+        if self._velocity_only:
+            return self._bias_per_velocity * phi
         if self.pos.any() and advance:
             self.bias_integral += self.dt * np.where(self.pos, phi, 0.0)
         b0 = np.where(self.vel, self.kv * self.gear * phi, 0.0)

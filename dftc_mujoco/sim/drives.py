@@ -53,6 +53,14 @@ class Drive:
             cap = limit if np.isfinite(limit) else DEFAULT_MAX_SPEED
         self.command_limit = min(limit, cap)
         self._clip = cap < limit  # then the drive clips the planar command
+        # velocity servos that take the planar command as it is (the disk): ctrl = ū
+        self._identity = (
+            self.held is None
+            and not self._clip
+            and self.actuation._velocity_only
+            and bool((self.actuation.per_velocity == 1.0).all())
+            and getattr(self, "_plain", False)
+        )
 
     def _planar_limit(self, joint_limit: float) -> float:
         raise NotImplementedError
@@ -74,12 +82,16 @@ class Drive:
 
     def command(self, u: np.ndarray) -> np.ndarray:
         """Actuator commands (N, A + H): driven joints for ``u`` (N, 2), then held joints."""
-        a = self.scene.actuator.shape[1]
+        if self._identity:
+            return u
         if self._clip:
             u = np.clip(u, -self.command_limit, self.command_limit)
-        self._ctrl[:, :a] = self.actuation.command(self.joint_velocity(u))
-        if self.held is not None:
-            self._ctrl[:, a:] = self.held.hold(self.hold_target)
+        driven = self.actuation.command(self.joint_velocity(u))
+        if self.held is None:
+            return driven  # no held joint: the driven commands are all of them
+        a = driven.shape[1]
+        self._ctrl[:, :a] = driven
+        self._ctrl[:, a:] = self.held.hold(self.hold_target)
         return self._ctrl
 
     def controlled(self) -> np.ndarray:
@@ -92,16 +104,17 @@ class Holonomic(Drive):
 
     def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
         self.sign = np.array([robot.params.get("sign_x", 1.0), robot.params.get("sign_y", 1.0)])
+        self._plain = bool((self.sign == 1.0).all())  # both slides point along +x, +y
         super().__init__(robot, scene, data, dt)
 
     def _planar_limit(self, joint_limit: float) -> float:
         return joint_limit
 
     def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        return u * self.sign
+        return u if self._plain else u * self.sign
 
     def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        return qdot * self.sign
+        return qdot if self._plain else qdot * self.sign
 
 
 class DiffDrive(Drive):

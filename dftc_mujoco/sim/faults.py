@@ -50,6 +50,7 @@ class ActuatorFaults:
         self._b_value = np.array([f.value for f in bias]).reshape(-1, 2)
         # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
         self._b_settled = self._b_t + 40.0 * self._b_tau
+        self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
 
     def apply(self, t: float) -> list[Fault]:
@@ -100,7 +101,14 @@ class ActuatorFaults:
 
     def bias_phi(self, t: float) -> np.ndarray:
         """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
-        return self._bias_profile(np.array([t]))[0]
+        phi = self._phi
+        phi[:] = 0.0
+        for j, robot in enumerate(self._b_robot):
+            age = t - self._b_t[j]
+            if age >= 0.0:
+                tau = self._b_tau[j]
+                phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * self._b_value[j]
+        return phi
 
     def _bias_profile(self, t: np.ndarray) -> np.ndarray:
         phi = np.zeros((len(t), len(self.actuator), 2))
