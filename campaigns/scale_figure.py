@@ -83,8 +83,14 @@ def main() -> None:
         sizes = [n for n in NS if rule != "block_row" or n <= 64]
         pairs = [detectable(rule, n) for n in sizes]
         right.plot(sizes, [a for a, _ in pairs], "o-", color=colour, label=f"{rule}: some")
-        right.plot(sizes, [b for _, b in pairs], "v--", color=colour, alpha=0.6,
-                   label=f"{rule}: every teammate")
+        right.plot(
+            sizes,
+            [b for _, b in pairs],
+            "v--",
+            color=colour,
+            alpha=0.6,
+            label=f"{rule}: every teammate",
+        )
     left.set_ylabel("first flag after a stop [s]")
     left.set_title("Detection delay (scale_sweep)")
     right.set_ylabel("smallest detectable constant fault [m/s]")
