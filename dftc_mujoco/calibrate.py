@@ -606,14 +606,7 @@ def main(argv: list[str] | None = None) -> int:
         default="paper_case",
         help="the mission for the detectability warning and the drift (default paper_case)",
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a key of that scenario (as with run), e.g. mission.formation.side=1.0",
-    )
+    cli.add_set_option(p, "that scenario (as with run)")
     p.add_argument(
         "--runs", type=int, default=3, help="fault-free runs of the scenario for the drift"
     )

@@ -26,3 +26,17 @@ def print_error(exc: BaseException) -> None:
     """One ``error:`` line on stderr per problem the exception reports."""
     for line in str(exc).splitlines() or [type(exc).__name__]:
         print(f"error: {line}", file=sys.stderr)
+
+
+def add_set_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--set KEY=VALUE`` (repeatable, into ``args.overrides``): a scenario key by dotted
+    path, the value in TOML syntax; ``what`` completes the help."""
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"override a key of {what} by dotted path, value in TOML syntax "
+        "(e.g. --set gains.ko=3 --set mission.formation.side=1.0); repeatable",
+    )

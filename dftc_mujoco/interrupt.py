@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -127,3 +128,15 @@ def catch() -> Iterator[Signals]:
         yield signals
     finally:
         signals.restore()
+
+
+def guarded(body: Callable[[Signals], int], said: str) -> int:
+    """A command's ``body(signals)`` under :func:`catch`, its work deferring signals; a
+    signal that stops it prints "interrupted by NAME" + ``said`` and gives 130 / 143."""
+    with catch() as signals:
+        try:
+            with signals.deferred(check=False):
+                return body(signals)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}{said}", file=sys.stderr)
+            return exc.exit_code

@@ -18,7 +18,6 @@ from pathlib import Path
 
 from . import cli, interrupt, output
 from .errors import ScenarioError
-from .interrupt import Interrupted
 from .output import OutputError
 from .render import gl
 from .run import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_RENDER, add_video_options, setup_video
@@ -47,16 +46,10 @@ def main(argv: list[str] | None = None) -> int:
         help="also write the video frame at time T as still_T.png (repeatable)",
     )
     args = p.parse_args(argv)
-    with interrupt.catch() as signals:
-        try:
-            with signals.deferred(check=False):
-                return _plot(args, signals)
-        except Interrupted as exc:
-            print(
-                f"interrupted by {exc.name}: the figures and video in {args.run_dir} are unchanged",
-                file=sys.stderr,
-            )
-            return exc.exit_code
+    return interrupt.guarded(
+        lambda signals: _plot(args, signals),
+        f": the figures and video in {args.run_dir} are unchanged",
+    )
 
 
 def _plot(args, signals: interrupt.Signals) -> int:

@@ -50,15 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="replace an existing run folder at --out (as a whole; never a non-run folder)",
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key by dotted path, value in TOML syntax "
-        "(e.g. --set gains.ko=3 --set onboard.thresholds=paper); repeatable",
-    )
+    cli.add_set_option(p, "the scenario")
     p.add_argument("--seed", type=int, help="override the scenario's seed")
     p.add_argument(
         "--duration",
@@ -235,16 +227,10 @@ def write_records(result: RunResult, out: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = build_parser().parse_args(argv)
-    with interrupt.catch() as signals:
-        try:
-            with signals.deferred(check=False):  # the records are never cut in two
-                return _main(args, signals)
-        except Interrupted as exc:
-            print(
-                f"interrupted by {exc.name} before the run started: nothing was written",
-                file=sys.stderr,
-            )
-            return exc.exit_code
+    # the records are never cut in two: the work defers signals where it must
+    return interrupt.guarded(
+        lambda signals: _main(args, signals), " before the run started: nothing was written"
+    )
 
 
 def _main(args: argparse.Namespace, signals: Signals) -> int:

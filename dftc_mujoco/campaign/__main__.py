@@ -60,16 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = p.parse_args(argv)
-    with interrupt.catch() as signals:
-        try:
-            with signals.deferred(check=False):
-                return _main(args, signals)
-        except Interrupted as exc:
-            print(
-                f"interrupted by {exc.name} before the campaign started: no run was started",
-                file=sys.stderr,
-            )
-            return exc.exit_code
+    return interrupt.guarded(
+        lambda signals: _main(args, signals),
+        " before the campaign started: no run was started",
+    )
 
 
 def _main(args: argparse.Namespace, signals: Signals) -> int:

@@ -103,26 +103,38 @@ def column_of_row(rows: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+@njit(inline="always")
+def _row(i, v, o, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
+    """o = row i of B_k v for every column b (k the robot of column b): the one place the
+    observer matrix B_k = I − β(L + e_k e_kᵀ) is applied."""
+    a = 1.0 - beta * deg[i]
+    vi = v[i]
+    for b in range(o.shape[0]):
+        o[b] = a * vi[b]
+    for e in range(first[i], first[i + 1]):
+        vj = v[src[e]]
+        for b in range(o.shape[0]):
+            o[b] += beta * vj[b]
+    cb = col_of_row[i]
+    if cb >= 0:
+        o[cb] -= beta * vi[cb]
+
+
+@njit(inline="always")
+def _flush(o):  # pragma: no cover - compiled
+    """Entries below :data:`TINY` to zero: no subnormal arithmetic (see TINY)."""
+    for b in range(o.shape[0]):
+        o[b] = o[b] if abs(o[b]) > TINY else 0.0
+
+
 @njit(cache=True)
 def apply(v, out, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
     """out[:, b] = B_k v[:, b] with B_k = I − β(L + e_k e_kᵀ), k the robot of column b.
 
     With the out-neighbour lists (:meth:`Adjacency.transposed`) it applies B_kᵀ.
     """
-    n, kk = v.shape
-    for i in range(n):
-        a = 1.0 - beta * deg[i]
-        o = out[i]
-        vi = v[i]
-        for b in range(kk):
-            o[b] = a * vi[b]
-        for e in range(first[i], first[i + 1]):
-            vj = v[src[e]]
-            for b in range(kk):
-                o[b] += beta * vj[b]
-        cb = col_of_row[i]
-        if cb >= 0:
-            o[cb] -= beta * vi[cb]
+    for i in range(v.shape[0]):
+        _row(i, v, out[i], src, first, deg, col_of_row, beta)
 
 
 @njit(cache=True)
@@ -163,20 +175,9 @@ def advance_columns(
     cur, nxt = v, prev
     for s in range(steps):
         for i in range(n):
-            a = 1.0 - beta * deg[i]
-            o = nxt[i]
-            vi = cur[i]
-            for b in range(kk):
-                o[b] = a * vi[b]
-            for e in range(first[i], first[i + 1]):
-                vj = cur[src[e]]
-                for b in range(kk):
-                    o[b] += beta * vj[b]
-            cb = col_of_row[i]
-            if cb >= 0:
-                o[cb] -= beta * vi[cb]
-            for b in range(kk):  # no subnormal arithmetic (see TINY)
-                o[b] = o[b] if abs(o[b]) > TINY else 0.0
+            o, vi = nxt[i], cur[i]
+            _row(i, cur, o, src, first, deg, col_of_row, beta)
+            _flush(o)
             ti, si = tv[i], tot[i]
             for b in range(kk):
                 ti[b] += abs(o[b] - vi[b])
@@ -210,20 +211,9 @@ def advance_crossing(
     for s in range(steps):
         t1 = t0 + s + 1
         for i in range(n):
-            a = 1.0 - beta * deg[i]
-            o = nxt[i]
-            vi = cur[i]
-            for b in range(kk):
-                o[b] = a * vi[b]
-            for e in range(first[i], first[i + 1]):
-                vj = cur[src[e]]
-                for b in range(kk):
-                    o[b] += beta * vj[b]
-            cb = col_of_row[i]
-            if cb >= 0:
-                o[cb] -= beta * vi[cb]
-            for b in range(kk):
-                o[b] = o[b] if abs(o[b]) > TINY else 0.0
+            o, vi = nxt[i], cur[i]
+            _row(i, cur, o, src, first, deg, col_of_row, beta)
+            _flush(o)
             si, ni, wi = tot[i], need[i], when[i]
             for b in range(kk):
                 si[b] += vi[b]
@@ -242,22 +232,9 @@ def advance_crossing(
 @njit(cache=True)
 def _step_rows(cur, nxt, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
     """nxt = B_k cur column by column (as :func:`apply`), flushing entries below TINY."""
-    n, kk = cur.shape
-    for i in range(n):
-        d = 1.0 - beta * deg[i]
-        o = nxt[i]
-        vi = cur[i]
-        for b in range(kk):
-            o[b] = d * vi[b]
-        for e in range(first[i], first[i + 1]):
-            vj = cur[src[e]]
-            for b in range(kk):
-                o[b] += beta * vj[b]
-        cb = col_of_row[i]
-        if cb >= 0:
-            o[cb] -= beta * vi[cb]
-        for b in range(kk):
-            o[b] = o[b] if abs(o[b]) > TINY else 0.0
+    for i in range(cur.shape[0]):
+        _row(i, cur, nxt[i], src, first, deg, col_of_row, beta)
+        _flush(nxt[i])
 
 
 @njit(cache=True)
