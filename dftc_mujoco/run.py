@@ -266,18 +266,18 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             )
         out = args.out if args.out is not None else Path.cwd() / "renders" / s.name
         with run_folder(out, args.overwrite) as work:
-            with signals.active(), Simulation(s) as sim:
+            # from here on a signal stops the run and keeps its records (none yet when it
+            # came while the simulation was being built: signals are deferred until then)
+            with Simulation(s) as sim, signals.stopping(sim):
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
                 if args.viewer:
                     from .render.viewer import ViewerUnavailable, watch
 
                     try:
-                        with signals.stopping(sim):
-                            watch(sim)
+                        watch(sim)
                     except ViewerUnavailable as exc:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
-                with signals.stopping(sim):
-                    result = sim.run(progress=progress)
+                result = sim.run(progress=progress)
             return _finish(result, work, Path(out).absolute(), signals, options, progress)
     except ScenarioError as exc:
         cli.print_error(exc)

@@ -319,3 +319,28 @@ def test_plot_replaces_figures_and_video_only_when_complete(tmp_path):
     assert err.strip().splitlines()[-1].startswith("interrupted by SIGTERM")
     assert _snapshot(folder) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_signal_while_the_run_is_built_still_leaves_its_records(tmp_path):
+    """SIGINT as soon as the run holds its folder (the simulation is still being built):
+    the run stops before its first period and lands whole, status "interrupted"."""
+    out = tmp_path / "run"
+    first = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "dftc_mujoco.run", "paper_case", "--duration", "3000"),
+            *("--no-video", "--no-progress", "--out", str(out)),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lock = tmp_path / ".run.lock"
+    for _ in range(300):
+        if lock.exists() and lock.read_text().strip():
+            break
+        time.sleep(0.01)
+    first.send_signal(signal.SIGINT)
+    _, err = first.communicate(timeout=120)
+    assert first.returncode == 130 and "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
