@@ -57,6 +57,7 @@ class ActuatorInfo:
     kind: str  # velocity, position or motor
     joint: str
     joint_type: str  # "slide" or "hinge"
+    joint_id: int  # in the robot's own compiled model
     gear: float
     gain: float  # gainprm[0]
     kp: float  # position stiffness −b1 (position servos)
@@ -107,6 +108,7 @@ def classify(model: mujoco.MjModel, a: int) -> ActuatorInfo | str:
         kind=kind,
         joint=jname,
         joint_type="slide" if jtype == _SLIDE else "hinge",
+        joint_id=j,
         gear=gear,
         gain=gain,
         kp=kp,

@@ -436,7 +436,7 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
             )
         for role, axis in (("x", 0), ("y", 1)):
             info = infos[role]
-            j = model.joint(info.joint).id
+            j = info.joint_id
             if info.joint_type != "slide" or model.jnt_bodyid[j] != body:
                 fail(
                     role_key(role),
@@ -453,7 +453,7 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
             params[f"sign_{'xy'[axis]}"] = float(np.sign(world_axis[axis]))
         if "yaw" in infos:
             info = infos["yaw"]
-            j = model.joint(info.joint).id
+            j = info.joint_id
             if info.joint_type != "hinge" or abs(data.xaxis[j][2]) < 0.999:
                 fail(
                     role_key("yaw"),
@@ -554,7 +554,7 @@ def _wheel_geometry(model, data, body, infos, robot, fail, role_key, keys) -> di
     anchors, axes, radii = [], [], []
     for role in ("left", "right"):
         info = infos[role]
-        j = model.joint(info.joint).id
+        j = info.joint_id
         wheel = int(model.jnt_bodyid[j])
         if info.joint_type != "hinge" or not subtree(model, body)[wheel] or wheel == body:
             fail(
