@@ -502,4 +502,3 @@ def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
     d = calibrate.drift("disk", runs=1)
     assert d.period_max > 0.1  # per period the drift is far beyond h ξ̄ (compensation, start-up)
     assert d.drift_bound < 0.005 < d.startup  # a bounded offset once started
-
