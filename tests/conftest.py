@@ -12,6 +12,15 @@ import pytest
 from dftc_mujoco import scenario
 from dftc_mujoco.loop import RunResult, simulate
 from dftc_mujoco.paths import SCENARIOS
+from dftc_mujoco.render import gl
+
+try:
+    gl.probe()
+    GL_ERROR = None
+except gl.RenderError as exc:  # pragma: no cover - depends on the machine
+    GL_ERROR = str(exc)
+#: skips a test, saying why, where no GL backend can be created
+needs_gl = pytest.mark.skipif(GL_ERROR is not None, reason=f"no GL backend: {GL_ERROR}")
 
 
 def scenario_dict(name: str = "paper_case") -> dict[str, Any]:

@@ -14,14 +14,7 @@ import pytest
 
 from dftc_mujoco import plot, run
 from dftc_mujoco.output import OWNER
-from dftc_mujoco.render import gl
-
-try:
-    gl.probe()
-    GL_ERROR = None
-except gl.RenderError as exc:  # pragma: no cover - depends on the machine
-    GL_ERROR = str(exc)
-needs_gl = pytest.mark.skipif(GL_ERROR is not None, reason=f"no GL backend: {GL_ERROR}")
+from tests.conftest import needs_gl
 
 
 def _run(*args, cwd=None):

@@ -11,14 +11,8 @@ import pytest
 from PIL import Image
 
 from dftc_mujoco import plot, run, scenario
-from dftc_mujoco.render import figures, gl
-
-try:
-    gl.probe()
-    GL_ERROR = None
-except gl.RenderError as exc:  # pragma: no cover - depends on the machine
-    GL_ERROR = str(exc)
-needs_gl = pytest.mark.skipif(GL_ERROR is not None, reason=f"no GL backend: {GL_ERROR}")
+from dftc_mujoco.render import figures
+from tests.conftest import needs_gl
 
 
 @pytest.fixture(scope="module")

@@ -127,6 +127,23 @@ def _flush(o):  # pragma: no cover - compiled
         o[b] = o[b] if abs(o[b]) > TINY else 0.0
 
 
+@njit(inline="always")
+def _watch(o, vi, worst, low):  # pragma: no cover - compiled
+    """Track, over the rows of the last period, max(c(t + 1) − c(t)) and min c(t)."""
+    for b in range(o.shape[0]):
+        worst[b] = max(worst[b], o[b] - vi[b])
+        low[b] = min(low[b], vi[b])
+
+
+@njit(inline="always")
+def _certify(worst, low, steps, t0, cert):  # pragma: no cover - compiled
+    """Set ``cert[b]`` = t0 + steps − 1 where the last period was non-increasing and
+    positive in column b (see :func:`advance_columns`)."""
+    for b in range(worst.shape[0]):
+        if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
+            cert[b] = t0 + steps - 1
+
+
 @njit(cache=True)
 def apply(v, out, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
     """out[:, b] = B_k v[:, b] with B_k = I − β(L + e_k e_kᵀ), k the robot of column b.
@@ -188,13 +205,9 @@ def advance_columns(
                     d = (vi[b] - o[b]) * inv
                     mi[b] = max(mi[b], alpha[b] * abs(vi[b] - d) + gamma * abs(d))
             if s == steps - 1:
-                for b in range(kk):
-                    worst[b] = max(worst[b], o[b] - vi[b])
-                    low[b] = min(low[b], vi[b])
+                _watch(o, vi, worst, low)
         cur, nxt = nxt, cur
-    for b in range(kk):
-        if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
-            cert[b] = t0 + steps - 1
+    _certify(worst, low, steps, t0, cert)
 
 
 @njit(cache=True)
@@ -220,13 +233,9 @@ def advance_crossing(
                 hit = (wi[b] < 0) & (si[b] >= ni[b])
                 wi[b] = t1 if hit else wi[b]
             if s == steps - 1:
-                for b in range(kk):
-                    worst[b] = max(worst[b], o[b] - vi[b])
-                    low[b] = min(low[b], vi[b])
+                _watch(o, vi, worst, low)
         cur, nxt = nxt, cur
-    for b in range(kk):
-        if steps > 0 and worst[b] <= 0.0 and low[b] > 0.0 and cert[b] < 0:
-            cert[b] = t0 + steps - 1
+    _certify(worst, low, steps, t0, cert)
 
 
 @njit(cache=True)

@@ -76,6 +76,24 @@ def _next_breakpoint(last: int) -> int:
     return last + 1 if last < FIRST_BINS else math.ceil(last * RATIO)
 
 
+def _extend_breakpoints(
+    bp: list[int], T: np.ndarray, init_max: np.ndarray, target: np.ndarray, rate: np.ndarray
+) -> np.ndarray:
+    """Extend the breakpoints ``bp`` (in place) past the periods ``T`` by as many as the
+    initial part, decaying at ``rate`` per period from ``init_max``, needs to fall below
+    ``target``, and return them as an array."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        more = np.where(
+            (rate < 1.0) & (init_max > target) & np.isfinite(init_max),
+            np.ceil(np.log(target / init_max) / np.log(rate)),
+            0.0,
+        )
+    horizon = min(float((T + more).max()), float(T.max()) + 1e8)
+    while bp[-1] < horizon:
+        bp.append(_next_breakpoint(bp[-1]))
+    return np.array(bp, dtype=np.int64)
+
+
 def _slack(t: int, mass: float) -> float:
     """A bound of the rounding error of R = mass − S after t additions (and of the
     flushed subnormals, :data:`~.columns.TINY`)."""
@@ -320,17 +338,7 @@ class _ColumnSweep:
         init0 = self._init_tail(np.zeros_like(T), np.ones(len(T), bool))
         init_max = init0.max(axis=0)
         target = np.maximum(1e-4 * self.acc_inf.min(axis=0), 1e-15)
-        rate = self.s
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            more = np.where(
-                (rate < 1.0) & (init_max > target) & np.isfinite(init_max),
-                np.ceil(np.log(target / init_max) / np.log(rate)),
-                0.0,
-            )
-        horizon = min(float((T + more).max()), float(T.max()) + 1e8)
-        while self.bp[-1] < horizon:
-            self.bp.append(_next_breakpoint(self.bp[-1]))
-        bp = np.array(self.bp, dtype=np.int64)
+        bp = _extend_breakpoints(self.bp, T, init_max, target, self.s)
         n, kk = self.n, len(self.ks)
         while len(self.tables) < len(bp):
             self.tables.append(np.full((n, kk), np.nan))
@@ -831,16 +839,7 @@ class _RowSweep:
         y0, T, noise = self.y0, self.T, self.noise
         init_max = y0 * self.tmax.max(axis=0)
         target = np.maximum(1e-4 * noise * self.sum_inf.min(axis=0), 1e-15)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            more = np.where(
-                (self.s_u < 1.0) & (init_max > target) & np.isfinite(init_max),
-                np.ceil(np.log(target / init_max) / np.log(self.s_u)),
-                0.0,
-            )
-        horizon = min(float((T + more).max()), float(T.max()) + 1e8)
-        while self.bp[-1] < horizon:
-            self.bp.append(_next_breakpoint(self.bp[-1]))
-        bp = np.array(self.bp, dtype=np.int64)
+        bp = _extend_breakpoints(self.bp, T, init_max, target, self.s_u)
         n, kk = self.n, len(self.ks)
         while len(self.tables) < len(bp):
             self.tables.append(np.full((n, kk), np.nan))

@@ -72,10 +72,6 @@ class RobotModel:
     drive: str  # "holonomic" or "diffdrive"
     actuators: dict[str, str]  # driven role -> actuator name
     held: dict[str, str]  # held role (yaw) -> actuator name
-    driven_infos: tuple[ActuatorInfo, ...]
-    held_infos: tuple[ActuatorInfo, ...]
-    root: str  # "planar" (slide joints) or "free" (a free joint)
-    footprint_radius: float  # horizontal reach of the colliding geoms from the control point
     xi_bar: float  # recommended ξ̄ [m/s], from calibrate
     mismatch: float = 0.0  # measured ‖ẋ − u‖ on smooth commands [m/s], from calibrate
     params: dict[str, float] = field(default_factory=dict)  # drive geometry, mesh data
@@ -90,6 +86,11 @@ class RobotModel:
     init_ctrl: tuple[float, ...] = ()  # ctrl of the robot's actuators at the initial pose
     init_point: tuple[float, float] = (0.0, 0.0)  # the control point there, own world frame
     legacy: bool = False  # an MJCF of the older contract (calibration stored in <custom>)
+    # found by inspecting the compiled model (_inspect)
+    driven_infos: tuple[ActuatorInfo, ...] = ()
+    held_infos: tuple[ActuatorInfo, ...] = ()
+    root: str = ""  # "planar" (slide joints) or "free" (a free joint)
+    footprint_radius: float = 0.0  # horizontal reach of the colliding geoms from the point
 
     @property
     def adapter_kind(self) -> str:
@@ -247,10 +248,6 @@ def _load_robot_file(path: Path) -> RobotModel:
         drive=drive,
         actuators=roles,
         held=held,
-        driven_infos=(),
-        held_infos=(),
-        root="",
-        footprint_radius=0.0,
         xi_bar=calibration.get("xi_bar", 0.005),
         mismatch=calibration.get("mismatch", 0.0),
         params=params,
@@ -308,10 +305,6 @@ def _load_legacy(path: Path) -> RobotModel:
         drive=drive,
         actuators=dict(zip(DRIVE_ROLES[drive], LEGACY_ACTUATORS[drive], strict=True)),
         held={},
-        driven_infos=(),
-        held_infos=(),
-        root="",
-        footprint_radius=0.0,
         xi_bar=nums.get("xi_bar", 0.005),
         mismatch=nums.get("mismatch", 0.0),
         params=params,
