@@ -342,6 +342,20 @@ def test_delays_agree_with_the_first_crossing_of_the_signature():
     ).all()
 
 
+def test_delays_are_not_promised_when_the_signature_oscillates():
+    """With h k_o (d_max + 1) > 1 some A_k has negative entries: the signature overshoots
+    2 ⁱμ_k and falls back below it, so a first crossing guarantees no debounced flag and
+    no delay is predicted (the run falls back to its Δt_d,max and says so)."""
+    graph = ring_with_chords(6, (2,))  # in-degree 2
+    n, ko, fault = graph.n, 40.0, 0.1  # h k_o (2 + 1) = 1.2
+    sig = H * fault * np.cumsum(_columns(graph, ko, H, 400), axis=1)  # (k, T, i)
+    mu = np.full((n, n), 0.499 * sig[0, 0, 0])  # 2μ crossed by the self-signature at once...
+    crossed = sig[0, :, 0] >= 2 * mu[0, 0]
+    assert crossed[0] and not crossed[1]  # ...which then falls back below it
+    assert sig[0, -1, 0] > 2 * mu[0, 0]  # (for a while: its limit 1/(h k_o) is above)
+    assert np.isinf(predicted_delays(graph, ko, H, mu, fault)).all()
+
+
 @pytest.mark.parametrize("transpose", [False, True])
 def test_grounded_solve_matches_dense_solves(transpose):
     rng = np.random.default_rng(1)
@@ -384,6 +398,11 @@ def test_rules_give_no_bound_where_the_graph_is_not_strongly_connected():
         mu = cls.for_graph(ring_without_1, 6.0, ETA, XI, np.ones(3)).mu(10.0)
         assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
         assert np.isfinite(mu[:, 0]).all()
+    # a two-way line cut in the middle: no robot reaches every other one
+    line_without_2 = Graph(4, ((0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2))).without(1)
+    for cls in (BlockRow, L1, Drive):
+        rule = cls.for_graph(line_without_2, 6.0, ETA, XI, np.ones(3))
+        assert np.isinf(rule.mu(0.0)).all() and np.isinf(rule.mu(10.0)).all()
 
 
 def test_rules_refuse_what_they_cannot_bound():

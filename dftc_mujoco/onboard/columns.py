@@ -53,10 +53,6 @@ class Adjacency:
         deg = np.bincount(e[:, 1], minlength=graph.n).astype(float)
         return cls(graph.n, e[by_to, 0].copy(), first, e[by_from, 1].copy(), out_first, deg)
 
-    def transposed(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lists, offsets) that make :func:`apply` compute with Lᵀ instead of L."""
-        return self.dst, self.out_first
-
 
 def reaches_all(graph: Graph) -> np.ndarray:
     """(N,) bool: robot k reaches every robot along the edges, i.e. M_k is positive

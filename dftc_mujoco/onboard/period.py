@@ -6,7 +6,8 @@ same compiled functions the blocks call (observer :func:`~.observer.estimate_one
 :func:`~.observer.integrate_inputs`; controller :func:`~.controller.collective_one`;
 supervisor :func:`~.supervisor.supervise`; fault estimator
 :func:`~.fault_estimator.estimate_faults`; decision :func:`~.fdir.decide`), each
-equation written once. Composed in one compiled call, the period costs no Python
+equation written once (only the mission's x_d = c + offsets of eq. 14, one addition, is
+spelled out in both paths). Composed in one compiled call, the period costs no Python
 overhead per block, and the per-entry functions are fused into two passes over
 the team's N × N state instead of one pass per equation (the state is memory-bound
 at N = 400): ⁱx̂, ⁱû_g and ∫ⁱû_g in one, then each robot's residual, its norms and

@@ -379,6 +379,8 @@ def column_envelope(
     n = graph.n
     finite = reaches_all(graph)
     ks = np.flatnonzero(finite)
+    if len(ks) == 0:
+        return _unbounded(n)
     alpha = np.asarray(start.alpha, float)
     circulant = bool(finite.all()) and rotation_invariant(graph) and np.all(alpha == alpha[0])
     if circulant:
@@ -386,6 +388,13 @@ def column_envelope(
     sub = Start(alpha[ks], start.gamma, start.structured)
     env = _ColumnSweep(graph, h * ko, ks, sub, mu_coef, max_work).run()
     return _expand(env, n, ks, circulant)
+
+
+def _unbounded(n: int) -> Envelope:
+    """No robot reaches every other one: +inf for every pair, from the start."""
+    return Envelope(
+        np.zeros(1, np.int64), [np.full((n, n), np.inf)], np.zeros(n, np.int64), np.zeros(n, bool)
+    )
 
 
 def _expand(env: Envelope, n: int, ks: np.ndarray, circulant: bool) -> Envelope:
@@ -894,6 +903,8 @@ def row_envelope(
     noise = h * (ko * eta_bar + math.sqrt(n) * xi_bar)
     finite = reaches_all(graph)
     ks = np.flatnonzero(finite)
+    if len(ks) == 0:
+        return _unbounded(n), np.full((1, n), np.inf)
     y0 = np.asarray(y0, float)
     circulant = bool(finite.all()) and rotation_invariant(graph) and np.all(y0 == y0[0])
     if circulant:
@@ -981,14 +992,18 @@ def predicted_delays(
     :mod:`.columns`) until every pair has crossed or the column is certified monotone;
     then R = 1/(h k_o) − S decays at least as fast as s^m (A R(t) ≤ s R(t), s =
     max_i R_i(t+1)/R_i(t)), which bounds the remaining crossing times from above.
-    +inf where fault/k_o ≤ 2 ⁱμ_k (never guaranteed) or robot k does not reach robot i.
+    +inf where fault/k_o ≤ 2 ⁱμ_k (never guaranteed) or robot k does not reach robot i,
+    and everywhere when some A_k has a negative entry (h k_o (d_max + 1) > 1): S_ik then
+    oscillates and can fall back below 2 ⁱμ_k after crossing it, inside the detection
+    window, so no crossing guarantees a flag.
     """
     n = graph.n
     beta = h * ko
     mass = 1.0 / beta
     need = 2.0 * np.asarray(mu_steady, float) / (h * fault)  # [i, k], in units of S
     adj = Adjacency.of(graph)
-    nonneg = beta * (adj.deg.max() + 1.0) <= 1.0 + 1e-12
+    if beta * (adj.deg.max() + 1.0) > 1.0 + 1e-12:
+        return np.full((n, n), np.inf)
     finite = reaches_all(graph)
     crossable = np.isfinite(need) & finite[None, :] & (need < mass * (1.0 - 1e-12))
     circulant = bool(finite.all()) and rotation_invariant(graph)
@@ -996,15 +1011,13 @@ def predicted_delays(
         rot = need[(np.arange(n)[:, None] + np.arange(n)[None, :]) % n, np.arange(n)[None, :]]
         need0 = rot.max(axis=1, keepdims=True)
         ok0 = np.isfinite(need0) & (need0 < mass * (1.0 - 1e-12))
-        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, nonneg, max_work)
+        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work)
         idx = (np.arange(n)[:, None] - np.arange(n)[None, :]) % n
         return periods[:, 0][idx] * h
     out = np.full((n, n), np.inf)
     ks = np.flatnonzero(crossable.any(axis=0))
     if len(ks):
-        out[:, ks] = _crossing_periods(
-            adj, beta, ks, need[:, ks], crossable[:, ks], nonneg, max_work
-        )
+        out[:, ks] = _crossing_periods(adj, beta, ks, need[:, ks], crossable[:, ks], max_work)
     return out * h
 
 
@@ -1014,7 +1027,6 @@ def _crossing_periods(
     ks: np.ndarray,
     need: np.ndarray,
     crossable: np.ndarray,
-    nonneg: bool,
     max_work: float,
 ) -> np.ndarray:
     """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never)."""
@@ -1048,14 +1060,14 @@ def _crossing_periods(
         c = cols[idx]
         got = when[:, idx] >= 0
         result[:, c] = np.where(got, when[:, idx], result[:, c])
-        if nonneg:  # the rest from R(t + m) <= s^m R(t)
-            rem = mass - tot[:, idx] + _slack(t, mass)
-            s = np.clip(((rem - v[:, idx]) / rem).max(axis=0), 0.0, 1.0)
-            g = goal[:, idx]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                m = np.ceil(np.log((mass - g) / rem) / np.log(s))
-            late = ~got & np.isfinite(g) & (s < 1.0)
-            result[:, c] = np.where(late, t + np.maximum(m, 0.0), result[:, c])
+        # the rest from R(t + m) <= s^m R(t) (A_k >= 0)
+        rem = mass - tot[:, idx] + _slack(t, mass)
+        s = np.clip(((rem - v[:, idx]) / rem).max(axis=0), 0.0, 1.0)
+        g = goal[:, idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m = np.ceil(np.log((mass - g) / rem) / np.log(s))
+        late = ~got & np.isfinite(g) & (s < 1.0)
+        result[:, c] = np.where(late, t + np.maximum(m, 0.0), result[:, c])
         keep = ~done
         v, prev, tot, goal, when = (
             np.ascontiguousarray(a[:, keep]) for a in (v, prev, tot, goal, when)
