@@ -199,6 +199,33 @@ def test_unnamed_collision_geoms_meet_cylinders_and_follow_robot_contacts():
     assert apart > 2 * 0.2 and through[0, 0] > through[1, 0] + 0.5
 
 
+def _contacts_between_robots(sc: scene.Scene, data: mujoco.MjData) -> int:
+    """Contacts MuJoCo finds between geoms of two different robots."""
+    owner = np.full(sc.model.nbody, -1)
+    for i, b in enumerate(sc.body):
+        owner[robots.subtree(sc.model, int(b))] = i
+    pairs = [
+        (owner[sc.model.geom_bodyid[c.geom1]], owner[sc.model.geom_bodyid[c.geom2]])
+        for c in data.contact[: data.ncon]
+    ]
+    return sum(a >= 0 and b >= 0 and a != b for a, b in pairs)
+
+
+def test_free_joint_robots_without_robot_contacts_meet_the_floor_but_not_each_other():
+    """Robots on a free joint keep the floor under their wheels; with robot_contacts =
+    false the floor's bit must not make their own geoms meet each other's."""
+    arm = robots.get(str(MOBILEARM))
+    for contacts, expect_between in ((True, True), (False, False)):
+        sc = scene.compose(arm, np.array([[0.0, 0.0], [0.05, 0.0]]), robot_contacts=contacts)
+        data = Plant.initial_data(sc)
+        mujoco.mj_forward(sc.model, data)
+        assert (_contacts_between_robots(sc, data) > 0) == expect_between, contacts
+    for _ in range(100):  # 1 s standing through each other: both rest on the floor
+        mujoco.mj_step(sc.model, data, nstep=5)
+    z = data.xpos[sc.body, 2]
+    assert abs(z[1] - z[0]) < 1e-3 and np.all(z > -0.01), z
+
+
 def test_keyframe_pose_is_the_start_and_undriven_actuators_hold_it():
     arm = robots.get(str(MOBILEARM))
     s = scenario.load_scenario(
@@ -223,6 +250,36 @@ def test_keyframe_pose_is_the_start_and_undriven_actuators_hold_it():
         yaw = sim.data.qpos[[sim.model.joint(f"robot{i}/joint_th").qposadr[0] for i in (1, 2)]]
         np.testing.assert_allclose(yaw, 0.3, atol=0.01)  # the yaw is held at its keyframe
     assert arm.init_qpos[-3:] == (0.0, -1.2, 2.0)
+
+
+def test_bodies_outside_the_base_neither_widen_the_footprint_nor_shift_the_keyframe_ctrl(
+    tmp_path,
+):
+    """A model with more than the robot at world level (here a dock on a slide, with the
+    first actuator): only the base's subtree is attached, so only its geoms count for the
+    footprint, and the arm's servos still hold their keyframe ctrl."""
+    import shutil
+
+    folder = tmp_path / "mobilearm"
+    shutil.copytree(MOBILEARM.parent / "mobilearm", folder)
+    xml = (folder / "mobilearm.xml").read_text()
+    dock = (
+        '<body name="dock" pos="3 0 0.3"><joint name="dock_slide" type="slide" axis="1 0 0"/>'
+        '<geom type="box" size="0.5 0.5 0.3"/></body>\n  </worldbody>'
+    )
+    xml = xml.replace("</worldbody>", dock, 1)
+    xml = xml.replace("<actuator>", '<actuator>\n    <position name="dock" joint="dock_slide"/>', 1)
+    xml = xml.replace('-1.2 2.0" ctrl="0 0 0 -1.2 2.0"', '-1.2 2.0 0.4" ctrl="0.4 0 0 0 -1.2 2.0"')
+    (folder / "dock.xml").write_text(xml)
+    text = MOBILEARM.read_text().replace("mobilearm/mobilearm.xml", "mobilearm/dock.xml")
+    (tmp_path / "dock.robot.toml").write_text(text)
+    plain, docked = robots.get(str(MOBILEARM)), robots.get(str(tmp_path / "dock.robot.toml"))
+    assert docked.footprint_radius == pytest.approx(plain.footprint_radius)
+    sc = scene.compose(docked, np.array([[0.0, 0.0], [1.0, 0.0]]))
+    data = Plant.initial_data(sc)
+    for i in (1, 2):
+        for name, value in (("shoulder_pitch", -1.2), ("elbow", 2.0)):
+            assert data.ctrl[sc.model.actuator(f"robot{i}/{name}").id] == pytest.approx(value)
 
 
 def test_wheel_gear_and_axle_direction_are_read_from_the_model():

@@ -83,7 +83,7 @@ class RobotModel:
     inertia: tuple[float, float, float] = (0.0, 0.0, 0.0)
     options: tuple[tuple[str, str], ...] = ()  # <option> (name, value) set by the robot's MJCF
     init_qpos: tuple[float, ...] = ()  # qpos of the base's subtree at the initial pose
-    init_ctrl: tuple[float, ...] = ()  # ctrl of the robot's actuators at the initial pose
+    init_ctrl: tuple[float, ...] = ()  # ctrl at the initial pose of the attached actuators
     init_point: tuple[float, float] = (0.0, 0.0)  # the control point there, own world frame
     legacy: bool = False  # an MJCF of the older contract (calibration stored in <custom>)
     # found by inspecting the compiled model (_inspect)
@@ -462,7 +462,7 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
     driven = tuple(infos[r] for r in robot.actuators)
     held = tuple(infos[r] for r in robot.held)
     site = model.site(CONTROL_SITE).id
-    footprint = _footprint(model, data, site)
+    footprint = _footprint(model, data, site, subtree(model, body))
     qpos = data.qpos[qpos_addresses(model, np.flatnonzero(subtree(model, body)[model.jnt_bodyid]))]
     return replace(
         robot,
@@ -473,7 +473,7 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
         params=params,
         options=options,
         init_qpos=tuple(float(v) for v in qpos),
-        init_ctrl=tuple(float(v) for v in data.ctrl),
+        init_ctrl=tuple(float(v) for v in data.ctrl[attached_actuators(model, body)]),
         init_point=(float(data.site_xpos[site][0]), float(data.site_xpos[site][1])),
     )
 
@@ -611,6 +611,25 @@ def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     return inside
 
 
+def attached_actuators(model: mujoco.MjModel, body: int) -> np.ndarray:
+    """The actuators that come along when body ``body`` is attached (its subtree's joints,
+    sites and bodies are their targets), in model order; tendon actuators are not."""
+    inside = subtree(model, body)
+    target_body = {
+        int(mujoco.mjtTrn.mjTRN_JOINT): model.jnt_bodyid,
+        int(mujoco.mjtTrn.mjTRN_JOINTINPARENT): model.jnt_bodyid,
+        int(mujoco.mjtTrn.mjTRN_SITE): model.site_bodyid,
+        int(mujoco.mjtTrn.mjTRN_BODY): np.arange(model.nbody),
+    }
+    out = [
+        a
+        for a in range(model.nu)
+        if (ids := target_body.get(int(model.actuator_trntype[a]))) is not None
+        and inside[ids[model.actuator_trnid[a, 0]]]
+    ]
+    return np.array(out, dtype=int)
+
+
 def qpos_addresses(model: mujoco.MjModel, joints: np.ndarray) -> np.ndarray:
     """The qpos addresses of ``joints``, in order (7 for a free joint, 4 for a ball)."""
     parts = [
@@ -680,12 +699,13 @@ def colliding(model: mujoco.MjModel, g: int) -> bool:
     return bool(model.geom_contype[g] or model.geom_conaffinity[g])
 
 
-def _footprint(model: mujoco.MjModel, data: mujoco.MjData, site: int) -> float:
-    """Largest horizontal reach of the robot's colliding geoms from the control point."""
+def _footprint(model: mujoco.MjModel, data: mujoco.MjData, site: int, inside: np.ndarray) -> float:
+    """Largest horizontal reach from the control point of the colliding geoms of the bodies
+    ``inside`` (the base's subtree: what is attached to the scene)."""
     centre = data.site_xpos[site][:2]
     reach = 0.0
     for g in range(model.ngeom):
-        if model.geom_bodyid[g] == 0 or not colliding(model, g):
+        if not inside[model.geom_bodyid[g]] or not colliding(model, g):
             continue
         pts = _surface_points(model, data, g)
         reach = max(reach, float(np.linalg.norm(pts[:, :2] - centre, axis=1).max()))

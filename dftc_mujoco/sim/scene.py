@@ -7,8 +7,9 @@ own keyframe pose. What the scene adds:
 * **Collision filtering by body membership.** Every colliding geom of a robot (any
   group, named or not) meets the cylinders; the geoms of a robot on a free joint that
   would touch a default geom in their own model (contype or conaffinity bit 1) also
-  meet the floor (wheels, casters, a chassis that drops); a robot on slide joints never
-  touches the floor. With ``physics.robot_contacts`` the robots keep their own
+  meet the floor (wheels, casters, a chassis that drops: the floor bit is in their
+  contype and the floor's conaffinity only, so it never pairs two robot geoms); a robot
+  on slide joints never touches the floor. With ``physics.robot_contacts`` the robots keep their own
   contype/conaffinity bits (so a robot collides with itself, and with its teammates,
   as in its own model) and their base bodies always meet each other; without it those
   bits are cleared (no robot-robot and no self contacts). The arena's bits sit above
@@ -33,6 +34,7 @@ from .robots import (
     CONTROL_SITE,
     OPTION_NAMES,
     RobotModel,
+    attached_actuators,
     option_value,
     qpos_addresses,
     subtree,
@@ -141,10 +143,10 @@ def _filter(body: mujoco.MjsBody, robot: RobotModel, robot_contacts: bool) -> No
             continue  # visual only
         ground = robot.root == "free" and bool((ct | ca) & 1)
         own_ct, own_ca = (ct & OWN_BITS, ca & OWN_BITS) if robot_contacts else (0, 0)
-        extra = FLOOR if ground else 0
-        hull = ROBOT if robot_contacts and g.parent.name == body.name else 0
-        g.contype = own_ct | HULL | extra | hull
-        g.conaffinity = own_ca | OBSTACLE | extra | hull
+        floor = FLOOR if ground else 0  # contype only: the floor's conaffinity has it, and
+        hull = ROBOT if robot_contacts and g.parent.name == body.name else 0  # two robot
+        g.contype = own_ct | HULL | floor | hull  # geoms must not match on it
+        g.conaffinity = own_ca | OBSTACLE | hull
 
 
 def _initial_state(
@@ -154,7 +156,7 @@ def _initial_state(
 
     A robot's joints in the scene are those of its base's subtree, in the same order as
     in its own model; a free joint's position is in world coordinates, so it moves with
-    the robot's frame. Each robot's actuators are one block, in its model's order.
+    the robot's frame. Each robot's attached actuators take their initial ctrl, in order.
     """
     qpos = model.qpos0.copy()
     ctrl = np.zeros(model.nu)
@@ -169,8 +171,10 @@ def _initial_state(
             if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
                 a = model.jnt_qposadr[j]
                 qpos[a : a + 2] += frames[i]
-    if model.nu == len(body) * len(key_c):
-        ctrl[:] = np.tile(key_c, len(body))
+        acts = attached_actuators(model, int(b))
+        if len(acts) != len(key_c):
+            raise ValueError(f"robot {i + 1}: {len(acts)} actuators, expected {len(key_c)}")
+        ctrl[acts] = key_c
     return qpos, ctrl
 
 
