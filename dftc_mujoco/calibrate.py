@@ -36,6 +36,7 @@ import dataclasses
 import itertools
 import math
 import os
+import stat
 import sys
 import tempfile
 import tomllib
@@ -267,7 +268,9 @@ def _analyse(
     )
 
 
-def detectability(cal: Calibration, scenario_name: str, robot: str) -> tuple[str, bool]:
+def detectability(
+    cal: Calibration, scenario_name: str, robot: str, overrides: dict | None = None
+) -> tuple[str, bool]:
     """What the recommended ξ̄ implies for the scenario's thresholds: the smallest constant
     fault they can detect, and whether faults of the mission's size are below it.
 
@@ -282,7 +285,7 @@ def detectability(cal: Calibration, scenario_name: str, robot: str) -> tuple[str
     from .scenario import load_scenario
     from .sim import robots
 
-    s = load_scenario(scenario_name, {"noise.xi_bar": cal.recommended_xi_bar})
+    s = load_scenario(scenario_name, {**(overrides or {}), "noise.xi_bar": cal.recommended_xi_bar})
     config = team_config(s, robots.get(robot, where="MODEL"), cal.command_limit)
     th = create("thresholds", s.onboard.thresholds, s.onboard.params.get("thresholds", {}))
     x0 = np.asarray(s.team.initial_positions)
@@ -329,10 +332,15 @@ G_CANDIDATES = (1.0, 1.5, 2.0, 3.0, 5.0, 10.0)  # multiples of the scenario's G 
 
 
 def compensation(
-    name: str, scenario_name: str = "paper_case", seconds: float = 25.0, seed: int = 0
+    name: str,
+    scenario_name: str = "paper_case",
+    seconds: float = 25.0,
+    seed: int = 0,
+    overrides: dict | None = None,
 ) -> list[Compensation]:
     """Run the paper's fault estimator in closed loop on one robot (smooth commands, η at
-    its bound) for the scenario's G and larger ones, until the loop no longer rings.
+    its bound) for the scenario's G (after ``overrides``) and larger ones, until the loop
+    no longer rings.
 
     With a per-period gain h/G = 1 (the paper's G = 0.01 at h = 0.01 s) the loop is
     deadbeat on an integrator and marginal on any robot with lag: healthy ‖φ̂‖ then
@@ -346,7 +354,7 @@ def compensation(
     from .sim import robots, scene
     from .sim.plant import Plant
 
-    s = load_scenario(scenario_name)
+    s = load_scenario(scenario_name, overrides)
     robot = robots.get(name, where="MODEL")
     sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
     nsub = round(CONTROL_PERIOD / TIMESTEP)
@@ -513,22 +521,46 @@ def write(path: Path, cal: Calibration) -> None:
 
 
 def _atomic(path: Path, text: str) -> None:
+    """Replace ``path`` with ``text`` in one step, keeping the file's permissions."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
+        if path.exists():  # mkstemp makes the file private (0600)
+            os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def _calibration_header(path: Path, lines: list[str]) -> int | None:
+    """The line of the robot file's ``[calibration]`` header (None: no calibration yet);
+    a calibration written otherwise (inline or dotted keys) cannot be replaced line-wise."""
+    start = next((i for i, ln in enumerate(lines) if ln.strip().startswith("[calibration]")), None)
+    if start is None and "calibration" in tomllib.loads("\n".join(lines)):
+        raise ScenarioError(
+            f"{path}: calibration: written as an inline or dotted table; --write replaces a "
+            "[calibration] table: move those keys into one (or delete them) and run again"
+        )
+    return start
+
+
+def check_writable(path: Path) -> None:
+    """Refuse ``--write`` before measuring when the robot file's calibration cannot be
+    replaced (:func:`_calibration_header`); an MJCF is saved through MjSpec."""
+    if path.name.endswith(".toml"):
+        _calibration_header(path, path.read_text().splitlines())
+    if not os.access(path, os.W_OK) or not os.access(path.parent, os.W_OK):
+        raise ScenarioError(f"{path}: cannot write the calibration there (permission denied)")
+
+
 def _write_robot_file(path: Path, values: dict[str, float]) -> None:
     """Replace (or add) the ``[calibration]`` table; every other line stays as it was."""
     lines = path.read_text().splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.strip().startswith("[calibration]")), None)
+    start = _calibration_header(path, lines)
     body = [f"{k} = {v:.6g}" for k, v in values.items()]
     table = ["[calibration]  # python -m dftc_mujoco.calibrate --write", *body]
     if start is None:
@@ -612,19 +644,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     try:
+        overrides = parse_overrides(args.overrides)  # bad input fails before measuring
+        from .scenario import load_scenario
+
+        load_scenario(args.scenario, overrides)
+        path = robots.resolve(args.model, where="MODEL") if args.write else None
+        if path is not None:
+            check_writable(path)
         cal = measure(args.model)
         print(report(cal))
-        line, warn = detectability(cal, args.scenario, args.model)
+        line, warn = detectability(cal, args.scenario, args.model, overrides)
         print(f"WARNING: {line}" if warn else line)
-        loop_results = compensation(args.model, args.scenario)
+        loop_results = compensation(args.model, args.scenario, overrides=overrides)
         line, warn = compensation_report(loop_results)
         print(f"WARNING: {line}" if warn else line)
-        overrides = parse_overrides(args.overrides)
         if loop_results[0].rings and "gains.G" not in overrides:
             overrides["gains.G"] = loop_results[-1].G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
         cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
-        path = robots.resolve(args.model, where="MODEL") if args.write else None
         if path is not None:  # the drift runs then see the robot's new mismatch
             write(path, cal)
         try:

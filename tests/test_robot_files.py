@@ -282,6 +282,25 @@ def test_bodies_outside_the_base_neither_widen_the_footprint_nor_shift_the_keyfr
             assert data.ctrl[sc.model.actuator(f"robot{i}/{name}").id] == pytest.approx(value)
 
 
+@pytest.mark.parametrize("model", ["diffdrive", str(MOBILEARM)])
+def test_a_diffdrive_reaches_its_command_range_in_every_heading_within_its_wheel_range(model):
+    """The per-axis command range is what the wheels can give in every heading: at the
+    corners (±m, ±m) the wheel speeds asked for stay within the servos' range, and reach
+    it in the worst heading (the range is not understated either)."""
+    robot = robots.get(model)
+    sc = scene.compose(robot, np.zeros((1, 2)))
+    drive = robot.adapter(sc, Plant.initial_data(sc))
+    m = drive.command_limit
+    wheel = min(i.velocity_limit for i in robot.driven_infos)
+    corners = m * np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0]])
+    worst = max(
+        float(np.abs(drive.joint_velocity(corners[[c]], np.array([h]))).max())
+        for h in np.linspace(-np.pi, np.pi, 721)
+        for c in range(4)
+    )
+    assert wheel * 0.999 < worst <= wheel * (1 + 1e-9), (worst, wheel)
+
+
 def test_wheel_gear_and_axle_direction_are_read_from_the_model():
     """Bug 4 (diffdrive): the adapter honours gear="3" and a wheel whose axis points back."""
     arm = robots.get(str(MOBILEARM))
@@ -372,7 +391,9 @@ def test_calibrate_writes_the_robot_file_never_the_mjcf(tmp_path, capsys):
         mjcf,
     )
     before = (tmp_path / "bot.xml").read_bytes()
+    path.chmod(0o644)
     assert calibrate.main([str(path), "--write"]) == 0
+    assert path.stat().st_mode & 0o777 == 0o644  # the replaced file keeps its permissions
     out = capsys.readouterr().out
     assert "start-up:" in out and "response to a jump" in out and "compensation loop" in out
     assert (tmp_path / "bot.xml").read_bytes() == before
@@ -381,6 +402,41 @@ def test_calibrate_writes_the_robot_file_never_the_mjcf(tmp_path, capsys):
     assert path.read_text().count("[calibration]") == 1 and "# the end" in path.read_text()
     assert calibrate.main([str(path), "--write"]) == 0  # again: replaced, not added
     assert path.read_text().count("[calibration]") == 1
+
+
+@pytest.mark.parametrize(
+    "written", ["calibration = { xi_bar = 0.01 }", "calibration.xi_bar = 0.01"]
+)
+def test_calibrate_refuses_a_calibration_table_it_cannot_replace_before_measuring(
+    tmp_path, written
+):
+    """An inline or dotted calibration cannot be replaced line-wise: one line naming the
+    file and the key, exit 2, in well under the measuring time, the file untouched."""
+    path = robot_file(tmp_path, f"{written}\n{HOLO_FILE}")
+    before = path.read_bytes()
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "dftc_mujoco.calibrate", str(path), "--write"],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert f"{path}: calibration:" in proc.stderr and "[calibration] table" in proc.stderr
+    assert time.perf_counter() - start < 5.0 and path.read_bytes() == before
+
+
+def test_calibrate_applies_set_to_every_measurement(capsys):
+    """--set reaches the compensation check and the detectability line, not only the
+    drift runs: at G = 0.02 the diffdrive's loop is calm and paper_case with block_row
+    detects far smaller faults than with eq. 40."""
+    args = ["diffdrive", "--runs", "1", "--set", "gains.G=0.02"]
+    assert calibrate.main([*args, "--set", 'onboard.thresholds="block_row"']) == 0
+    out = capsys.readouterr().out
+    assert "compensation loop (G = 0.02 I)" in out and "does not ring" in out
+    assert "thresholds (block_row)" in out
+    assert calibrate.main(["diffdrive", "--set", "gains.nope=1"]) == 2  # before measuring
+    assert "gains.nope" in capsys.readouterr().err
 
 
 def test_calibrate_writes_an_mjcf_saved_by_mjspec(tmp_path):

@@ -512,7 +512,7 @@ def test_block_row_raises_no_false_flag_on_physics_at_the_noise_bounds(model, G)
     """Issue 10's honesty target on MuJoCo, with each robot's calibrated xi_bar and drift
     offset: fault-free 60 s paper_case runs at the noise bounds flag nobody and keep every
     residual below 0.8 of its threshold (the campaigns false_alarms_block_row_* run 200 such
-    runs per robot: 0 false alarms, margins 0.41 / 0.41 / 0.48)."""
+    runs per robot: 0 false alarms, margins 0.41 / 0.41 / 0.41)."""
     from dftc_mujoco import load_scenario, simulate
 
     for seed in (1, 2):

@@ -33,7 +33,6 @@ import mujoco
 import numpy as np
 
 VELOCITY, POSITION, MOTOR = "velocity", "position", "motor"
-KINDS = (VELOCITY, POSITION, MOTOR)
 MOTOR_TIME_CONSTANT = 0.05  # s, default time constant of a torque motor's velocity loop
 HOLD_TIME_CONSTANT = 0.2  # s, a held joint (a base's yaw) returns to its target at this rate
 

@@ -76,10 +76,6 @@ class Drive:
         """Driven joint velocities (N, A) for planar velocities ``u`` (N, 2)."""
         raise NotImplementedError
 
-    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        """The planar velocity (N, 2) of the controlled points for joint velocities ``qdot``."""
-        raise NotImplementedError
-
     def command(self, u: np.ndarray) -> np.ndarray:
         """Actuator commands (N, A + H): driven joints for ``u`` (N, 2), then held joints."""
         if self._identity:
@@ -113,9 +109,6 @@ class Holonomic(Drive):
     def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
         return u if self._plain else u * self.sign
 
-    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        return qdot if self._plain else qdot * self.sign
-
 
 class DiffDrive(Drive):
     """Two wheels on hinges: offset-point feedback linearisation (module docstring)."""
@@ -132,8 +125,11 @@ class DiffDrive(Drive):
         super().__init__(robot, scene, data, dt)
 
     def _planar_limit(self, joint_limit: float) -> float:
-        # the per-axis planar speed reachable in every heading
-        return joint_limit * self.r * min(1.0, abs(self.b) / self.half) / np.sqrt(2)
+        # the per-axis planar speed reachable in every heading: a rim speed is
+        # u_f + (l ∓ a) u_l / b (forward and lateral parts of u), at most
+        # sqrt(1 + K²) ‖u‖ with K = (|l| + a)/|b|, and ‖u‖ <= sqrt(2) × the per-axis bound
+        k = (abs(self.lat) + self.half) / abs(self.b)
+        return joint_limit * self.r / (np.sqrt(2) * np.sqrt(1.0 + k * k))
 
     def _heading(self) -> tuple[np.ndarray, np.ndarray]:
         mat = self.data.xmat[self.body]  # (N, 9), row-major
@@ -158,14 +154,6 @@ class DiffDrive(Drive):
         v = c * u[:, 0] + s * u[:, 1] + self.lat * w
         rim = np.stack([v - w * self.half, v + w * self.half], axis=1)
         return rim * (self.sign / self.r)
-
-    def planar(self, qdot: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
-        c, s = self._cs(heading)
-        rim = qdot * (self.sign * self.r)
-        v = (rim[:, 0] + rim[:, 1]) / 2
-        w = (rim[:, 1] - rim[:, 0]) / (2 * self.half)
-        along, across = v - self.lat * w, self.b * w
-        return np.stack([c * along - s * across, s * along + c * across], axis=1)
 
 
 DRIVES: dict[str, type[Drive]] = {"holonomic": Holonomic, "diffdrive": DiffDrive}

@@ -85,17 +85,11 @@ class RobotModel:
     init_qpos: tuple[float, ...] = ()  # qpos of the base's subtree at the initial pose
     init_ctrl: tuple[float, ...] = ()  # ctrl at the initial pose of the attached actuators
     init_point: tuple[float, float] = (0.0, 0.0)  # the control point there, own world frame
-    legacy: bool = False  # an MJCF of the older contract (calibration stored in <custom>)
     # found by inspecting the compiled model (_inspect)
     driven_infos: tuple[ActuatorInfo, ...] = ()
     held_infos: tuple[ActuatorInfo, ...] = ()
     root: str = ""  # "planar" (slide joints) or "free" (a free joint)
     footprint_radius: float = 0.0  # horizontal reach of the colliding geoms from the point
-
-    @property
-    def adapter_kind(self) -> str:
-        """The drive (older name)."""
-        return self.drive
 
     @property
     def drift_bound(self) -> float:
@@ -309,7 +303,6 @@ def _load_legacy(path: Path) -> RobotModel:
         mismatch=nums.get("mismatch", 0.0),
         params=params,
         calibration=calibration,
-        legacy=True,
     )
     return _inspect(robot, keys=None)
 
