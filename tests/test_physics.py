@@ -279,3 +279,18 @@ def test_a_signal_stops_the_run_and_keeps_what_was_computed(tmp_path, sig, code)
         # period (50 Hz) before it
         assert 0 <= summary["simulated_time"] - log["t"][-1] <= 0.02 + 1e-9
         assert np.isfinite(log["x"][-1]).all()
+
+
+def test_simulated_time_is_the_control_clock_after_long_runs():
+    """After 25 721 periods MuJoCo's accumulated ``data.time`` is 257.21000000050003, and the
+    summary's simulated time read 257.210000001 against the log's 257.21: the interrupted-run
+    test above failed on it (simulated − last row = 0.020000001 > one log period). The
+    physics time is a whole number of MuJoCo steps, and the summary says so."""
+    d = scenario_dict()
+    d["faults"], d["obstacles"], d["duration"] = [], [], 300.0
+    d["physics"]["log_rate"] = 1.0
+    d["fdir"] = {**d.get("fdir", {}), "enabled": False}
+    with loop.Simulation(make(d)) as sim:
+        sim.step(25_721)
+        summary = sim.result().summary
+    assert summary["simulated_time"] == 257.21
