@@ -79,6 +79,8 @@ def load(path: str | Path) -> Spec:
     base_path = candidate if candidate.suffix == ".toml" and candidate.is_file() else None
     base_file = scenario_mod.resolve(base_path or base_name)
     base = scenario_mod._read(base_file)  # not TOML, not UTF-8, unreadable: one line
+    # the base scenario must be valid on its own: its errors name its file, not a run
+    scenario_mod.from_dict(copy.deepcopy(base), source=f"{base_file} (base scenario of {path})")
     runs = top.integer("runs", low=1)
     seed = top.integer("seed", 0, low=0)
     overrides = top.raw("set", {})
