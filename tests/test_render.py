@@ -217,3 +217,37 @@ def test_glfw_without_a_display_says_so(tmp_path):
     )
     assert p.returncode == 4
     assert "GLFW needs a display" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_large_teams_show_the_robots_worth_showing():
+    """N = 16, robot 11 stops: the residual grid's observers are the faulty robot, the first
+    and the last teammate to flag it and the healthy robots nearest a false flag; its first
+    column is robot 11 (the grid used to show robots 1-6 only, never an observer that
+    flagged late); the inputs figure shows robot 11 among eight robots, not all sixteen."""
+    from dftc_mujoco.loop import simulate
+    from tests.conftest import make, scenario_dict
+
+    d = scenario_dict()
+    d["team"] = {
+        "robots": 16,
+        "initial_positions": {"layout": "formation", "jitter": 0.02},
+        "graph": {"family": "ring_chords", "chords": [2, 5]},
+    }
+    d["mission"]["formation"] = {"shape": "grid", "side": 0.6}
+    d["mission"]["centroid"] = {"waypoints": [[0, 0], [20, 0]], "speed": 0.1}
+    d["obstacles"], d["duration"] = [], 12.0
+    d["faults"] = [{"robot": 11, "kind": "stop", "t": 6.0}]
+    d["onboard"] = {"thresholds": "l1"}
+    r = simulate(make(d))
+    flags = sorted((e for e in r.summary["detections"] if e["robot"] == 11), key=lambda e: e["t"])
+    assert len(flags) >= 3
+    first, last = flags[0]["by"], flags[-1]["by"]
+    figs = figures.make_all(r.log, r.summary)
+    grid = figs["fig5_8_residuals"].axes
+    observers = [ax.get_ylabel() for ax in grid if ax.get_ylabel()]
+    monitored = [ax.get_title() for ax in grid if ax.get_title()]
+    assert len(observers) == 6 and len(monitored) == 6
+    assert observers[0] == "i = 11" and monitored[0] == "k = 11"
+    assert {f"i = {first}", f"i = {last}"} <= set(observers)
+    inputs = [ax.get_ylabel() for ax in figs["fig10_inputs"].axes]
+    assert len(inputs) == 8 and "u11 [m/s]" in inputs

@@ -3,8 +3,8 @@
 Each figure adapts to N and to the run's fault times: the snapshots of Fig. 3
 are taken at the paper's fractions of the duration (22.8, 38 and 53.2 s of
 60 s), Fig. 4 shows every robot with a bias fault (or every robot's φ̂ when
-there is none), and the residual grid shows at most six rows and columns,
-faulty robots first.
+there is none), and large teams show the robots worth showing (``worth_showing``): at
+most six rows and columns in the residual grid, eight robots' inputs and fault estimates.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from matplotlib.patches import Circle
 from ..record import matrix_rows
 
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
-MAX_GRID = 6
+MAX_GRID = 6  # rows and columns of the residual grid
+MAX_LINES = 8  # robots in the inputs and fault-estimate figures
 FIGURES = ("fig3_paths", "fig4_fault_estimate", "fig5_8_residuals", "fig9_errors", "fig10_inputs")
 
 
@@ -36,6 +37,45 @@ def _faulty(summary: dict[str, Any]) -> dict[int, list[dict[str, Any]]]:
     for f in summary.get("faults", []):
         out.setdefault(f["robot"] - 1, []).append(f)
     return out
+
+
+def _healthy_ratio(log: dict[str, np.ndarray], faulty: list[int]) -> np.ndarray:
+    """(observer, monitored) largest ‖ⁱr_k‖ / ⁱμ_k over the run, for robots k without a fault
+    (0 where there is none, and for the faulty robots' columns)."""
+    r, mu = log["residual"], log["threshold"]
+    ratio = np.zeros(r.shape[1:])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for a in range(0, len(r), 64):  # in chunks: the N x N logs may be large
+            q = r[a : a + 64] / mu[a : a + 64]  # NaN for excluded robots, 0 for mu = inf
+            np.fmax(ratio, np.nan_to_num(q, nan=0.0, posinf=0.0).max(axis=0), out=ratio)
+    ratio[:, faulty] = 0.0
+    return ratio
+
+
+def worth_showing(
+    log: dict[str, np.ndarray], summary: dict[str, Any], limit: int, role: str = "observer"
+) -> list[int]:
+    """Up to ``limit`` robots (0-based) worth a figure in a large team, most telling first.
+
+    The faulty robots; then, as observers (``role="observer"``), the first and the last
+    robot to flag a faulty one, or, as monitored robots (``role="monitored"``), none; then
+    the healthy robots that came closest to a false flag (largest healthy residual /
+    threshold); then the rest in order. A team of at most ``limit`` robots is shown whole.
+    """
+    n = log["x"].shape[1]
+    faulty = sorted(_faulty(summary))
+    order: list[int] = list(faulty)
+    if role == "observer":
+        flags = sorted(summary.get("detections", []), key=lambda d: d["t"])
+        if flags:
+            order += [flags[0]["by"] - 1, flags[-1]["by"] - 1]
+    if "residual" in log and "threshold" in log:
+        ratio = _healthy_ratio(log, faulty)
+        near = ratio.max(axis=1 if role == "observer" else 0)
+        order += [int(i) for i in np.argsort(-near, kind="stable") if near[i] > 0]
+    order += range(n)
+    picked = list(dict.fromkeys(order))[: min(limit, n)]
+    return picked if n > limit else sorted(picked, key=lambda i: (i not in faulty, i))
 
 
 def _mark_events(ax, summary: dict[str, Any], robot: int | None = None) -> None:
@@ -98,7 +138,7 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 4: φ and φ̂ of every robot with a bias fault (components x and y)."""
     t = log["t"]
     biased = sorted({f["robot"] - 1 for f in summary.get("faults", []) if f["kind"] == "bias"})
-    robots = biased or list(range(log["x"].shape[1]))
+    robots = biased[:MAX_LINES] or worth_showing(log, summary, MAX_LINES)
     fig, axes = new_figure(2, 1, figsize=(8, 5), sharex=True, squeeze=False)
     for c, name in enumerate("xy"):
         ax = axes[c, 0]
@@ -122,10 +162,8 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
 def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Figs. 5-8: ‖ⁱr_k‖ and ⁱμ_k, rows i (observer), columns k (monitored robot)."""
     t, r, mu = log["t"][matrix_rows(log)], log["residual"], log["threshold"]
-    n = r.shape[1]
-    faulty = sorted(_faulty(summary))
-    cols = (faulty + [k for k in range(n) if k not in faulty])[:MAX_GRID]
-    rows = list(range(n))[:MAX_GRID]
+    cols = worth_showing(log, summary, MAX_GRID, role="monitored")
+    rows = worth_showing(log, summary, MAX_GRID, role="observer")
     fig, axes = new_figure(
         len(rows), len(cols), figsize=(2.6 * len(cols), 1.9 * len(rows)), sharex=True, squeeze=False
     )
@@ -192,10 +230,11 @@ def fig_errors(log: dict[str, np.ndarray], summary: dict[str, Any]):
 def fig_inputs(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Fig. 10: each robot's nominal input uᵢ (x and y)."""
     t, u = log["t"], log["u"]
-    n = min(u.shape[1], 8)
+    robots = worth_showing(log, summary, MAX_LINES)
+    n = len(robots)
     fig, axes = new_figure(n, 1, figsize=(8, 1.4 * n + 0.8), sharex=True, squeeze=False)
-    for i in range(n):
-        ax = axes[i, 0]
+    for a, i in enumerate(robots):
+        ax = axes[a, 0]
         ax.plot(t, u[:, i, 0], lw=0.7, label="x")
         ax.plot(t, u[:, i, 1], lw=0.7, label="y")
         _mark_events(ax, summary)
