@@ -172,6 +172,10 @@ def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
             ax = axes[a, b]
             ax.semilogy(t, r[:, i, k], "b-", lw=0.7)
             ax.semilogy(t, mu[:, i, k], "g--", lw=0.9)
+            m = mu[:, i, k]
+            m = m[np.isfinite(m) & (m > 0)]
+            if m.size:  # a residual that starts at 0 would stretch the axis to 1e-40
+                ax.set_ylim(bottom=max(ax.get_ylim()[0], float(m.min()) * 1e-3))
             _mark_events(ax, summary, robot=k)
             for d in summary.get("detections", []):
                 if d["by"] - 1 == i and d["robot"] - 1 == k:
