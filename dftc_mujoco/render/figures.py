@@ -153,7 +153,7 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
     title = (
         "Fault and its estimate (paper Fig. 4)"
         if biased
-        else "Fault estimates φ̂ (no bias fault in this run: noise level)"
+        else "Fault estimates φ̂ (no bias fault in this run; robots worth showing)"
     )
     axes[0, 0].set_title(title)
     return fig
