@@ -123,6 +123,28 @@ def test_robot_file_problems_are_one_line_naming_file_and_key(tmp_path, change, 
     assert "\n" not in text
 
 
+@pytest.mark.parametrize(
+    ("change", "key", "known"),
+    [
+        (
+            lambda t: "max_sped = 0.8\n" + t,
+            "max_sped",
+            "base, calibration, control_point, diffdrive, drive, holonomic, keyframe, "
+            "max_speed, mesh_density, mjcf, motor, name",
+        ),
+        (lambda t: t + "yaww = 'joint_th'\n", "holonomic.yaww", "x, y, yaw"),
+        (lambda t: t + "[motor]\ntau = 0.1\n", "motor.tau", "time_constant"),
+    ],
+)
+def test_an_unknown_key_lists_every_key_the_robot_file_accepts(tmp_path, change, key, known):
+    """A misspelt optional key is told what it could be: the list used to name only the
+    keys the file already had (no keyframe, max_speed, motor or yaw)."""
+    path = robot_file(tmp_path, change(HOLO_FILE.replace('yaw = "joint_th"\n', "")))
+    with pytest.raises(ScenarioError) as info:
+        robots.get(str(path))
+    assert str(info.value) == f"{path}: {key}: unknown key (known keys here: {known})"
+
+
 def test_a_bad_robot_file_on_the_command_line_is_one_line_exit_2(tmp_path):
     path = robot_file(tmp_path, HOLO_FILE.replace('"joint_y"', '"nope"'))
     proc = subprocess.run(

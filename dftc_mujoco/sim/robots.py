@@ -209,10 +209,11 @@ def _load_robot_file(path: Path) -> RobotModel:
         for role in HELD_ROLES[kind]:
             if role in sub.data:
                 held[role] = sub.string(role)
-        if kind == "diffdrive":
-            for key in ("wheel_radius", "axle_width"):
-                if key in sub.data:
-                    params[key] = sub.number(key, low=0.0)
+        geometry = ("wheel_radius", "axle_width") if kind == "diffdrive" else ()
+        for key in geometry:
+            if key in sub.data:
+                params[key] = sub.number(key, low=0.0)
+        sub.used.update((*HELD_ROLES[kind], *geometry))  # optional: known when misspelt
         sub.finish()
     if t.ok("drive") and drive not in data:
         t.report(drive, f"missing table [{drive}] naming the actuators to drive")
@@ -227,7 +228,10 @@ def _load_robot_file(path: Path) -> RobotModel:
         for key in CALIBRATION_KEYS:
             if key in c.data:
                 calibration[key] = c.number(key, low=0.0, strict_low=False)
+        c.used.update(CALIBRATION_KEYS)
         c.finish()
+    # the optional keys, so that a misspelt one is told what it could be
+    t.used.update(("keyframe", "max_speed", "mesh_density", "motor", "calibration", *DRIVE_ROLES))
     t.finish()
     doc.raise_problems()
     mjcf = (path.parent / mjcf_name).resolve()
