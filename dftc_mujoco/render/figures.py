@@ -2,9 +2,10 @@
 
 Each figure adapts to N and to the run's fault times: the snapshots of Fig. 3
 are taken at the paper's fractions of the duration (22.8, 38 and 53.2 s of
-60 s), Fig. 4 shows every robot with a bias fault (or every robot's φ̂ when
-there is none), and large teams show the robots worth showing (``worth_showing``): at
-most six rows and columns in the residual grid, eight robots' inputs and fault estimates.
+60 s), Fig. 4 shows the robots with a bias fault (or, when there is none, the φ̂ of
+the robots worth showing), and large teams show the robots worth showing
+(``worth_showing``): at most six rows and columns in the residual grid, eight robots'
+inputs and fault estimates.
 """
 
 from __future__ import annotations
