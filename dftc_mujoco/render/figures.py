@@ -54,7 +54,11 @@ def _healthy_ratio(log: dict[str, np.ndarray], faulty: list[int]) -> np.ndarray:
 
 
 def worth_showing(
-    log: dict[str, np.ndarray], summary: dict[str, Any], limit: int, role: str = "observer"
+    log: dict[str, np.ndarray],
+    summary: dict[str, Any],
+    limit: int,
+    role: str = "observer",
+    ratio: np.ndarray | None = None,
 ) -> list[int]:
     """Up to ``limit`` robots (0-based) worth a figure in a large team, most telling first.
 
@@ -62,6 +66,8 @@ def worth_showing(
     robot to flag a faulty one, or, as monitored robots (``role="monitored"``), none; then
     the healthy robots that came closest to a false flag (largest healthy residual /
     threshold); then the rest in order. A team of at most ``limit`` robots is shown whole.
+    ``ratio`` is that largest ratio per (observer, monitored) pair when the caller has it
+    already (one pass over the N x N logs instead of one per call).
     """
     n = log["x"].shape[1]
     faulty = sorted(_faulty(summary))
@@ -70,8 +76,9 @@ def worth_showing(
         flags = sorted(summary.get("detections", []), key=lambda d: d["t"])
         if flags:
             order += [flags[0]["by"] - 1, flags[-1]["by"] - 1]
-    if "residual" in log and "threshold" in log:
+    if ratio is None and "residual" in log and "threshold" in log:
         ratio = _healthy_ratio(log, faulty)
+    if ratio is not None:
         near = ratio.max(axis=1 if role == "observer" else 0)
         order += [int(i) for i in np.argsort(-near, kind="stable") if near[i] > 0]
     order += range(n)
@@ -163,8 +170,9 @@ def fig_fault_estimate(log: dict[str, np.ndarray], summary: dict[str, Any]):
 def fig_residuals(log: dict[str, np.ndarray], summary: dict[str, Any]):
     """Figs. 5-8: ‖ⁱr_k‖ and ⁱμ_k, rows i (observer), columns k (monitored robot)."""
     t, r, mu = log["t"][matrix_rows(log)], log["residual"], log["threshold"]
-    cols = worth_showing(log, summary, MAX_GRID, role="monitored")
-    rows = worth_showing(log, summary, MAX_GRID, role="observer")
+    ratio = _healthy_ratio(log, sorted(_faulty(summary)))  # once for rows and columns
+    cols = worth_showing(log, summary, MAX_GRID, role="monitored", ratio=ratio)
+    rows = worth_showing(log, summary, MAX_GRID, role="observer", ratio=ratio)
     fig, axes = new_figure(
         len(rows), len(cols), figsize=(2.6 * len(cols), 1.9 * len(rows)), sharex=True, squeeze=False
     )
