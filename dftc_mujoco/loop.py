@@ -26,11 +26,12 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from . import blocks as blocks_mod
-from . import checks, mission
+from . import checks, mission, premises
 from .checks import CLEARANCE
 from .errors import ScenarioError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team, TeamConfig
+from .onboard.thresholds import estimator_gain
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
@@ -46,8 +47,36 @@ def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
     return robot.xi_bar if robot is not None else 0.0
 
 
+def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: float) -> float:
+    """Per-axis range of the applied nominal input (``onboard/applied.py``).
+
+    The command range less the compensation's headroom: a healthy robot's ‖φ̂‖ stays
+    within Φ̄ (the fault estimator's ℓ1 gain from η̄ and ξ̄), so ū = u − φ̂ stays within the
+    range the drive delivers; at least half the range is kept for the mission.
+    ``fdir.input = "nominal"`` returns inf (no saturation).
+    """
+    if s.fdir.input == "nominal" or not np.isfinite(command_limit):
+        return np.inf
+    headroom = 0.0
+    if s.fdir.enabled and s.fdir.compensate:
+        try:
+            headroom = estimator_gain(
+                np.asarray(s.gains.K),
+                np.asarray(s.gains.G),
+                s.physics.control_period,
+                s.noise.eta_bar,
+                effective_xi_bar(s, robot),
+            )
+        except ScenarioError:  # an unstable estimator loop is refused elsewhere
+            headroom = 0.0
+    return max(command_limit - headroom, 0.5 * command_limit)
+
+
 def team_config(
-    s: Scenario, robot: robots.RobotModel | None = None, command_limit: float = np.inf
+    s: Scenario,
+    robot: robots.RobotModel | None = None,
+    command_limit: float = np.inf,
+    initial_error_bound: float | None = None,
 ) -> TeamConfig:
     """The onboard configuration a scenario gives every robot of model ``robot``.
 
@@ -55,7 +84,9 @@ def team_config(
     2 cm > d) gets the larger value, so no hull ever reaches a cylinder or an
     excluded robot, and its activation distance is raised by as much (the
     scenario's margin between the two is kept). ``command_limit`` is the per-axis
-    planar command range.
+    planar command range; ``initial_error_bound`` ε̄ as derived for the run
+    (:func:`dftc_mujoco.premises.initial_error_bound`; default: the scenario's, 1 m
+    where it says "auto").
     """
     obs = s.obstacles
     f = s.fdir
@@ -86,12 +117,17 @@ def team_config(
         dt_d_max=f.dt_d_max,
         isolation=f.isolation,
         reference_fault=f.reference_fault or s.mission.centroid.speed,
-        initial_error_bound=f.initial_error_bound,
+        initial_error_bound=(
+            initial_error_bound
+            if initial_error_bound is not None
+            else (1.0 if f.initial_error_bound == "auto" else float(f.initial_error_bound))
+        ),
         replan_time=f.replan_time,
         excluded_safe=excluded_safe,
         excluded_activation=max(f.excluded_activation_distance, excluded_safe + 0.1),
         phi_low_pass=f.phi_low_pass,
         command_limit=command_limit,
+        input_limit=input_limit(s, robot, command_limit),
         fdir=f.enabled,
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
@@ -294,7 +330,17 @@ class Simulation:
             self.events.add(0.0, "warning", message=note)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
         self.command_limit = limit = self.adapter.command_limit
-        config = team_config(s, model, limit)
+        blocks = make_blocks(s, self._given, self._search)
+        # the first period's measurement starts the observers and the fault estimators
+        self.noise = NoiseStream(plant)
+        x0 = plant.positions()
+        x_m0 = x0 + self.noise.peek()[0]
+        slots = self.path.position[0] + mission.formation_offsets(s.mission.formation, n)
+        meaning = getattr(blocks["thresholds"], "initial_error", "stacked")
+        self.start_bound, refusal = premises.initial_error_bound(
+            s.fdir.initial_error_bound, x0, slots, s.noise.eta_bar, meaning, str(s.source)
+        )
+        config = team_config(s, model, limit, self.start_bound.value)
         every = max(1, round(0.1 / dt))  # the path every 0.1 s is enough to check it
         found = checks.preflight(
             s,
@@ -305,14 +351,17 @@ class Simulation:
             self.path.position[::every],
             every * dt,
         )
+        if refusal:
+            found.refusals.append(refusal)
+        found.refusals += premises.rule_refusals(
+            self.block_names["thresholds"], s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
+        )
         found.raise_refusals()
         for message in found.warnings:
             self.events.add(0.0, "warning", message=message)
-        blocks = make_blocks(s, self._given, self._search)
-        self.team = Team(config, plant.measure(), self.path.position[0], blocks)
+        self.team = Team(config, x_m0, self.path.position[0], blocks)
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
-        self.noise = NoiseStream(plant)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)

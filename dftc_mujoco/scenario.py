@@ -224,7 +224,8 @@ class Fdir:
 
     detection_window: float = 0.2
     dt_d_max: float | str = 5.0  # Δt_d,max [s], or "auto": from the analysis (eq. 46)
-    initial_error_bound: float = 1.0
+    # ε̄ [m], or "auto": derived from the start positions and the planned slots (premises.py)
+    initial_error_bound: float | str = "auto"
     replan_time: float = 4.0
     excluded_safe_distance: float = 0.35
     excluded_activation_distance: float = 0.45
@@ -233,6 +234,9 @@ class Fdir:
     compensate: bool = True  # false: φ̂ is estimated and logged but not applied
     isolation: str = "pairwise"  # or "exclusive": eq. 39's second clause
     reference_fault: float = 0.0  # [m/s] the fault Δt_d,max = "auto" is sized for (0: path speed)
+    # the input that enters y_m, Δu and the fault estimator: "applied" (the nominal input
+    # after the robot's own command limits, Remark 4.1) or "nominal" (as computed, eq. 8)
+    input: str = "applied"
 
 
 @dataclass(frozen=True)
@@ -1342,7 +1346,7 @@ def _fdir(t: _Table) -> Fdir:
     f = Fdir(
         detection_window=t.number("detection_window", 0.2, low=0.0, strict_low=False),
         dt_d_max=_dt_d_max(t),
-        initial_error_bound=t.number("initial_error_bound", 1.0, low=0.0, strict_low=False),
+        initial_error_bound=_initial_error_bound(t),
         replan_time=t.number("replan_time", 4.0, low=0.0, strict_low=False),
         excluded_safe_distance=safe,
         excluded_activation_distance=t.number(
@@ -1356,9 +1360,21 @@ def _fdir(t: _Table) -> Fdir:
         compensate=t.boolean("compensate", True),
         isolation=t.string("isolation", "pairwise", choices=("pairwise", "exclusive")),
         reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
+        input=t.string("input", "applied", choices=("applied", "nominal")),
     )
     t.finish()
     return f
+
+
+def _initial_error_bound(t: _Table) -> float | str:
+    """ε̄ in metres, or "auto" (derived per run from the start positions and the slots)."""
+    raw = t.data.get("initial_error_bound", "auto")
+    if isinstance(raw, str):
+        t.raw("initial_error_bound")
+        if raw != "auto":
+            t.report("initial_error_bound", f'expected a distance in m or "auto", got {raw!r}')
+        return "auto"
+    return t.number("initial_error_bound", 1.0, low=0.0, strict_low=False)
 
 
 def _dt_d_max(t: _Table) -> float | str:

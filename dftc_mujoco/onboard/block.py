@@ -40,12 +40,15 @@ class TeamConfig:
     dt_d_max: float | str = 5.0  # or "auto": from the analysis of eq. 46 (onboard/fdir.py)
     isolation: str = "pairwise"  # or "exclusive" (eq. 39's second clause)
     reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
-    initial_error_bound: float = 1.0
+    initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (premises.py)
     replan_time: float = 4.0
     excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)
     excluded_activation: float = 0.45
     phi_low_pass: float = 0.0
     command_limit: float = np.inf  # per-axis planar command range of the robots [m/s]
+    # per-axis range of the applied nominal input uᵢ (onboard/applied.py) [m/s]: the command
+    # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
+    input_limit: float = np.inf
     compiled: bool = True  # compose the paper's blocks in one compiled period when possible
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)

@@ -303,6 +303,9 @@ class Thresholds(Block):
     """
 
     kind = "thresholds"
+    #: what ``initial_error_bound`` bounds for this rule: "stacked", ‖ỹ*_k(0)‖ over every
+    #: observer (eq. 40), or "robot", each robot's start distance from its planned slot
+    initial_error: str = "stacked"
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Start from ‖ỹ*_k(0)‖ ≤ ``initial_error_bound`` for every k."""

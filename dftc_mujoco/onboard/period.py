@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from numba import njit
 
+from .applied import limit_input
 from .controller import collective_one
 from .fault_estimator import estimate_faults
 from .fdir import decide
@@ -29,6 +30,7 @@ from .supervisor import supervise
 
 RAISED = 1  # some flag was raised (detection events to report)
 SWITCHED = 2  # some robot switched behaviour (reactive events to report)
+SATURATED = 4  # some robot's nominal input was beyond its command range (saturated)
 
 
 @njit(cache=True)
@@ -57,6 +59,7 @@ def team_period(
     active,
     fdir,
     compensate,
+    input_limit,
     z,
     int_e,
     phi_hat,
@@ -111,6 +114,8 @@ def team_period(
             s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
     if supervise(x_own, u_g, obs, safe, act, theta, release, active, u_mem, du):  # eqs. 8, 18
         code |= SWITCHED
+    if limit_input(u_mem, u_g, du, input_limit):  # the input the robot applies (Remark 4.1)
+        code |= SATURATED
     yn = y_next.reshape(m, m * n)
     for i in range(m):  # pass 2: every robot reads its in-neighbours' current messages
         residual_row(y_hat, int_u_own, x_own, src, first_edge, in_degree, i, row)  # eq. 35

@@ -33,7 +33,8 @@ from .controller import Controller
 from .fault_estimator import FaultEstimator
 from .fdir import Decision, Thresholds
 from .observer import Observer
-from .period import RAISED, SWITCHED, team_period
+from .applied import limit_input
+from .period import RAISED, SATURATED, SWITCHED, team_period
 from .supervisor import Supervisor
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -230,6 +231,7 @@ class Team:
             sup.active,
             cfg.fdir,
             cfg.compensate,
+            cfg.input_limit,
             est.z,
             est.int_e,
             est.phi_hat,
@@ -273,6 +275,9 @@ class Team:
         u_hat_g = self.controller.collective_input(x_hat, self.x_d, self.xd_dot)  # eq. 15
         u_g = self.controller.own_input(u_hat_g)  # eq. 16
         u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
+        u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
+        delta_u = np.array(delta_u, dtype=float)
+        saturated = limit_input(u_mem, np.ascontiguousarray(u_g, float), delta_u, cfg.input_limit)
         r = self.observer.residual(x_own)  # eq. 35
         self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
         self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
@@ -280,6 +285,8 @@ class Team:
             self.u[:] = 0.0  # an excluded robot is told to stay where it is
         self.u[mem] = u_mem
         code = SWITCHED if not np.array_equal(before, self.supervisor.active) else 0
+        if saturated:
+            code |= SATURATED
         if cfg.fdir:
             u_bar = self.estimator.step(x_m, self.u)  # eqs. 28-31, nominal u (NOTES 2)
             self.u_bar[:] = u_bar if cfg.compensate else self.u

@@ -423,6 +423,9 @@ def _expand(env: Envelope, n: int, ks: np.ndarray, circulant: bool) -> Envelope:
 class _Enveloped(Thresholds):
     """A rule stored as an :class:`Envelope` after every (re)start."""
 
+    #: ē is raised to the compensation's own offset ‖G‖Φ̄ + 2η̄ (l1, block_row)
+    covers_compensation = True
+
     def __init__(self, drift_bound: float | None = None) -> None:
         self.drift_param = drift_bound
 
@@ -437,6 +440,11 @@ class _Enveloped(Thresholds):
             else getattr(config, "drift_bound", 0.0)
         )
         self.n_dim = np.shape(x_m0)[1]
+        self.drift_given = self.drift
+        if self.covers_compensation and config.fdir and config.compensate:
+            # with the compensation applied, D_k = G φ̂_k − η_k + η_k(0): ē must cover it
+            phi_bar = estimator_gain(config.K, config.G, self.h, self.eta_bar, self.xi_bar)
+            self.drift = max(self.drift, compensation_offset(self.G, phi_bar, self.eta_bar))
         self._setup(config)
         self._begin(config.graph, self._structured(config.graph.n, config.initial_error_bound), 0.0)
 
@@ -570,6 +578,8 @@ class L1(_Enveloped):
     restarts from the residuals' bound (:meth:`drop`). Needs k_o h (d_max + 1) ≤ 1.
     """
 
+    initial_error = "robot"
+
     def _structured(self, n: int, y0: float) -> Start:
         return Start(np.full(n, y0), self.eta_bar, True)
 
@@ -594,6 +604,9 @@ class Drive(_Enveloped):
     to φ̂; on a real robot its own mismatch adds to it (``docs/thresholds.md``).
     Needs k_o h (d_max + 1) ≤ 1.
     """
+
+    initial_error = "robot"
+    covers_compensation = False  # Φ̄ is its own premise
 
     def __init__(self, phi_bar: float | None = None) -> None:
         super().__init__()
@@ -932,6 +945,16 @@ def row_envelope(
 
 
 # --------------------------------------------------------------------------- Φ̄, Δt_d
+
+
+def compensation_offset(G: np.ndarray, phi_bar: float, eta_bar: float) -> float:
+    """The drift offset the compensation makes on a healthy robot: ‖G‖₂ Φ̄ + 2η̄.
+
+    With the fault estimator (eqs. 29-31) and the observer fed the same input,
+    y_m,k(t) − y_m,k(0) = G φ̂_k(t) exactly, so D_k = G φ̂_k − η_k(t) + η_k(0)
+    (``docs/thresholds.md``): l1 and block_row take ē at least this large.
+    """
+    return float(np.linalg.norm(np.asarray(G, float), 2)) * phi_bar + 2.0 * eta_bar
 
 
 def estimator_gain(

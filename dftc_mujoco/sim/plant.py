@@ -91,6 +91,12 @@ class NoiseStream:
         self.k += 1
         return self.eta[k], self.xi[k]
 
+    def peek(self) -> tuple[np.ndarray, np.ndarray]:
+        """(η, ξ) that :meth:`next` hands out next, without taking them (copies)."""
+        if self.k == self.chunk:
+            self._refill()
+        return self.eta[self.k].copy(), self.xi[self.k].copy()
+
     def _refill(self) -> None:
         p = self.plant
         r = p.rng.random((self.chunk, 2, 2, p.n))  # per period: η's (2, N), then ξ's (2, N)
