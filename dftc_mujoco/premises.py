@@ -106,13 +106,13 @@ def rule_refusals(rule: str, compensate: bool, low_pass: float, where: str) -> l
     out = []
     if rule == "drive" and not compensate:
         out.append(
-            f"{where}: onboard.thresholds = \"drive\" needs fdir.compensate = true (it bounds "
+            f'{where}: onboard.thresholds = "drive" needs fdir.compensate = true (it bounds '
             "y_m,k − y_m,k(0) = G φ̂_k, which holds only while φ̂ is applied; without it ∫e "
             'winds up and no Φ̄ exists); use "l1" or "block_row"'
         )
     if rule == "drive" and low_pass > 0:
         out.append(
-            f"{where}: onboard.thresholds = \"drive\" needs fdir.phi_low_pass = 0 (a filtered "
+            f'{where}: onboard.thresholds = "drive" needs fdir.phi_low_pass = 0 (a filtered '
             "compensation breaks the identity y_m,k − y_m,k(0) = G φ̂_k it rests on)"
         )
     return out

@@ -28,12 +28,12 @@ import numpy as np
 from numba import njit
 
 from ..mission import FormationPlan, formation_offsets, replan
+from .applied import limit_input
 from .block import Block, TeamConfig
 from .controller import Controller
 from .fault_estimator import FaultEstimator
 from .fdir import Decision, Thresholds
 from .observer import Observer
-from .applied import limit_input
 from .period import RAISED, SATURATED, SWITCHED, team_period
 from .supervisor import Supervisor
 
