@@ -362,6 +362,7 @@ class Simulation:
         self.team = Team(config, x_m0, self.path.position[0], blocks)
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
+        self.monitor = self._monitor(x0)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
@@ -373,6 +374,34 @@ class Simulation:
         self._build = self._build_time + (time.perf_counter() - wall0)
         self._wall = self._build
         self._build_time = 0.0
+
+    def _monitor(self, x0: np.ndarray) -> premises.Monitor:
+        """The premises of the run's threshold rule, watched against the truth."""
+        sc, th, cfg = self.scene, self.team.thresholds, self.team.config
+        model = sc.model
+        geom_robot = np.full(model.ngeom, -1, dtype=np.int64)
+        root = model.body_rootid
+        for i, b in enumerate(sc.body):
+            geom_robot[root[model.geom_bodyid] == root[b]] = i
+        geom_robot[np.asarray(sc.obstacle_geom, dtype=np.int64)] = -2
+        drive = self.block_names["thresholds"] == "drive"
+        phi_bar = float(getattr(th, "phi_bar", 0.0)) if drive else 0.0
+        drift = float(getattr(th, "drift", cfg.drift_bound))
+        return premises.Monitor(
+            n=self.n,
+            dt=self.dt,
+            eta_bar=cfg.eta_bar,
+            xi_bar=cfg.xi_bar,
+            drift_bound=drift,
+            phi_bar=phi_bar,
+            command_limit=self.command_limit,
+            start=self.start_bound,
+            geom_robot=geom_robot,
+            body=sc.body,
+            x0=x0,
+            z0=self.plant.data.xpos[sc.body, 2],
+            events=self.events,
+        )
 
     @property
     def t(self) -> float:
@@ -450,7 +479,9 @@ class Simulation:
             self.adapter,
             self.noise,
         )
-        events, hook = self.events, self.hook
+        events, hook, monitor = self.events, self.hook, self.monitor
+        data = plant.data
+        xpos, xmat = data.xpos, data.xmat
         position, velocity = self.path.position, self.path.velocity
         last = len(position) - 1
         x, x_m, cmd = self._x, self._x_m, self._cmd
@@ -476,15 +507,28 @@ class Simulation:
                     if t >= faults.due:
                         for f in faults.apply(t):
                             events.add(t, "fault", robot=f.robot + 1, fault=f.kind)
+                            monitor.watched[f.robot] = False  # the fault is to be detected
                     plant.positions(out=x)
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)
                     j = k if k < last else last
                     team.step(t, x_m, position[j], velocity[j], x)
+                    ncon = data.ncon
+                    monitor.period(
+                        t,
+                        x,
+                        eta,
+                        team.u,
+                        team.u_bar,
+                        team.phi_hat,
+                        xpos,
+                        xmat,
+                        data.contact.geom if ncon else None,
+                        data.contact.dist if ncon else None,
+                        ncon,
+                    )
                     if team.events:
-                        for e in team.events:
-                            events.add(e.pop("t"), e.pop("kind"), **e)
-                        team.events.clear()
+                        self._take_team_events(t)
                     ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
                         self._sample(t, x, cmd, position[j])
@@ -508,6 +552,21 @@ class Simulation:
             self.k = k
             bar.close()
             self._wall += time.perf_counter() - wall0
+
+    def _take_team_events(self, t: float) -> None:
+        """Move the team's events into the run's, each flag labelled with the premises its
+        robot violated (``premises.LOOKBACK``), and tell the monitor of exclusions."""
+        monitor = self.monitor
+        for e in self.team.events:
+            kind = e.pop("kind")
+            if kind == "detection":
+                e["premises"] = monitor.violated(e["robot"] - 1, t)
+            elif kind == "exclusion":
+                monitor.watched[e["robot"] - 1] = False
+            elif kind == "graph_not_strongly_connected":
+                monitor.graph_changed(t, False)
+            self.events.add(e.pop("t"), kind, **e)
+        self.team.events.clear()
 
     def _left_arena(self, t: float, x: np.ndarray) -> None:
         """End the mission: a robot is off the floor (``checks.ARENA_HALF``)."""
@@ -539,6 +598,7 @@ class Simulation:
 
     def result(self) -> RunResult:
         """The records of the run so far (the log, the events and the summary)."""
+        self.monitor.finish(self.simulated_time)
         arrays = self.log.arrays()
         arrays["phi"] = self.faults.phi_series(arrays["t"], arrays["v_cmd"])
         arrays["sigma_err"] = mission.task_errors(arrays["x"], arrays["x_d"], arrays["active"])
@@ -556,6 +616,7 @@ class Simulation:
             ended=self.team.ended or self.left,
             stopped=self.stopped,
         )
+        summary["premises"] = self.monitor.table()
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}

@@ -23,8 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numba import njit
+
+from .errors import SimulationError
 
 #: the premises, in the order the tables print them, with a one-line meaning each
 PREMISES: dict[str, str] = {
@@ -116,3 +120,307 @@ def rule_refusals(rule: str, compensate: bool, low_pass: float, where: str) -> l
             "compensation breaks the identity y_m,k − y_m,k(0) = G φ̂_k it rests on)"
         )
     return out
+
+
+# --------------------------------------------------------------------------- at run time
+
+#: a robot's base may move this far up or down from its start height [m] ...
+HEIGHT_TOLERANCE = 0.05
+#: ... and tilt this far from level [rad] (about 29°) before the run stops: the planar
+#: model of eq. 1 no longer describes it
+TILT_TOLERANCE = 0.5
+#: a flag is labelled with the premises its robot violated this long before it [s]: the
+#: residual remembers an offset for a while (the decision window plus the observer's mixing)
+LOOKBACK = 2.0
+#: a span of a violated premise ends once the premise has held this long [s]
+GAP = 0.1
+
+_NOISE, _MISMATCH, _SATURATION, _CONTACT, _PLANAR = range(5)
+_PER_PERIOD = ("noise", "mismatch", "saturation", "contact", "planar")
+
+
+@njit(cache=True)
+def _check(
+    x,
+    eta,
+    u,
+    u_bar,
+    phi_hat,
+    watched,
+    x0,
+    int_u,
+    slow,
+    h,
+    eta_bar,
+    step,
+    offset,
+    phi_bar,
+    limit,
+    xpos,
+    xmat,
+    body,
+    z0,
+    geom_robot,
+    contact_geom,
+    contact_dist,
+    ncon,
+    value,
+):  # pragma: no cover - compiled
+    """One period of the premise checks, every robot at once; ``value`` (5, N) gets each
+    premise's excess over its bound (> 0: violated). Returns how many entries are > 0.
+
+    The drift premise (l1, block_row): D_k = y_k − y_k(0), y_k = x_k − h Σ u_k (the applied
+    input), splits into S_k moving by at most h ξ̄ (``step``) per period towards D_k and an
+    offset E_k = D_k − S_k within ē (``offset``); with ``phi_bar`` > 0 (the drive rule) the
+    premise is ‖φ̂_k‖ ≤ Φ̄ instead. Robots not ``watched`` (excluded, or with an active
+    fault) are not judged on noise, drift and saturation.
+    """
+    n = x.shape[0]
+    hits = 0
+    for i in range(n):
+        for p in range(5):
+            value[p, i] = 0.0
+        d0 = x[i, 0] - x0[i, 0] - int_u[i, 0]
+        d1 = x[i, 1] - x0[i, 1] - int_u[i, 1]
+        g0, g1 = d0 - slow[i, 0], d1 - slow[i, 1]
+        gap = np.sqrt(g0 * g0 + g1 * g1)
+        if gap > step:
+            g0, g1 = g0 * step / gap, g1 * step / gap
+        slow[i, 0] += g0
+        slow[i, 1] += g1
+        int_u[i, 0] += h * u[i, 0]
+        int_u[i, 1] += h * u[i, 1]
+        if watched[i]:
+            e = np.sqrt(eta[i, 0] ** 2 + eta[i, 1] ** 2)
+            value[_NOISE, i] = max(e - eta_bar * (1 + 1e-9), 0.0)
+            if phi_bar > 0:
+                f = np.sqrt(phi_hat[i, 0] ** 2 + phi_hat[i, 1] ** 2)
+                value[_MISMATCH, i] = max(f - phi_bar, 0.0)
+            else:
+                e0, e1 = d0 - slow[i, 0], d1 - slow[i, 1]
+                value[_MISMATCH, i] = max(np.sqrt(e0 * e0 + e1 * e1) - offset, 0.0)
+            over = max(abs(u_bar[i, 0]), abs(u_bar[i, 1])) - limit
+            value[_SATURATION, i] = max(over, 0.0)
+        up = abs(xpos[body[i], 2] - z0[i]) - HEIGHT_TOLERANCE
+        tilt = np.arccos(min(max(xmat[body[i], 8], -1.0), 1.0)) - TILT_TOLERANCE
+        value[_PLANAR, i] = max(up, tilt, 0.0)
+    for c in range(ncon):
+        a, b = geom_robot[contact_geom[c, 0]], geom_robot[contact_geom[c, 1]]
+        if a == -1 or b == -1 or a == b or (a < 0 and b < 0):
+            continue  # the floor, the world, a robot's own parts, cylinder against cylinder
+        depth = max(-contact_dist[c], 1e-12)
+        if a >= 0:
+            value[_CONTACT, a] = max(value[_CONTACT, a], depth)
+        if b >= 0:
+            value[_CONTACT, b] = max(value[_CONTACT, b], depth)
+    for p in range(5):
+        for i in range(n):
+            if value[p, i] > 0:
+                hits += 1
+    return hits
+
+
+class Monitor:
+    """The premises of the run's threshold rule, checked against the truth every period.
+
+    ``bounds`` names each premise's bound as the rule uses it. Each span during which a
+    premise is violated becomes one ``premise_violated`` event (``premise``, ``robot``
+    1-based or None for the team, ``value`` the worst, ``bound``, ``t``, ``until``);
+    :meth:`violated` says which premises robot k violated within :data:`LOOKBACK` s
+    before an instant, for labelling its flags; :meth:`table` summarises the run.
+    A base that leaves the plane raises :class:`~dftc_mujoco.errors.SimulationError`
+    (the run stops: the planar model no longer holds).
+    """
+
+    def __init__(
+        self,
+        *,
+        n: int,
+        dt: float,
+        eta_bar: float,
+        xi_bar: float,
+        drift_bound: float,
+        phi_bar: float,
+        command_limit: float,
+        start: StartBound,
+        geom_robot: np.ndarray,
+        body: np.ndarray,
+        x0: np.ndarray,
+        z0: np.ndarray,
+        events: Any,
+    ) -> None:
+        self.n, self.h, self.events = n, dt, events
+        self.eta_bar, self.step = eta_bar, dt * xi_bar
+        self.offset, self.phi_bar = drift_bound, phi_bar
+        self.limit = command_limit if np.isfinite(command_limit) else 1e300
+        self.start = start
+        self.bounds = {
+            "noise": eta_bar,
+            "mismatch": phi_bar if phi_bar > 0 else drift_bound,
+            "initial_error": start.value,
+            "saturation": command_limit,
+            "contact": 0.0,
+            "planar": HEIGHT_TOLERANCE,
+            "connectivity": 0.0,
+        }
+        self.geom_robot = np.ascontiguousarray(geom_robot, dtype=np.int64)
+        self.body = np.ascontiguousarray(body, dtype=np.int64)
+        self.x0 = np.array(x0, dtype=float)
+        self.z0 = np.array(z0, dtype=float)
+        self.int_u = np.zeros((n, 2))
+        self.slow = np.zeros((n, 2))
+        self.value = np.zeros((5, n))
+        self.watched = np.ones(n, bool)
+        self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
+        self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
+        self.worst = {p: (0.0, None) for p in PREMISES}  # premise -> (value, robot 1-based)
+        self.spans: dict[tuple[str, int | None], list[float]] = {}  # -> [t0, worst, last]
+        self.count = dict.fromkeys(PREMISES, 0)
+        self._index = {p: k for k, p in enumerate(PREMISES)}
+        self._empty_geom = np.zeros((0, 2), dtype=np.int32)
+        self._empty_dist = np.zeros(0)
+        if start.implied > start.value:
+            self.worst["initial_error"] = (start.implied, start.robot + 1)
+            self._violate("initial_error", start.robot, start.implied, 0.0)
+        else:
+            self.worst["initial_error"] = (start.implied, start.robot + 1)
+
+    def period(
+        self,
+        t: float,
+        x: np.ndarray,
+        eta: np.ndarray,
+        u: np.ndarray,
+        u_bar: np.ndarray,
+        phi_hat: np.ndarray,
+        xpos: np.ndarray,
+        xmat: np.ndarray,
+        contact_geom: np.ndarray,
+        contact_dist: np.ndarray,
+        ncon: int,
+    ) -> None:
+        """Check one control period (after the team's step, before the physics advances):
+        true positions ``x``, noise ``eta``, applied inputs ``u``, commands ``u_bar`` and
+        fault estimates ``phi_hat`` (N, 2); MuJoCo's ``xpos``, ``xmat`` and contacts."""
+        hits = _check(
+            x,
+            eta,
+            u,
+            u_bar,
+            phi_hat,
+            self.watched,
+            self.x0,
+            self.int_u,
+            self.slow,
+            self.h,
+            self.eta_bar,
+            self.step,
+            self.offset,
+            self.phi_bar,
+            self.limit,
+            xpos,
+            xmat,
+            self.body,
+            self.z0,
+            self.geom_robot,
+            contact_geom if ncon else self._empty_geom,
+            contact_dist if ncon else self._empty_dist,
+            ncon,
+            self.value,
+        )
+        if hits:
+            for p, i in zip(*np.nonzero(self.value), strict=True):
+                name = _PER_PERIOD[p]
+                v = float(self.value[p, i])
+                if name != "contact":
+                    v += self.bounds[name] if name != "saturation" else self.limit
+                self._violate(name, int(i), v, t)
+            planar = np.flatnonzero(self.value[_PLANAR])
+            if len(planar):
+                i = int(planar[0])
+                b = self.body[i]
+                tilt = np.degrees(np.arccos(np.clip(xmat[b, 8], -1.0, 1.0)))
+                self.finish(t)
+                raise SimulationError(
+                    f"robot {i + 1} left the plane at t = {t:.2f} s: its base is at height "
+                    f"{xpos[b, 2]:.3f} m (started at {self.z0[i]:.3f} m, tolerance "
+                    f"{HEIGHT_TOLERANCE:g} m) and tilted {tilt:.0f}° (tolerance "
+                    f"{np.degrees(TILT_TOLERANCE):.0f}°): the planar model of eq. 1 no longer "
+                    "describes it; the run was stopped"
+                )
+        if self.spans:
+            self._close(t, False)
+
+    def graph_changed(self, t: float, strongly_connected: bool) -> None:
+        """After an exclusion: a graph that is not strongly connected violates the premise
+        of every rule from now on (its thresholds are unbounded)."""
+        if not strongly_connected:
+            self._violate("connectivity", None, 1.0, t)
+
+    def _violate(self, name: str, robot: int | None, value: float, t: float) -> None:
+        k = self._index[name]
+        if robot is None:
+            self.team_last[k] = t
+        else:
+            self.last[k, robot] = t
+        key = (name, robot)
+        span = self.spans.get(key)
+        if span is None:
+            self.spans[key] = [t, value, t]
+        else:
+            span[1] = max(span[1], value)
+            span[2] = t
+        if value > self.worst[name][0] or self.worst[name][1] is None:
+            self.worst[name] = (value, None if robot is None else robot + 1)
+
+    def _close(self, t: float, final: bool) -> None:
+        for key in list(self.spans):
+            t0, worst, last = self.spans[key]
+            if final or t - last >= GAP - 1e-9:
+                name, robot = key
+                if name == "connectivity" and not final:
+                    continue  # lasts until the end
+                del self.spans[key]
+                self.count[name] += 1
+                self.events.add(
+                    t0,
+                    "premise_violated",
+                    premise=name,
+                    robot=None if robot is None else robot + 1,
+                    value=float(worst),
+                    bound=float(self.bounds[name]),
+                    until=round(float(last), 6),
+                )
+
+    def violated(self, robot: int, t: float) -> list[str]:
+        """The premises robot ``robot`` (0-based), or the team, violated within
+        :data:`LOOKBACK` s before ``t``, in :data:`PREMISES` order."""
+        since = t - LOOKBACK
+        return [
+            p
+            for k, p in enumerate(PREMISES)
+            if self.last[k, robot] >= since or self.team_last[k] >= since
+        ]
+
+    def finish(self, t: float) -> None:
+        """Close every open span at the end of the run."""
+        self._close(t, True)
+
+    def table(self) -> dict[str, dict[str, Any]]:
+        """Per premise: held or not, its worst value (robot) against its bound, spans."""
+        out = {}
+        for p, meaning in PREMISES.items():
+            worst, robot = self.worst[p]
+            held = self.count[p] == 0 and not any(k[0] == p for k in self.spans)
+            if p == "initial_error":
+                held = self.start.implied <= self.start.value
+            out[p] = {
+                "held": bool(held),
+                "worst": float(worst),
+                "robot": robot,
+                "bound": float(self.bounds[p]),
+                "spans": int(self.count[p]),
+                "meaning": meaning,
+            }
+        out["initial_error"]["derived"] = self.start.derived
+        return out

@@ -292,7 +292,8 @@ def summarize(
         ],
         "reactive": reactive_spans(events),
         "detections": [
-            {"by": e["by"], "robot": e["robot"], "t": e["t"]} for e in events.of_kind("detection")
+            {"by": e["by"], "robot": e["robot"], "t": e["t"], "premises": e.get("premises", [])}
+            for e in events.of_kind("detection")
         ],
         "exclusions": [{"robot": e["robot"], "t": e["t"]} for e in events.of_kind("exclusion")],
         "errors": {
@@ -321,5 +322,13 @@ def summarize(
             peak_ratio(log["residual"], log["threshold"], settled) if biased.any() else None
         )
         summary["fault_estimates"] = fault_estimates(s, log, events)
+    healthy_flags = [d for d in summary["detections"] if _healthy_at(events, d["robot"], d["t"])]
+    summary["healthy_flags"] = len(healthy_flags)
+    summary["healthy_flags_premises_held"] = sum(1 for d in healthy_flags if not d["premises"])
     summary["events"] = events.ordered()
     return summary
+
+
+def _healthy_at(events: Events, robot: int, t: float) -> bool:
+    """Robot ``robot`` (1-based) had no fault at or before ``t``."""
+    return not any(e["robot"] == robot and e["t"] <= t for e in events.of_kind("fault"))

@@ -146,7 +146,15 @@ def _fmt_event(e: dict) -> str:
     if k == "reactive_off":
         return f"robot {r} back to the global mission"
     if k == "detection":
-        return f"robot {e['by']} flags robot {r}"
+        held = e.get("premises")
+        why = f" — while its premises were violated: {', '.join(held)}" if held else ""
+        return f"robot {e['by']} flags robot {r}{why}"
+    if k == "premise_violated":
+        who = f"robot {r}" if r else "the team"
+        return (
+            f"premise '{e['premise']}' violated by {who} until {e['until']:.2f} s "
+            f"(worst {e['value']:.4g} against {e['bound']:.4g})"
+        )
     if k == "exclusion_scheduled":
         return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
     if k == "exclusion":
@@ -199,6 +207,22 @@ def report(result: RunResult, out: Path) -> str:
         )
     if s.get("margin") is not None:
         lines.append(f"largest residual / threshold on robots without a fault: {s['margin']:.3f}")
+    table = s.get("premises")
+    if table:
+        broken = [
+            f"{p} ({v['spans']} span{'s' * (v['spans'] != 1)}, worst {v['worst']:.4g} vs "
+            f"{v['bound']:.4g}" + (f", robot {v['robot']})" if v["robot"] else ")")
+            for p, v in table.items()
+            if not v["held"]
+        ]
+        lines.append(
+            "premises: all held" if not broken else "premises violated: " + "; ".join(broken)
+        )
+    if s.get("healthy_flags_premises_held"):
+        lines.append(
+            f"DEFECT OF THE THRESHOLD RULE: {s['healthy_flags_premises_held']} flag(s) on "
+            "robots without a fault while every premise held (see docs/thresholds.md)"
+        )
     for f in s.get("fault_estimates", []):  # one entry per robot, however many biases
         mean = ", ".join(f"{v:.4f}" for v in f["mean_error"])
         windows = f.get("windows", [f["window"]])

@@ -328,7 +328,8 @@ class Thresholds(Block):
         G: float = 0.01,
     ) -> Thresholds:
         """The rule on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team (control
-        period ``dt``, fault-estimator gains K, G as scalars times I)."""
+        period ``dt``, fault-estimator gains K, G as scalars times I; no compensation, so
+        ē is the rule's own ``drift_bound``)."""
         from ..mission import polygon_offsets
         from ..scenario import Formation
 
@@ -346,6 +347,7 @@ class Thresholds(Block):
             obstacle_position=np.zeros((0, 2)),
             obstacle_safe=np.zeros(0),
             obstacle_activation=np.zeros(0),
+            compensate=False,
         )
         th = cls()
         slots = polygon_offsets(graph.n, 0.5)

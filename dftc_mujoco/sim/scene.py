@@ -155,8 +155,9 @@ def _initial_state(
     """qpos and ctrl of the whole scene with every robot at its own initial pose.
 
     A robot's joints in the scene are those of its base's subtree, in the same order as
-    in its own model; a free joint's position is in world coordinates, so it moves with
-    the robot's frame. Each robot's attached actuators take their initial ctrl, in order.
+    in its own model; a free joint keeps the base's MJCF pose in the scene (its robot's
+    frame included), whatever the keyframe says of it. Each robot's attached actuators
+    take their initial ctrl, in order.
     """
     qpos = model.qpos0.copy()
     ctrl = np.zeros(model.nu)
@@ -169,8 +170,11 @@ def _initial_state(
         qpos[adr] = key_q
         for j in joints:
             if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                # a keyframe's root pose is ignored: the base sits where its MJCF puts it,
+                # at its planned place on the floor (a keyframe 1 m under the floor flung
+                # robots 8 m up); only the other joints come from the keyframe
                 a = model.jnt_qposadr[j]
-                qpos[a : a + 2] += frames[i]
+                qpos[a : a + 7] = model.qpos0[a : a + 7]
         acts = attached_actuators(model, int(b))
         if len(acts) != len(key_c):
             raise ValueError(f"robot {i + 1}: {len(acts)} actuators, expected {len(key_c)}")
