@@ -1,0 +1,67 @@
+"""Cost of the run-time premise checks (issue 19): the closed loop with and without them.
+
+    python benchmarks/bench_premises.py [--n 4 100] [--repeat 5] [--duration 20]
+
+Each size runs the same scenario alternately with ``loop.MONITOR_ALLOWED`` on and off in
+one process (numba's cache warm, the first pair discarded) and prints the median wall time
+of the stepping loop (set-up excluded) and the ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from dftc_mujoco import Simulation, load_scenario
+from dftc_mujoco import loop as loop_mod
+
+
+def scenario(n: int, duration: float):
+    if n == 4:
+        return load_scenario("paper_case", {"duration": duration})
+    return load_scenario(
+        "paper_case",
+        {
+            "duration": duration,
+            "obstacles": [],
+            "team.robots": n,
+            "team.initial_positions": {"layout": "formation", "jitter": 0.05},
+            "team.graph": {"family": "ring_chords", "chords": [2]},
+            "mission.formation": {"shape": "line", "side": 0.6},
+            "onboard.thresholds": "l1",
+            "fdir.initial_error_bound": "auto",
+            "faults": [{"robot": 37, "kind": "stop", "t": duration / 2}],
+        },
+    )
+
+
+def loop_time(s, monitor: bool) -> float:
+    loop_mod.MONITOR_ALLOWED = monitor
+    with Simulation(s) as sim:
+        t0 = time.perf_counter()
+        sim.run(progress=False)
+        return time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--n", type=int, nargs="+", default=[4, 100])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--duration", type=float, default=20.0)
+    a = ap.parse_args()
+    print("| N | loop without checks [s] | with checks [s] | cost |")
+    print("|---|---|---|---|")
+    for n in a.n:
+        s = scenario(n, a.duration)
+        loop_time(s, True), loop_time(s, False)  # warm-up pair
+        off, on = [], []
+        for _ in range(a.repeat):
+            off.append(loop_time(s, False))
+            on.append(loop_time(s, True))
+        m_off, m_on = statistics.median(off), statistics.median(on)
+        print(f"| {n} | {m_off:.3f} | {m_on:.3f} | {100 * (m_on / m_off - 1):+.1f} % |")
+
+
+if __name__ == "__main__":
+    main()
