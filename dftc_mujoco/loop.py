@@ -605,6 +605,7 @@ class Simulation:
     def result(self) -> RunResult:
         """The records of the run so far (the log, the events and the summary)."""
         self.monitor.finish(self.simulated_time)
+        self.events.items.sort(key=lambda e: e["t"])  # spans are added when they end
         arrays = self.log.arrays()
         arrays["phi"] = self.faults.phi_series(arrays["t"], arrays["v_cmd"])
         arrays["sigma_err"] = mission.task_errors(arrays["x"], arrays["x_d"], arrays["active"])
