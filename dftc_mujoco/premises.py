@@ -279,11 +279,9 @@ class Monitor:
         self._index = {p: k for k, p in enumerate(PREMISES)}
         self._empty_geom = np.zeros((0, 2), dtype=np.int32)
         self._empty_dist = np.zeros(0)
+        self.worst["initial_error"] = (start.implied, start.robot + 1)
         if start.implied > start.value:
-            self.worst["initial_error"] = (start.implied, start.robot + 1)
             self._violate("initial_error", start.robot, start.implied, 0.0)
-        else:
-            self.worst["initial_error"] = (start.implied, start.robot + 1)
 
     def period(
         self,
