@@ -123,6 +123,7 @@ def test_two_stop_faults_on_six_robots_are_handled_one_after_the_other():
     d["obstacles"] = []
     d["faults"] = [{"robot": 1, "kind": "stop", "t": 12.0}, {"robot": 4, "kind": "stop", "t": 30.0}]
     d["duration"] = 50.0
+    d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start
     r = loop.simulate(make(d))
     out = r.summary
     assert [e["robot"] for e in out["exclusions"]] == [1, 4]

@@ -164,6 +164,7 @@ def test_twelve_robots_converge():
     }
     d["obstacles"], d["faults"], d["duration"] = [], [], 25.0
     d["mission"]["formation"]["side"] = 0.6
+    d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start
     r = loop.simulate(make(d))
     after = r.log["t"] >= 18.0  # slowest observer mode: λ ≈ 0.37 1/s on this graph
     assert r.summary["status"] == "ok"

@@ -164,6 +164,7 @@ def test_figures_adapt_to_other_teams(tmp_path):
     }
     d["faults"] = [{"robot": 1, "kind": "stop", "t": 5.0}]
     d["duration"] = 15.0
+    d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start
     r = simulate(make(d))
     paths = figures.draw_all(r.log, r.summary, tmp_path)
     assert len(paths) == len(figures.FIGURES) and all(p.stat().st_size > 10_000 for p in paths)

@@ -523,7 +523,10 @@ def test_impossible_set_ups_are_refused_before_simulating():
     assert any("mission.formation.side" in ln and "use side >= 0.66" in ln for ln in lines)
     assert any("team.initial_positions" in ln and "hulls overlap" in ln for ln in lines)
     inside = _refusals(
-        {"team.initial_positions": [[1.2, 0.55], [0.1, -0.45], [0.35, 0.1], [-0.1, 0.4]]}
+        {
+            "team.initial_positions": [[1.2, 0.55], [0.1, -0.45], [0.35, 0.1], [-0.1, 0.4]],
+            "fdir.initial_error_bound": "auto",  # 1 m is below this start: refused too
+        }
     )
     assert inside == [
         f"{scenario.resolve('paper_case')}: team.initial_positions: robot 1 starts with its hull "
