@@ -19,7 +19,12 @@ What is measured, separately:
   :data:`JUMP_HOLD` s: the samples from a jump until the mismatch is back below the
   smooth level count as jump-affected, however long that takes (the robot's own
   response time, reported);
-* **saturation**: the share of the commands the actuators clamped.
+* **saturation**: the share of the commands the actuators clamped;
+* **the drive's lag**: the time constant τ of the first-order lag whose response to the
+  programme best fits the measured velocity (least squares). When τ is at least
+  :data:`LAG_MIN` and the lag model halves the rms mismatch, the robot models its drive
+  (``lag`` in ``[calibration]``, ``onboard/applied.py``) and every mismatch above is then
+  measured against that model, ‖ẋ − v̂‖, not against the command.
 
 The recommended ξ̄ is the largest mismatch on smooth commands, rounded up to 0.5 mm/s,
 and never below the paper's 5 mm/s. With ``--scenario`` (default ``paper_case``) it
@@ -54,6 +59,9 @@ STARTUP_QUIET = 0.002  # m/s: the start-up is over once the mismatch stays below
 STARTUP_MAX = 3.0  # s
 JUMP_HOLD = 4.0  # s each command jump is held
 SETTLED_FOR = 0.2  # s the mismatch must stay low for a response to count as settled
+LAG_MIN = 0.05  # s: a faster drive is taken to move at its command (ẋ = u, the paper)
+LAG_CANDIDATES = np.geomspace(0.005, 20.0, 121)  # s, the time constants tried
+REPLAN_WINDOW = 5.0  # s after an exclusion that count as the re-plan's transient
 
 
 @dataclass(frozen=True)
@@ -136,6 +144,10 @@ class Calibration:
     notes: tuple[str, ...] = field(default_factory=tuple)
     compensation_G: float | None = None  # the smallest G (x I) whose loop does not ring
     drift: Drift | None = None  # the drift split in a mission (threshold rules)
+    lag: float = 0.0  # τ of the drive lag the robot models (0: none, ẋ = u) [s]
+    lag_fit: float = 0.0  # the best-fitting τ, modelled or not [s]
+    rms_command: float = 0.0  # rms ‖ẋ − u‖ over the programme [m/s]
+    rms_lag: float = 0.0  # rms ‖ẋ − v̂‖ with the fitted lag [m/s]
 
     @property
     def recommended_xi_bar(self) -> float:
@@ -151,12 +163,18 @@ class Calibration:
             "startup_time": round(self.startup_time, 3),
             "response_time": round(self.response_time, 3),
             "saturation": round(self.saturation, 4),
+            **({"lag": round(self.lag, 4)} if self.lag > 0 else {}),
             **({"compensation_G": self.compensation_G} if self.compensation_G else {}),
             **(
                 {
                     "drift_bound": round(self.drift.drift_bound, 6),
                     "drift_startup": round(self.drift.startup, 6),
                     "drift_settle": self.drift.settle,
+                    **(
+                        {"drift_replan": round(self.drift.replan, 6)}
+                        if self.drift.replan is not None
+                        else {}
+                    ),
                 }
                 if self.drift
                 else {}
@@ -178,7 +196,7 @@ def measure(name: str) -> Calibration:
     limit = drive.command_limit
     prog = programme(limit)
     nsub = round(CONTROL_PERIOD / TIMESTEP)
-    mismatch = np.empty(len(prog.u))
+    velocity = np.empty((len(prog.u), 2))
     clamped = np.zeros(len(prog.u), bool)
     vel = np.empty(6)
     site = int(sc.site[0])
@@ -193,12 +211,55 @@ def measure(name: str) -> Calibration:
         clamped[k] = bool((limited & ((c <= lo) | (c >= hi))).any())
         mujoco.mj_step(sc.model, data, nstep=nsub)
         mujoco.mj_objectVelocity(sc.model, data, mujoco.mjtObj.mjOBJ_SITE, site, vel, 0)
-        mismatch[k] = np.hypot(vel[3] - u[0], vel[4] - u[1])
+        velocity[k] = vel[3:5]
         if data.warning.number.any() or not np.isfinite(data.qvel).all():
             raise ScenarioError(
                 f"{robot.path}: the physics failed during calibration at t = {data.time:.2f} s"
             )
-    return _analyse(robot.name, prog, mismatch, clamped, limit)
+    mismatch = np.hypot(*(velocity - prog.u).T)
+    tau, rms_lag = fit_lag(prog.u, velocity, prog.startup)
+    rms = float(np.sqrt(np.mean(mismatch[prog.startup :] ** 2)))
+    modelled = tau >= LAG_MIN and rms_lag < 0.5 * rms
+    if modelled:  # measure the rest against the drive model the robot will run
+        mismatch = np.hypot(*(velocity - lag_response(prog.u, tau)).T)
+    cal = _analyse(robot.name, prog, mismatch, clamped, limit)
+    return dataclasses.replace(
+        cal,
+        lag=tau if modelled else 0.0,
+        lag_fit=tau,
+        rms_command=rms,
+        rms_lag=rms_lag,
+    )
+
+
+def lag_response(u: np.ndarray, tau: float, dt: float = CONTROL_PERIOD) -> np.ndarray:
+    """Velocity (K, 2) at the end of each period of a first-order lag ``tau`` from rest,
+    its command ``u`` (K, 2) held over each period (the model of ``onboard/applied.py``)."""
+    from scipy.signal import lfilter
+
+    from .onboard.applied import lag_coefficients
+
+    a, _ = lag_coefficients(tau, dt)
+    if a == 0.0:
+        return np.array(u, dtype=float)
+    return lfilter([a], [1.0, a - 1.0], u, axis=0)
+
+
+def fit_lag(u: np.ndarray, v: np.ndarray, skip: int = 0) -> tuple[float, float]:
+    """The τ of :data:`LAG_CANDIDATES` whose :func:`lag_response` to ``u`` fits the measured
+    velocities ``v`` best (rms of ‖v − v̂‖ from sample ``skip`` on); returns (τ, that rms)."""
+    from scipy.optimize import minimize_scalar
+
+    def rms(log_tau: float) -> float:
+        err = v[skip:] - lag_response(u, float(np.exp(log_tau)))[skip:]
+        return float(np.sqrt(np.mean(np.einsum("kd,kd->k", err, err))))
+
+    logs = np.log(LAG_CANDIDATES)
+    i = int(np.argmin([rms(x) for x in logs]))
+    lo, hi = logs[max(i - 1, 0)], logs[min(i + 1, len(logs) - 1)]
+    best = minimize_scalar(rms, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4})
+    tau = round(float(np.exp(best.x)), 4)
+    return tau, rms(float(np.log(tau)))
 
 
 def _analyse(
@@ -337,6 +398,7 @@ def compensation(
     seconds: float = 25.0,
     seed: int = 0,
     overrides: dict | None = None,
+    lag: float = 0.0,
 ) -> list[Compensation]:
     """Run the paper's fault estimator in closed loop on one robot (smooth commands, η at
     its bound) for the scenario's G (after ``overrides``) and larger ones, until the loop
@@ -344,10 +406,13 @@ def compensation(
 
     With a per-period gain h/G = 1 (the paper's G = 0.01 at h = 0.01 s) the loop is
     deadbeat on an integrator and marginal on any robot with lag: healthy ‖φ̂‖ then
-    grows far beyond its ideal-plant bound and feeds the robot's commands.
+    grows far beyond its ideal-plant bound and feeds the robot's commands. With ``lag`` the
+    robot models its drive as the team will (``onboard/applied.py``): the estimator is
+    driven by the modelled velocity, the drive by the command.
     """
     import mujoco
 
+    from .onboard.applied import lag_coefficients, lag_input
     from .onboard.fault_estimator import estimate_faults
     from .onboard.thresholds import estimator_gain
     from .scenario import load_scenario
@@ -379,9 +444,15 @@ def compensation(
         g_inv = np.eye(2) / g
         ids = drive.controlled()[0]
         norms = np.empty(steps)
+        lag_a, lag_b = lag_coefficients(lag, CONTROL_PERIOD)
+        v_hat, command = np.zeros((1, 2)), np.zeros((1, 2))
         for k in range(steps):
             x_m = data.site_xpos[site][:2][None] + eta[k]
-            u = u_all[k][None]
+            u = u_all[k][None].copy()
+            if lag_a > 0.0:
+                lag_input(u, v_hat, command, lag_a, lag_b)  # u: the modelled velocity
+            else:
+                command[:] = u
             estimate_faults(
                 x_m,
                 u,
@@ -397,10 +468,10 @@ def compensation(
                 u_bar,
             )
             norms[k] = np.linalg.norm(phi)
-            data.ctrl[ids] = drive.command(u_bar)[0]
+            data.ctrl[ids] = drive.command(command - applied)[0]  # ū (eq. 28)
             mujoco.mj_step(sc.model, data, nstep=nsub)
         settled = norms[round(1.0 / CONTROL_PERIOD) :]  # after the first second
-        ideal = estimator_gain(K, g * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0)
+        ideal = estimator_gain(K, g * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0, lag=lag)
         result = Compensation(g, float(np.percentile(settled, 99)), float(settled.max()), ideal)
         out.append(result)
         if not result.rings:
@@ -414,8 +485,8 @@ def compensation_report(results: list[Compensation]) -> tuple[str, bool]:
     if not first.rings:
         return (
             f"compensation loop (G = {first.G:g} I): healthy |phi_hat| p99 "
-            f"{first.phi_p99:.3g} m/s against {first.ideal:.3g} m/s on an ideal plant "
-            "(it does not ring)",
+            f"{first.phi_p99:.3g} m/s against its bound Phi_bar = {first.ideal:.3g} m/s "
+            "(estimator_gain: ideal plant with the drive model; it does not ring)",
             False,
         )
     fix = (
@@ -449,6 +520,11 @@ class Drift:
     drift_bound: float  # ē from ``settle`` s on [m]
     settle: float  # the start-up, the scenario's mission.transient [s]
     period_max: float  # largest per-period drift ‖w‖ / h [m/s], for comparison
+    # ē of the robots that stayed healthy within REPLAN_WINDOW s after an exclusion (a run
+    # with the scenario's stop faults, or a stop of robot 1): the re-plan's transient [m]
+    replan: float | None = None
+    replan_runs: int = 0
+    excluded: int = 0  # exclusions seen in those runs
 
 
 def split_drift(D: np.ndarray, step: float) -> np.ndarray:
@@ -493,19 +569,57 @@ def drift(
         if not r.ok:
             raise ScenarioError(f"{s.source}: the run for the drift failed: {r.error}")
         xi_bar = float(r.summary["xi_bar"])
-        t, x, u = r.log["t"], r.log["x"], r.log["u"]
-        integral = np.concatenate([np.zeros((1, *u.shape[1:])), np.cumsum(h * u[:-1], axis=0)])
-        y = x - integral  # y_k = x_k − ∫u_k at every period (eq. 20)
-        late = t >= s.mission.transient
-        for k in range(y.shape[1]):
-            d = y[:, k] - y[0, k]
-            off = split_drift(d, h * xi_bar)
-            worst = max(worst, float(off.max()))
-            after = max(after, float(off[late].max()) if late.any() else 0.0)
-            per_period = max(
-                per_period, float(np.linalg.norm(np.diff(d, axis=0), axis=1).max()) / h
-            )
-    return Drift(scenario_name, runs, xi_bar, worst, after, s0.mission.transient, per_period)
+        off, d = _offsets(r.log, h, xi_bar)
+        late = r.log["t"] >= s.mission.transient
+        worst = max(worst, float(off.max()))
+        after = max(after, float(off[late].max()) if late.any() else 0.0)
+        per_period = max(per_period, float(np.linalg.norm(np.diff(d, axis=0), axis=2).max()) / h)
+    # the re-plan: the scenario's stops (else robot 1 stopped at 60 % of the mission), the
+    # drift of every robot that never had a fault, from each exclusion on
+    stops = [
+        {"robot": f.robot + 1, "kind": "stop", "t": f.t} for f in s0.faults if f.kind == "stop"
+    ] or [{"robot": 1, "kind": "stop", "t": round(0.6 * s0.duration, 2)}]
+    replan, excluded = 0.0, 0
+    for seed in range(1, runs + 1):
+        s = load_scenario(scenario_name, {**base, "faults": stops, "seed": seed})
+        r = simulate(s)
+        if not r.ok:
+            raise ScenarioError(f"{s.source}: the run for the re-plan failed: {r.error}")
+        t = r.log["t"]
+        gone = r.events.of_kind("exclusion")
+        healthy = sorted(set(range(r.log["x"].shape[1])) - {f["robot"] - 1 for f in stops})
+        if not gone or not healthy:
+            continue
+        excluded += len(gone)
+        off, _ = _offsets(r.log, h, xi_bar)
+        window = np.zeros(len(t), bool)
+        for e in gone:
+            window |= (t >= e["t"]) & (t <= e["t"] + REPLAN_WINDOW)
+        if window.any():
+            replan = max(replan, float(off[np.ix_(window, healthy)].max()))
+    return Drift(
+        scenario_name,
+        runs,
+        xi_bar,
+        worst,
+        after,
+        s0.mission.transient,
+        per_period,
+        replan=replan if excluded else None,
+        replan_runs=runs,
+        excluded=excluded,
+    )
+
+
+def _offsets(log: dict, h: float, xi_bar: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every robot's drift D_k(t) = y_k(t) − y_k(0), y_k = x_k − ∫u_k (eq. 20), (T, N, 2),
+    and its offset ‖D_k − S_k‖ (T, N) after the greedy split at h ξ̄ per period."""
+    x, u = log["x"], log["u"]
+    integral = np.concatenate([np.zeros((1, *u.shape[1:])), np.cumsum(h * u[:-1], axis=0)])
+    y = x - integral
+    d = y - y[0]
+    off = np.stack([split_drift(d[:, k], h * xi_bar) for k in range(d.shape[1])], axis=1)
+    return off, d
 
 
 # --------------------------------------------------------------------------- writing
@@ -610,6 +724,21 @@ def report(cal: Calibration) -> str:
         f"recommended xi_bar: {cal.recommended_xi_bar:g} m/s "
         f"(smooth maximum rounded up, at least the paper's {PAPER_XI_BAR:g})",
     ]
+    fit = (
+        f"drive lag: a first-order lag of {cal.lag_fit:.3g} s fits best (rms mismatch "
+        f"{cal.rms_command * mm:.2f} mm/s against the command, {cal.rms_lag * mm:.2f} mm/s "
+        "against the lag)"
+    )
+    if cal.lag > 0:
+        lines.insert(
+            1,
+            fit + ": the robot models it (lag), and every mismatch below is ‖ẋ − v̂‖ against "
+            "that model",
+        )
+    else:
+        lines.append(
+            fit + f"; not modelled (below {LAG_MIN:g} s or not halving the mismatch): ẋ = u"
+        )
     lines += [f"WARNING: {n}" for n in cal.notes]
     return "\n".join(lines)
 
@@ -655,7 +784,9 @@ def main(argv: list[str] | None = None) -> int:
         print(report(cal))
         line, warn = detectability(cal, args.scenario, args.model, overrides)
         print(f"WARNING: {line}" if warn else line)
-        loop_results = compensation(args.model, args.scenario, overrides=overrides)
+        if cal.lag > 0:  # the missions below run the drive model the robot will run
+            overrides.setdefault("fdir.drive_lag", cal.lag)
+        loop_results = compensation(args.model, args.scenario, overrides=overrides, lag=cal.lag)
         line, warn = compensation_report(loop_results)
         print(f"WARNING: {line}" if warn else line)
         if loop_results[0].rings and "gains.G" not in overrides:
@@ -681,6 +812,18 @@ def main(argv: list[str] | None = None) -> int:
                 f"a bounded offset of {d.drift_bound * 1000:.2f} mm from {d.settle:g} s on "
                 f"({d.startup * 1000:.2f} mm with the start-up)"
             )
+            if d.replan is not None:
+                print(
+                    f"re-plan transient: {d.excluded} exclusions in {d.replan_runs} runs with a "
+                    f"stop; the healthy robots' offset within {REPLAN_WINDOW:g} s of each "
+                    f"exclusion reached {d.replan * 1000:.2f} mm (avoidance switches are in "
+                    "every run above)"
+                )
+            else:
+                print(
+                    "WARNING: re-plan transient not measured: no exclusion happened in the "
+                    "runs with a stop"
+                )
         cal = dataclasses.replace(cal, drift=d)
         if path is not None:
             write(path, cal)

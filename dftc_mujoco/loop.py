@@ -66,6 +66,7 @@ def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: flo
                 s.physics.control_period,
                 s.noise.eta_bar,
                 effective_xi_bar(s, robot),
+                lag=drive_lag(s, robot),
             )
         except ScenarioError:  # an unstable estimator loop is refused elsewhere
             headroom = 0.0
@@ -131,7 +132,16 @@ def team_config(
         fdir=f.enabled,
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
+        lag=drive_lag(s, robot),
     )
+
+
+def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """τ of the drive lag the robots model: the scenario's ``fdir.drive_lag``, or the robot
+    file's calibrated one ("robot"; 0 for a robot without one)."""
+    if s.fdir.drive_lag != "robot":
+        return float(s.fdir.drive_lag)
+    return robot.lag if robot is not None else 0.0
 
 
 @dataclass(frozen=True)

@@ -237,6 +237,9 @@ class Fdir:
     # the input that enters y_m, Δu and the fault estimator: "applied" (the nominal input
     # after the robot's own command limits, Remark 4.1) or "nominal" (as computed, eq. 8)
     input: str = "applied"
+    # τ [s] of the first-order drive lag each robot models (onboard/applied.py), or "robot":
+    # the robot file's calibrated [calibration] lag (0 when it has none: ẋ = u)
+    drive_lag: float | str = "robot"
 
 
 @dataclass(frozen=True)
@@ -1361,16 +1364,28 @@ def _fdir(t: _Table) -> Fdir:
         isolation=t.string("isolation", "pairwise", choices=("pairwise", "exclusive")),
         reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
         input=t.string("input", "applied", choices=("applied", "nominal")),
+        drive_lag=_drive_lag(t),
     )
     t.finish()
     return f
+
+
+def _drive_lag(t: _Table) -> float | str:
+    """τ of the modelled drive lag in seconds, or "robot" (the robot file's calibration)."""
+    raw = t.data.get("drive_lag", "robot")
+    if isinstance(raw, str):
+        t.raw("drive_lag", "robot")
+        if raw != "robot":
+            t.report("drive_lag", f'expected a time constant in s or "robot", got {raw!r}')
+        return "robot"
+    return t.number("drive_lag", 0.0, low=0.0, strict_low=False)
 
 
 def _initial_error_bound(t: _Table) -> float | str:
     """ε̄ in metres, or "auto" (derived per run from the start positions and the slots)."""
     raw = t.data.get("initial_error_bound", "auto")
     if isinstance(raw, str):
-        t.raw("initial_error_bound")
+        t.raw("initial_error_bound", "auto")
         if raw != "auto":
             t.report("initial_error_bound", f'expected a distance in m or "auto", got {raw!r}')
         return "auto"

@@ -11,11 +11,44 @@ at the part of its range that the compensation of eq. 28 leaves free
 supervisor: in y_m, in Δuᵢ = uᵢ − u_g,i and in the fault estimator. ``fdir.input =
 "nominal"`` keeps the unsaturated input (``input_limit`` = inf): the paper's equations
 read literally, valid only while no command leaves the range.
+
+A drive that answers its command with a first-order lag τ (``TeamConfig.lag``, the robot
+file's calibrated ``lag``) does not move at its command either: robot i then integrates
+the velocity its own drive model predicts, v̂ᵢ, the exact response of the lag to the
+command held over the period (:func:`lag_input`), in y_m, in Δuᵢ and in its fault
+estimator, while the command itself goes to the drive. Without it a slow robot's own lag
+is a mismatch of up to τ‖Δu‖ in position (``docs/thresholds.md``) that the compensation
+of eq. 28 fights as if it were a fault.
 """
 
 from __future__ import annotations
 
+import math
+
 from numba import njit
+
+
+def lag_coefficients(lag: float, dt: float) -> tuple[float, float]:
+    """(a, b) of :func:`lag_input` for a first-order lag ``lag`` [s] at period ``dt``:
+    a = 1 − e^(−h/τ) and b = τa/h; (0, 0) without a lag (the command is the velocity)."""
+    if not lag > 0.0:
+        return 0.0, 0.0
+    a = -math.expm1(-dt / lag)
+    return a, lag * a / dt
+
+
+@njit(cache=True)
+def lag_input(u, v_hat, command, a, b):  # pragma: no cover - compiled
+    """The drive model of every robot (N, 2), in place: the commands ``u`` are copied to
+    ``command`` and replaced by the mean velocity over the period of a first-order lag
+    held at them, u + b(v̂ − u); v̂ advances to the period's end, u + (1 − a)(v̂ − u)."""
+    for r in range(u.shape[0]):
+        for d in range(u.shape[1]):
+            c = u[r, d]
+            gap = v_hat[r, d] - c
+            command[r, d] = c
+            u[r, d] = c + b * gap
+            v_hat[r, d] = c + (1.0 - a) * gap
 
 
 @njit(cache=True)

@@ -49,6 +49,7 @@ class TeamConfig:
     # per-axis range of the applied nominal input uᵢ (onboard/applied.py) [m/s]: the command
     # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
     input_limit: float = np.inf
+    lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)
     compiled: bool = True  # compose the paper's blocks in one compiled period when possible
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)

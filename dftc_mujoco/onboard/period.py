@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from .applied import limit_input
+from .applied import lag_input, limit_input
 from .controller import collective_one
 from .fault_estimator import estimate_faults
 from .fdir import decide
@@ -60,6 +60,10 @@ def team_period(
     fdir,
     compensate,
     input_limit,
+    lag_a,
+    lag_b,
+    v_hat,
+    command,
     z,
     int_e,
     phi_hat,
@@ -89,8 +93,10 @@ def team_period(
 ):  # pragma: no cover - compiled
     """One period for the members ``rows`` (team row i is robot ``rows[i]``); returns flags.
 
-    ``x_m``, ``z``, ``int_e``, ``phi_hat``, ``applied``, ``u`` and ``u_bar`` are on
-    the original robot axis (N); the others on the members' axis (M). Robots
+    ``x_m``, ``v_hat``, ``command``, ``z``, ``int_e``, ``phi_hat``, ``applied``, ``u``
+    and ``u_bar`` are on the original robot axis (N); with a drive lag (``lag_a`` > 0) ``u``
+    ends as the velocity the drive model predicts and ``command`` as what the drive is
+    told; the others on the members' axis (M). Robots
     that are not members get u = 0 and only run their fault estimator. ŷ of the
     next period goes to ``y_next`` (the caller swaps it with ``y_hat``); ``row``
     (M·n,) is scratch. Returns RAISED | SWITCHED bits.
@@ -122,18 +128,27 @@ def team_period(
         row_norms(row, i, n, r_norm)
         for a in range(m * n):
             yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
-    integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
     if m < u.shape[0]:
         u[:] = 0.0  # an excluded robot is told to stay where it is
     for i in range(m):
         for d in range(2):
             u[rows[i], d] = u_mem[i, d]
+    if lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
+        lag_input(u, v_hat, command, lag_a, lag_b)
+        for i in range(m):
+            for d in range(2):
+                u_mem[i, d] = u[rows[i], d]
+                du[i, d] = u_mem[i, d] - u_g[i, d]
+    else:
+        command[:] = u
+    integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
     if fdir:
         estimate_faults(x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, u_bar)
-        if not compensate:
-            u_bar[:] = u
+        for r in range(u.shape[0]):
+            for d in range(2):
+                u_bar[r, d] = command[r, d] - (applied[r, d] if compensate else 0.0)  # eq. 28
         if decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # eq. 39
             code |= RAISED
     else:
-        u_bar[:] = u
+        u_bar[:] = command
     return code

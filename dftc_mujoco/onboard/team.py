@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from ..mission import FormationPlan, formation_offsets, replan
-from .applied import limit_input
+from .applied import lag_coefficients, lag_input, limit_input
 from .block import Block, TeamConfig
 from .controller import Controller
 from .fault_estimator import FaultEstimator
@@ -102,6 +102,11 @@ class Team:
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
         self.u = np.zeros((n, 2))
         self.u_bar = np.zeros((n, 2))
+        # each robot's model of its own drive (onboard/applied.py): what it commands, and the
+        # velocity v̂ a first-order lag of config.lag delivers (robots start at rest)
+        self.command = np.zeros((n, 2))
+        self.v_hat = np.zeros((n, 2))
+        self._lag_a, self._lag_b = lag_coefficients(config.lag, config.dt)
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
         self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
@@ -232,6 +237,10 @@ class Team:
             cfg.fdir,
             cfg.compensate,
             cfg.input_limit,
+            self._lag_a,
+            self._lag_b,
+            self.v_hat,
+            self.command,
             est.z,
             est.int_e,
             est.phi_hat,
@@ -278,23 +287,34 @@ class Team:
         u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
         delta_u = np.array(delta_u, dtype=float)
         saturated = limit_input(u_mem, np.ascontiguousarray(u_g, float), delta_u, cfg.input_limit)
-        r = self.observer.residual(x_own)  # eq. 35
-        self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
-        self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         if not whole:
             self.u[:] = 0.0  # an excluded robot is told to stay where it is
         self.u[mem] = u_mem
+        if self._lag_a > 0.0:  # the drive's lag: integrate what it delivers (applied.py)
+            lag_input(self.u, self.v_hat, self.command, self._lag_a, self._lag_b)
+            u_mem = self.u[mem]
+            delta_u = u_mem - u_g
+        else:
+            self.command[:] = self.u
+        r = self.observer.residual(x_own)  # eq. 35
+        self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
+        self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         code = SWITCHED if not np.array_equal(before, self.supervisor.active) else 0
         if saturated:
             code |= SATURATED
         if cfg.fdir:
             u_bar = self.estimator.step(x_m, self.u)  # eqs. 28-31, nominal u (NOTES 2)
-            self.u_bar[:] = u_bar if cfg.compensate else self.u
+            if not cfg.compensate:
+                self.u_bar[:] = self.command
+            elif self._lag_a > 0.0:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
+                self.u_bar[:] = self.command - (self.u - u_bar)
+            else:
+                self.u_bar[:] = u_bar
             self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)  # eq. 39
             if self._raised.any():
                 code |= RAISED
         else:
-            self.u_bar[:] = self.u
+            self.u_bar[:] = self.command
         return code
 
     # ------------------------------------------------------------------ outputs

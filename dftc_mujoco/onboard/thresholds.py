@@ -443,7 +443,9 @@ class _Enveloped(Thresholds):
         self.drift_given = self.drift
         if self.covers_compensation and config.fdir and config.compensate:
             # with the compensation applied, D_k = G φ̂_k − η_k + η_k(0): ē must cover it
-            phi_bar = estimator_gain(config.K, config.G, self.h, self.eta_bar, self.xi_bar)
+            phi_bar = estimator_gain(
+                config.K, config.G, self.h, self.eta_bar, self.xi_bar, lag=config.lag
+            )
             self.drift = max(self.drift, compensation_offset(self.G, phi_bar, self.eta_bar))
         self._setup(config)
         self._begin(config.graph, self._structured(config.graph.n, config.initial_error_bound), 0.0)
@@ -616,7 +618,9 @@ class Drive(_Enveloped):
         self.phi_bar = (
             float(self.phi_bar_param)
             if self.phi_bar_param is not None
-            else estimator_gain(config.K, config.G, config.dt, config.eta_bar, config.xi_bar)
+            else estimator_gain(
+                config.K, config.G, config.dt, config.eta_bar, config.xi_bar, lag=config.lag
+            )
         )
         self.offset = float(np.linalg.norm(self.G, 2)) * self.phi_bar
 
@@ -958,31 +962,53 @@ def compensation_offset(G: np.ndarray, phi_bar: float, eta_bar: float) -> float:
 
 
 def estimator_gain(
-    K: np.ndarray, G: np.ndarray, h: float, eta_bar: float, xi_bar: float, steps: int = 100000
+    K: np.ndarray,
+    G: np.ndarray,
+    h: float,
+    eta_bar: float,
+    xi_bar: float,
+    steps: int = 100000,
+    lag: float = 0.0,
 ) -> float:
-    """Bound of ‖φ̂‖ on a healthy robot of an ideal plant (ẋ = ū + ξ, x_m = x + η).
+    """Bound of ‖φ̂‖ on a healthy robot (x_m = x + η, mismatch ‖ξ‖ ≤ ξ̄ from its drive model).
 
     The fault estimator's closed loop (eqs. 28-31 with compensation) is linear in
     the deviation d = x − z and the integral I = ∫e: φ̂ = G⁻¹(d + η + K I),
-    d⁺ = d + h(ξ − φ̂ − K(d + η)), I⁺ = I + h(d + η). Returns
-    Σ_t ‖H_η(t)‖₂ η̄ + Σ_t ‖H_ξ(t)‖₂ ξ̄ (ℓ1 norms of its impulse responses).
+    d⁺ = d + h(ξ − φ̂ − K(d + η)), I⁺ = I + h(d + η) on an ideal plant (ẋ = ū + ξ). A drive
+    with a first-order lag ``lag`` that the robot models (``onboard/applied.py``) delivers
+    its command's lagged response: the model cancels the lag of u, but φ̂ reaches the
+    plant through the lag too, d⁺ = d + h(ξ − (1 − b)φ̂ − b w − K(d + η)), w⁺ = aφ̂ + (1 − a)w
+    (a, b of :func:`~.applied.lag_coefficients`). Returns Σ_t ‖H_η(t)‖₂ η̄ + Σ_t ‖H_ξ(t)‖₂ ξ̄
+    (ℓ1 norms of its impulse responses).
     """
+    from .applied import lag_coefficients
+
     K, G = np.asarray(K, float), np.asarray(G, float)
     gi = np.linalg.inv(G)
     n = len(K)
-    eye = np.eye(n)
-    # state s = [d, I]; φ̂ = C s + D η
+    eye, zero = np.eye(n), np.zeros((n, n))
+    a, b = lag_coefficients(lag, h)
+    # state s = [d, I] (and w with a lag); φ̂ = C s + D η
     C = np.hstack([gi, gi @ K])
     D = gi
-    Ad = np.block(
-        [[eye - h * gi - h * K, -h * gi @ K], [h * eye, eye]]
-    )  # d⁺ = d − h G⁻¹(d + K I) − h K d + ...
-    B_eta = np.vstack([-h * gi - h * K, h * eye])
-    B_xi = np.vstack([h * eye, np.zeros((n, n))])
+    Ad = np.block([[eye - h * (1 - b) * gi - h * K, -h * (1 - b) * gi @ K], [h * eye, eye]])
+    B_eta = np.vstack([-h * (1 - b) * gi - h * K, h * eye])
+    B_xi = np.vstack([h * eye, zero])
+    if a > 0.0:
+        Ad = np.block(
+            [
+                [Ad, np.vstack([-h * b * eye, zero])],
+                [a * gi, a * gi @ K, (1 - a) * eye],
+            ]
+        )
+        C = np.hstack([C, zero])
+        B_eta = np.vstack([B_eta, a * gi])
+        B_xi = np.vstack([B_xi, zero])
     if np.abs(np.linalg.eigvals(Ad)).max() >= 1.0:
         raise ScenarioError(
-            "gains.G, gains.K: the fault estimator's loop is unstable at this control period; "
-            'thresholds = "drive" needs it stable'
+            "gains.G, gains.K: the fault estimator's loop is unstable at this control period"
+            + (f" with the drive lag of {lag:g} s" if a > 0 else "")
+            + "; its compensation has no bound Φ̄ (raise gains.G)"
         )
     total_eta = np.linalg.norm(D, 2)
     total_xi = 0.0

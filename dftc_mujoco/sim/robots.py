@@ -48,6 +48,8 @@ CALIBRATION_KEYS = (
     "startup_mismatch",  # largest ‖ẋ − u‖ while the robot settles at the start [m/s]
     "startup_time",  # how long it settles [s]
     "response_time",  # time to follow a command jump [s]
+    "drift_replan",  # ē measured within 5 s of an exclusion (the re-plan's transient) [m]
+    "lag",  # first-order lag τ of the drive, modelled onboard when set (onboard/applied.py) [s]
     "drift_bound",  # ē: bounded offset of the drift after the start-up (docs/thresholds.md) [m]
     "drift_startup",  # ē including the start-up [m]
     "drift_settle",  # how long the start-up lasts [s]
@@ -95,6 +97,12 @@ class RobotModel:
     def drift_bound(self) -> float:
         """ē from calibration (0 when the robot was not calibrated for it)."""
         return float(self.calibration.get("drift_bound", 0.0))
+
+    @property
+    def lag(self) -> float:
+        """τ of the drive's first-order lag from calibration (0: the robot is taken to move at
+        its command, the paper's ẋ = u)."""
+        return float(self.calibration.get("lag", 0.0))
 
     def spec(self) -> mujoco.MjSpec:
         """A fresh MjSpec of the robot's MJCF with, in memory only: file paths made absolute,
