@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dftc_mujoco import load_scenario, simulate
 from dftc_mujoco import calibrate as cal_mod
+from dftc_mujoco import load_scenario, simulate
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard import team as team_mod
 from dftc_mujoco.onboard.applied import lag_coefficients, lag_input
