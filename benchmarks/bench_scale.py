@@ -29,7 +29,7 @@ def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dic
 
     from dftc_mujoco import scenario
     from dftc_mujoco.graph import ring_with_chords
-    from dftc_mujoco.onboard import fdir
+    from dftc_mujoco.onboard.thresholds import decay
 
     d = {
         "name": f"scale{n}",
@@ -52,7 +52,7 @@ def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dic
     }
     s = scenario.from_dict(d, source=f"bench N={n}")
     t0 = time.perf_counter()
-    fdir.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
+    decay.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
     kappa = time.perf_counter() - t0
     r = measure(s, repeat)
     loop_s = r["loop_us"] * (r["periods"] + 1) * 1e-6

@@ -56,8 +56,7 @@ def median_time(fn, repeat: int) -> tuple[float, object]:
 
 
 def rules(offset: float) -> dict:
-    from dftc_mujoco.onboard.fdir import Thresholds
-    from dftc_mujoco.onboard.thresholds import BLOCK_ROW_MAX, L1, BlockRow, Drive
+    from dftc_mujoco.onboard.thresholds import BLOCK_ROW_MAX, L1, BlockRow, Drive, Thresholds
 
     return {
         "paper": (Thresholds, {}, 10**9),
@@ -84,15 +83,14 @@ def build(cls, params: dict, graph):
 
 
 def one(family: str, n: int, repeat: int) -> dict:
-    from dftc_mujoco.onboard import fdir
-    from dftc_mujoco.onboard.thresholds import estimator_gain, predicted_delays
+    from dftc_mujoco.onboard.thresholds import decay, estimator_gain, predicted_delays
 
     graph = graph_of(family, n)
     offset = 0.01 * estimator_gain(3 * np.eye(2), 0.01 * np.eye(2), H, ETA, XI) + 2 * ETA
 
     def kappa():
-        fdir._cached_decay_bounds.cache_clear()
-        return fdir.decay_bounds(graph, KO)
+        decay._cached_decay_bounds.cache_clear()
+        return decay.decay_bounds(graph, KO)
 
     row: dict = {"family": family, "n": n, "max_in_degree": int(graph.in_degree().max())}
     row["kappa_s"], (k, lam) = median_time(kappa, repeat)
@@ -103,7 +101,7 @@ def one(family: str, n: int, repeat: int) -> dict:
             continue
 
         def setup(cls=cls, params=params):
-            fdir._cached_decay_bounds.cache_clear()
+            decay._cached_decay_bounds.cache_clear()
             return build(cls, params, graph)
 
         entry: dict = {}
@@ -120,7 +118,7 @@ def one(family: str, n: int, repeat: int) -> dict:
         times = []
         for _ in range(repeat):
             fresh = build(cls, params, graph)
-            fdir._cached_decay_bounds.cache_clear()
+            decay._cached_decay_bounds.cache_clear()
             t0 = time.perf_counter()
             fresh.drop(0, reduced, 60.0)
             times.append(time.perf_counter() - t0)
@@ -138,10 +136,9 @@ def warm_up() -> None:
     for cls, params, _ in rules(0.004).values():
         rule = build(cls, params, small)
         rule.drop(0, small.without(0), 5.0)
-    from dftc_mujoco.onboard import fdir
-    from dftc_mujoco.onboard.thresholds import predicted_delays
+    from dftc_mujoco.onboard.thresholds import decay, predicted_delays
 
-    fdir._decay_bounds_fast(small, KO)
+    decay._decay_bounds_fast(small, KO)
     predicted_delays(small, KO, H, np.full((12, 12), 0.003), FAULT)
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 
 @dataclass(frozen=True)
@@ -108,3 +108,23 @@ def k_nearest(positions: np.ndarray, k: int) -> Graph:
         i, j = np.unravel_index(np.argmin(sub), sub.shape)
         g = Graph(n, tuple(sorted(set(g.edges) | {(int(i), int(j)), (int(j), int(i))})))
     return g
+
+
+def reaches_all(graph: Graph) -> np.ndarray:
+    """(N,) bool: robot k reaches every robot along the edges, i.e. M_k is positive
+    stable (the grounded Laplacian L + e_k e_kᵀ is then a non-singular M-matrix)."""
+    n = graph.n
+    if graph.is_strongly_connected():
+        return np.ones(n, bool)
+    e = np.array(graph.edges, dtype=np.int64).reshape(-1, 2)
+    m = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return np.array([len(breadth_first_order(m, k, directed=True)[0]) == n for k in range(n)])
+
+
+def rotation_invariant(graph: Graph) -> bool:
+    """The graph is invariant under the rotation i -> i + 1 (rings, rings with chords):
+    M_k = R^k M_0 R^{-k} with R the rotation, so every monitored robot sees the same
+    matrices and [f(M_k)]_{ik} = [f(M_0)]_{(i − k) mod N, 0}."""
+    n = graph.n
+    edges = set(graph.edges)
+    return n > 1 and {((j + 1) % n, (i + 1) % n) for j, i in edges} == edges

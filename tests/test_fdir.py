@@ -5,7 +5,8 @@ import pytest
 from scipy.linalg import expm
 
 from dftc_mujoco.graph import Graph
-from dftc_mujoco.onboard import fdir
+from dftc_mujoco.onboard import decision
+from dftc_mujoco.onboard.thresholds import decay, paper
 from tests.test_onboard import _integrate, _team
 
 PAPER = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)))
@@ -22,8 +23,8 @@ SMALL = {
 def test_kappa_lambda_against_brute_force_sup(name):
     g = SMALL[name]
     for k in range(g.n):
-        m = fdir.observer_matrix(g, 6.0, k)
-        kappa, lam = fdir.decay_bound(m)
+        m = decay.observer_matrix(g, 6.0, k)
+        kappa, lam = decay.decay_bound(m)
         lam_min = np.linalg.eigvals(m).real.min()
         assert 0 < lam < lam_min
         t = np.linspace(0, 60 / lam_min, 6001)
@@ -38,22 +39,22 @@ def test_kappa_lambda_against_brute_force_sup(name):
 
 
 def test_paper_graph_values_match_notes():
-    kappa, lam = fdir.decay_bounds(PAPER, 6.0)
+    kappa, lam = decay.decay_bounds(PAPER, 6.0)
     assert np.all((kappa >= 1.0) & (kappa <= 1.3))  # NOTES 6: κ ≈ 1.0-1.2
     assert np.all((lam >= 0.5) & (lam <= 1.6))  # NOTES 6: λ ≈ 0.6-1.5
 
 
 def test_not_strongly_connected_gives_infinite_thresholds():
     ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
-    assert fdir.decay_bound(fdir.observer_matrix(ring_without_1, 6.0, 1)) == (np.inf, 0.0)
-    th = fdir.Thresholds.for_graph(ring_without_1, 6.0, 0.001, 0.005, np.ones(3))
+    assert decay.decay_bound(decay.observer_matrix(ring_without_1, 6.0, 1)) == (np.inf, 0.0)
+    th = paper.Thresholds.for_graph(ring_without_1, 6.0, 0.001, 0.005, np.ones(3))
     mu = th.mu(10.0)
     assert not np.isnan(mu).any()
     assert np.isinf(mu[:, 1]).all() and np.isinf(mu[:, 2]).all()
 
 
 def test_threshold_formula_eq40():
-    th = fdir.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8))
+    th = paper.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8))
     d = PAPER.in_degree()
     mu0 = th.mu(0.0).copy()
     for i in range(4):
@@ -64,12 +65,12 @@ def test_threshold_formula_eq40():
     mu_inf = th.mu(1e4)
     assert mu_inf[0, 2] == pytest.approx(np.sqrt(2) * 1 * steady[2])
     # restarted thresholds count time from t0
-    late = fdir.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8), t0=30.0)
+    late = paper.Thresholds.for_graph(PAPER, 6.0, 0.001, 0.005, np.full(4, 0.8), t0=30.0)
     assert np.allclose(late.mu(30.0), mu0)
 
 
 def test_decision_window_and_release():
-    dec = fdir.Decision.standalone(2, window=0.2, dt=0.01)
+    dec = decision.Decision.standalone(2, window=0.2, dt=0.01)
     mu = np.ones((2, 2))
     high = np.array([[0.0, 2.0], [0.0, 0.0]])
     raised_at = []
@@ -139,9 +140,9 @@ def test_exclusion_cancelled_when_nobody_flags_at_t_r():
 @pytest.mark.parametrize("name", sorted(SMALL))
 def test_batched_kappa_lambda_agree_with_the_per_robot_ones(name):
     g = SMALL[name]
-    kappa, lam = fdir.decay_bounds(g, 6.0)
+    kappa, lam = decay.decay_bounds(g, 6.0)
     for k in range(g.n):
-        k1, l1 = fdir.decay_bound(fdir.observer_matrix(g, 6.0, k))
+        k1, l1 = decay.decay_bound(decay.observer_matrix(g, 6.0, k))
         assert lam[k] == pytest.approx(l1)
         assert k1 * (1 - 1e-3) <= kappa[k] <= k1 * 1.002  # both bound the sup, within 0.2 %
 
@@ -154,12 +155,12 @@ def test_rotation_invariant_graphs_compute_one_robot_and_agree_with_all(n):
     from dftc_mujoco.graph import ring_with_chords
 
     g = ring_with_chords(n, (2,))
-    kappa, lam = fdir.decay_bounds(g, 3.0)
-    full_kappa, full_lam = fdir._decay_bounds(g, 3.0)
+    kappa, lam = decay.decay_bounds(g, 3.0)
+    full_kappa, full_lam = decay._decay_bounds(g, 3.0)
     np.testing.assert_allclose(kappa, full_kappa, rtol=1e-10)
     np.testing.assert_allclose(lam, full_lam, rtol=1e-10)
     kappa[:] = -1.0  # the cache keeps its own values
-    assert (fdir.decay_bounds(g, 3.0)[0] > 0).all()
+    assert (decay.decay_bounds(g, 3.0)[0] > 0).all()
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -173,10 +174,10 @@ def test_certified_kappa_lambda_bound_the_exponential_and_stay_close_to_the_exac
     n = int(rng.integers(3, 12))
     g = random_strongly_connected(n, int(rng.integers(1, 4)), rng)
     ko = (3.0, 6.0)[seed % 2]
-    kf, lf = fdir._decay_bounds_fast(g, ko)
-    ke, le = fdir._decay_bounds(g, ko)
+    kf, lf = decay._decay_bounds_fast(g, ko)
+    ke, le = decay._decay_bounds(g, ko)
     for k in range(n):
-        m = fdir.observer_matrix(g, ko, k)
+        m = decay.observer_matrix(g, ko, k)
         lam_min = np.linalg.eigvals(m).real.min()
         assert 0 < lf[k] <= lam_min
         t = np.linspace(0, 40 / lam_min, 600)
@@ -193,19 +194,19 @@ def test_decay_bounds_keep_the_exact_method_where_it_is_cheap():
 
     from dftc_mujoco.graph import random_strongly_connected
 
-    fdir._cached_decay_bounds.cache_clear()
-    k4, l4 = fdir.decay_bounds(PAPER, 6.0)
-    ke, le = fdir._decay_bounds(PAPER, 6.0)
+    decay._cached_decay_bounds.cache_clear()
+    k4, l4 = decay.decay_bounds(PAPER, 6.0)
+    ke, le = decay._decay_bounds(PAPER, 6.0)
     assert np.array_equal(k4, ke) and np.array_equal(l4, le)
     g = random_strongly_connected(40, 3, np.random.default_rng(0))
-    kf, lf = fdir._decay_bounds_fast(g, 3.0)
-    k40, l40 = fdir.decay_bounds(g, 3.0)
+    kf, lf = decay._decay_bounds_fast(g, 3.0)
+    k40, l40 = decay.decay_bounds(g, 3.0)
     assert np.array_equal(k40, kf) and np.array_equal(l40, lf)
     g100 = random_strongly_connected(100, 3, np.random.default_rng(1))
     t0 = time.perf_counter()
-    fdir.decay_bounds(g100, 3.0)
+    decay.decay_bounds(g100, 3.0)
     assert time.perf_counter() - t0 < 2.0  # 2.8 s before (exact); ~0.01 s on an idle core
     # not strongly connected: the robots that reach everyone only
     ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
-    kn, ln = fdir._decay_bounds_fast(ring_without_1, 6.0)
+    kn, ln = decay._decay_bounds_fast(ring_without_1, 6.0)
     assert np.isfinite(kn[0]) and ln[0] > 0 and np.isinf(kn[1:]).all() and (ln[1:] == 0).all()

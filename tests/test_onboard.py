@@ -163,7 +163,9 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
         if t > 8.0:
             phi[1] = [1.5, 0.0]  # beyond the command range: anti-windup and a detection
         xs = xs + 0.01 * (np.clip(fast.u_bar, -1.0, 1.0) + phi)  # actuators saturate at 1 m/s
-    assert fast.detected == slow.detected and fast.detected  # the fault was caught on both
+    assert (
+        fast.recovery.detected == slow.recovery.detected and fast.recovery.detected
+    )  # the fault was caught on both
     assert list(fast.members) == list(slow.members)
     assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
     copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)

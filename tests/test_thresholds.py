@@ -12,7 +12,6 @@ import pytest
 
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.graph import Graph, random_strongly_connected, ring_with_chords
-from dftc_mujoco.onboard.fdir import Thresholds
 from dftc_mujoco.onboard.locality import demo_team
 from dftc_mujoco.onboard.thresholds import (
     BLOCK_ROW_MAX,
@@ -20,6 +19,7 @@ from dftc_mujoco.onboard.thresholds import (
     BlockRow,
     Drive,
     Start,
+    Thresholds,
     column_envelope,
     estimator_gain,
     grounded_solve,
@@ -330,13 +330,13 @@ def test_delays_agree_with_the_first_crossing_of_the_signature():
     expect[0, 1] = np.inf
     np.testing.assert_allclose(predicted_delays(graph, ko, H, mu, fault) / H, expect, rtol=1e-12)
     # at scale the sweep stops at each column's certificate: upper bounds from R's decay
-    from dftc_mujoco.onboard import thresholds
+    from dftc_mujoco.onboard.thresholds import delays
 
-    thresholds.EXACT_CROSSING_WORK = 0.0
+    delays.EXACT_CROSSING_WORK = 0.0
     try:
         bound = predicted_delays(graph, ko, H, mu, fault) / H + 1e-9
     finally:
-        thresholds.EXACT_CROSSING_WORK = 5e8
+        delays.EXACT_CROSSING_WORK = 5e8
     assert (bound >= expect).all() and (
         bound[np.isfinite(expect)] <= 1.2 * expect[np.isfinite(expect)] + 40
     ).all()
@@ -417,7 +417,7 @@ def test_rules_refuse_what_they_cannot_bound():
 def test_set_up_is_fast_at_n_100():
     """κ/λ, the l1 tables and Δt_d for a random in-degree-3 graph at N = 100 (issue 10's
     target is 0.5 s on an idle core; loose here for a shared CI machine)."""
-    from dftc_mujoco.onboard import fdir
+    from dftc_mujoco.onboard.thresholds import decay as fdir
 
     warm = random_strongly_connected(12, 3, np.random.default_rng(0))
     L1.for_graph(warm, 3.0, ETA, XI, np.ones(12))  # numba's cache loaded
@@ -477,7 +477,7 @@ def test_dt_d_max_from_the_analysis_covers_every_robots_detection():
 
 
 def test_exclusive_isolation_needs_the_other_residuals_below_their_thresholds():
-    from dftc_mujoco.onboard.fdir import Decision
+    from dftc_mujoco.onboard.decision import Decision
 
     mu = np.ones((2, 3))
     one = np.array([[0.0, 2.0, 0.0], [0.0, 0.0, 0.0]])  # robot 1 sees only robot 2 over

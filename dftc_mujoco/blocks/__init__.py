@@ -31,9 +31,9 @@ BUILTIN: dict[str, dict[str, str]] = {
     "fault_estimator": {"paper": "dftc_mujoco.blocks.paper:FaultEstimator"},
     "thresholds": {
         "paper": "dftc_mujoco.blocks.paper:Thresholds",
-        "block_row": "dftc_mujoco.onboard.thresholds:BlockRow",
-        "drive": "dftc_mujoco.onboard.thresholds:Drive",
-        "l1": "dftc_mujoco.onboard.thresholds:L1",
+        "block_row": "dftc_mujoco.onboard.thresholds.block_row:BlockRow",
+        "drive": "dftc_mujoco.onboard.thresholds.drive:Drive",
+        "l1": "dftc_mujoco.onboard.thresholds.l1:L1",
     },
     "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
 }

@@ -32,10 +32,11 @@ Every block also has ``reset(config, x_m0, prior)`` (start of a run) and
 
 from ..onboard.block import Block, TeamConfig
 from ..onboard.controller import Controller
+from ..onboard.decision import Decision
 from ..onboard.fault_estimator import FaultEstimator
-from ..onboard.fdir import Decision, Thresholds
 from ..onboard.observer import Observer
 from ..onboard.supervisor import Supervisor
+from ..onboard.thresholds import Thresholds
 
 __all__ = [
     "Block",

@@ -37,7 +37,7 @@ class TeamConfig:
     obstacle_safe: np.ndarray  # (O,) d of eq. 17
     obstacle_activation: np.ndarray  # (O,)
     detection_window: float = 0.2
-    dt_d_max: float | str = 5.0  # or "auto": from the analysis of eq. 46 (onboard/fdir.py)
+    dt_d_max: float | str = 5.0  # or "auto": eq. 46 (onboard/thresholds/delays.py)
     isolation: str = "pairwise"  # or "exclusive" (eq. 39's second clause)
     reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
     initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (premises.py)

@@ -23,8 +23,8 @@ from numba import njit
 
 from .applied import lag_input, limit_input
 from .controller import collective_one
+from .decision import decide
 from .fault_estimator import estimate_faults
-from .fdir import decide
 from .observer import advance_one, estimate_one, integrate_inputs, residual_row, row_norms
 from .supervisor import supervise
 

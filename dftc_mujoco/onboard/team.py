@@ -31,11 +31,13 @@ from ..mission import FormationPlan, formation_offsets, replan
 from .applied import lag_coefficients, lag_input, limit_input
 from .block import Block, TeamConfig
 from .controller import Controller
+from .decision import Decision
 from .fault_estimator import FaultEstimator
-from .fdir import Decision, Thresholds
 from .observer import Observer
 from .period import RAISED, SATURATED, SWITCHED, team_period
+from .recovery import Recovery
 from .supervisor import Supervisor
+from .thresholds import Thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -108,12 +110,10 @@ class Team:
         self.v_hat = np.zeros((n, 2))
         self._lag_a, self._lag_b = lag_coefficients(config.lag, config.dt)
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
-        self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
-        self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
-        self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
         self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
+        self.recovery = Recovery(self.dt_d_max)  # the exclusion protocol (eqs. 42-43)
         self._resize()
 
     def _detection_horizon(self) -> tuple[float, dict[str, Any]]:
@@ -191,7 +191,7 @@ class Team:
         (N, 2): where each robot's range sensor sees every robot (used only
         for robots that were excluded, which become obstacles).
         """
-        if self.pending:
+        if self.recovery.pending:
             self._exclusions_due(t)
         if len(self.gone) and sensed_bodies is not None:
             self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
@@ -423,56 +423,25 @@ class Team:
 
     def _report(self, t: float, raised: np.ndarray) -> None:
         """Detection events for first flags; schedule exclusions (eq. 43)."""
-        for pi, pk in zip(*np.nonzero(raised), strict=True):
-            by, robot = int(self.members[pi]), int(self.members[pk])
-            if (by, robot) in self.detected:
-                continue
-            self.detected.add((by, robot))
-            self.events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
-            if robot not in self.first_detection:
-                t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
-                self.first_detection[robot] = t
-                self.pending[robot] = t_r
-                self.events.append(
-                    {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
-                )
+        mem = self.members
+        pairs = ((int(mem[i]), int(mem[k])) for i, k in zip(*np.nonzero(raised), strict=True))
+        self.events.extend(self.recovery.flagged(t, pairs))
 
     def _exclusions_due(self, t: float) -> None:
         """At t_r, drop a robot that some teammate still flags (NOTES 10)."""
-        for robot, t_r in sorted(self.pending.items(), key=lambda kv: kv[1]):
-            if t + 1e-9 < t_r:
-                continue
-            del self.pending[robot]
-            self.first_detection.pop(robot, None)
+        for robot in self.recovery.due(t):
             p = int(np.flatnonzero(self.members == robot)[0])
             flag = np.asarray(self.flag, bool)
             flaggers = [int(self.members[i]) + 1 for i in np.flatnonzero(flag[:, p])]
-            detectors = sorted(by + 1 for by, k in self.detected if k == robot)
             if not flaggers:
-                self.events.append(
-                    {
-                        "t": t,
-                        "kind": "exclusion_cancelled",
-                        "robot": robot + 1,
-                        "detected_by": detectors,
-                    }
-                )
-                self.detected = {(b, k) for b, k in self.detected if k != robot}
+                self.events.append(self.recovery.cancel(t, robot))
                 continue
             last_pair = len(self.members) <= 2  # one robot would be left: no team, no mission
             if last_pair:
                 self.active[robot] = False
             else:
                 self._exclude(t, p)
-            self.events.append(
-                {
-                    "t": t,
-                    "kind": "exclusion",
-                    "robot": robot + 1,
-                    "flagged_by": flaggers,
-                    "detected_by": detectors,
-                }
-            )
+            self.events.append(self.recovery.exclusion(t, robot, flaggers))
             if last_pair:
                 left = [int(k) + 1 for k in self.members if k != robot]
                 self.ended = f"the team was reduced to robot {left[0]} alone"

@@ -9,9 +9,10 @@ vectors pushed through B_k = I − β(L + e_k e_kᵀ), never B_k's powers:
 
 Arrays are laid out (N, K): row i, one column per monitored robot (``rows[b]`` is
 the robot of column b), so that one pass over the in-neighbour lists serves all
-columns at once. B_k ≥ 0 elementwise when β (d_i + δ_ik) ≤ 1 for every i; the
-callers check it.
-"""
+columns at once. B_k is applied in one place, :func:`_row`; each sweep
+(:func:`advance_columns` for the rules' sums, :func:`advance_crossing` for eq. 46's
+crossing times, :func:`advance_sums` for κ, λ) accumulates what its analysis needs as it
+goes. B_k ≥ 0 elementwise when β (d_i + δ_ik) ≤ 1 for every i; the callers check it."""
 
 from __future__ import annotations
 
@@ -20,10 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import breadth_first_order
 
-from ..graph import Graph
+from ...graph import Graph
+
+#: entries below this are set to 0 in the recursions: the wavefront of a column
+#: otherwise passes through subnormal numbers, 10-100x slower. The error is at most
+#: TINY per entry and period, so at most t·TINY on c and t²·TINY on S after t
+#: periods (‖A‖_∞ ≤ 1): the callers add it to their rounding slack.
+TINY = 1e-250
 
 
 @dataclass(frozen=True)
@@ -54,26 +59,6 @@ class Adjacency:
         return cls(graph.n, e[by_to, 0].copy(), first, e[by_from, 1].copy(), out_first, deg)
 
 
-def reaches_all(graph: Graph) -> np.ndarray:
-    """(N,) bool: robot k reaches every robot along the edges, i.e. M_k is positive
-    stable (the grounded Laplacian L + e_k e_kᵀ is then a non-singular M-matrix)."""
-    n = graph.n
-    if graph.is_strongly_connected():
-        return np.ones(n, bool)
-    e = np.array(graph.edges, dtype=np.int64).reshape(-1, 2)
-    m = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return np.array([len(breadth_first_order(m, k, directed=True)[0]) == n for k in range(n)])
-
-
-def rotation_invariant(graph: Graph) -> bool:
-    """The graph is invariant under the rotation i -> i + 1 (rings, rings with chords):
-    M_k = R^k M_0 R^{-k} with R the rotation, so every monitored robot sees the same
-    matrices and [f(M_k)]_{ik} = [f(M_0)]_{(i − k) mod N, 0}."""
-    n = graph.n
-    edges = set(graph.edges)
-    return n > 1 and {((j + 1) % n, (i + 1) % n) for j, i in edges} == edges
-
-
 def ratios(new: np.ndarray, old: np.ndarray) -> np.ndarray:
     """new / old entrywise (0/0 = 0, x/0 = inf): the factors of a certificate new ≤ s old."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -83,13 +68,6 @@ def ratios(new: np.ndarray, old: np.ndarray) -> np.ndarray:
 def ratio_max(new: np.ndarray, old: np.ndarray) -> np.ndarray:
     """Per column, the smallest s with new ≤ s old componentwise (see :func:`ratios`)."""
     return ratios(new, old).max(axis=0)
-
-
-#: entries below this are set to 0 in the recursions: the wavefront of a column
-#: otherwise passes through subnormal numbers, 10-100x slower. The error is at most
-#: TINY per entry and period, so at most t·TINY on c and t²·TINY on S after t
-#: periods (‖A‖_∞ ≤ 1): the callers add it to their rounding slack.
-TINY = 1e-250
 
 
 def column_of_row(rows: np.ndarray, n: int) -> np.ndarray:

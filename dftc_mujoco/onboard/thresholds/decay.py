@@ -1,15 +1,9 @@
-"""Fault detection, isolation and recovery (eqs. 39-43, Remark 5.2).
+"""κ, λ of eq. 41: the decay of the observer's error matrix for every monitored robot.
 
-* :func:`decay_bound` gives κ, λ of eq. 41 for one monitored robot k, from the
-  N×N matrix k_o(L + e_k e_kᵀ) (NOTES 5-6).
-* :class:`Thresholds` (block) evaluates the adaptive thresholds ⁱμ_k(t) of eq. 40.
-* :class:`Decision` (block) raises robot i's flag on robot k when ‖ⁱr_k‖ > ⁱμ_k
-  has held for ``window`` seconds (Remark 5.2), and lowers it after as long
-  below; the rule is the compiled :func:`decide`.
-
-The exclusion protocol (eqs. 42-43) lives in :mod:`dftc_mujoco.onboard.team`,
-which owns the vectors that are resized.
-"""
+:func:`decay_bound` gives κ, λ with ‖e^{−M_k t}‖ ≤ κ e^{−λ t} for one monitored robot k from
+the N×N matrix M_k = k_o(L + e_k e_kᵀ) (NOTES 5-6); :func:`decay_bounds` for every k, batched
+through the row and column sums of :mod:`.kernels` at scale. The paper's thresholds
+(:mod:`.paper`) are built on them."""
 
 from __future__ import annotations
 
@@ -17,21 +11,10 @@ import functools
 import math
 
 import numpy as np
-from numba import njit
 from scipy.linalg import expm
 
-from ..graph import Graph
-from .block import Block, TeamConfig
-from .columns import (
-    TINY,
-    Adjacency,
-    advance_sums,
-    best_rate,
-    column_of_row,
-    ratios,
-    reaches_all,
-    rotation_invariant,
-)
+from ...graph import Graph, reaches_all, rotation_invariant
+from .kernels import TINY, Adjacency, advance_sums, best_rate, column_of_row, ratios
 
 
 def decay_bound(m: np.ndarray, n_lambda: int = 49) -> tuple[float, float]:
@@ -80,6 +63,11 @@ def observer_matrix(graph: Graph, ko: float, k: int) -> np.ndarray:
     return ko * m
 
 
+#: κ, λ are computed exactly (batched expm and SVDs, ~N³ per monitored robot and time
+#: point) while (robots computed) × N³ stays below this; beyond, certified (fast)
+EXACT_WORK = 1.1e6
+
+
 def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarray, np.ndarray]:
     """κ_k, λ_k (eq. 41) for every monitored robot k of ``graph`` (cached per graph).
 
@@ -89,11 +77,6 @@ def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarra
     """
     kappa, lam = _cached_decay_bounds(graph.n, tuple(sorted(graph.edges)), float(ko), n_lambda)
     return kappa.copy(), lam.copy()
-
-
-#: κ, λ are computed exactly (batched expm and SVDs, ~N³ per monitored robot and time
-#: point) while (robots computed) × N³ stays below this; beyond, certified (fast)
-EXACT_WORK = 1.1e6
 
 
 @functools.lru_cache(maxsize=16)
@@ -272,236 +255,3 @@ def _top_singular(a: np.ndarray, v: np.ndarray, iters: int = 30) -> tuple[np.nda
         w = at @ (a @ v)  # batched matrix-vector products (BLAS), not einsum
         v = w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
     return np.linalg.norm((a @ v)[..., 0], axis=1), v[..., 0]
-
-
-@njit(cache=True)
-def eq40(start, steady, lam, elapsed, coef, eta, out):  # pragma: no cover - compiled
-    """ⁱμ_k(t) = (√n dᵢ + δᵢₖ)·‖ỹ*_k‖-bound + δᵢₖ η̄ into ``out`` (M, M) (eq. 40).
-
-    The bound of ‖ỹ*_k(t)‖ is ‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt})
-    with ``start`` = κ‖ỹ*_k(0)‖ and ``steady`` = κ(k_o η̄ + √N ξ̄)/λ; where λ_k = 0
-    (no bound: the graph is not strongly connected) the threshold is +inf.
-    """
-    for k in range(out.shape[1]):
-        if lam[k] > 0:
-            decay = np.exp(-lam[k] * elapsed)
-            b = start[k] * decay + steady[k] * (1.0 - decay)
-            for i in range(out.shape[0]):
-                out[i, k] = coef[i, k] * b + eta[i, k]
-        else:
-            for i in range(out.shape[0]):
-                out[i, k] = np.inf
-
-
-class Thresholds(Block):
-    """The paper's adaptive thresholds ⁱμ_k(t) (eqs. 40-41) for every robot i and robot k.
-
-    Restarted at each exclusion from a bound valid at that instant, with κ, λ
-    of the new graph (NOTES 7). Override :meth:`mu` (and :meth:`restart`) to try
-    another rule; row i may use only what robot i knows: the graph, the gains,
-    the noise bounds and the time.
-    """
-
-    kind = "thresholds"
-    #: what ``initial_error_bound`` bounds for this rule: "stacked", ‖ỹ*_k(0)‖ over every
-    #: observer (eq. 40), or "robot", each robot's start distance from its planned slot
-    initial_error: str = "stacked"
-
-    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
-        """Start from ‖ỹ*_k(0)‖ ≤ ``initial_error_bound`` for every k."""
-        self.ko, self.eta_bar, self.xi_bar = config.ko, config.eta_bar, config.xi_bar
-        self.n_dim = np.shape(x_m0)[1]
-        self.restart(config.graph, np.full(config.graph.n, config.initial_error_bound), 0.0)
-
-    @classmethod
-    def for_graph(
-        cls,
-        graph: Graph,
-        ko: float,
-        eta_bar: float,
-        xi_bar: float,
-        y0: np.ndarray,
-        t0: float = 0.0,
-        n_dim: int = 2,
-        dt: float = 0.01,
-        K: float = 3.0,
-        G: float = 0.01,
-    ) -> Thresholds:
-        """The rule on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team (control
-        period ``dt``, fault-estimator gains K, G as scalars times I; no compensation, so
-        ē is the rule's own ``drift_bound``)."""
-        from ..mission import polygon_offsets
-        from ..scenario import Formation
-
-        config = TeamConfig(
-            graph=graph,
-            kc=1.0,
-            ko=ko,
-            K=K * np.eye(n_dim),
-            G=G * np.eye(n_dim),
-            theta=1.0,
-            dt=dt,
-            eta_bar=eta_bar,
-            xi_bar=xi_bar,
-            formation=Formation(),
-            obstacle_position=np.zeros((0, 2)),
-            obstacle_safe=np.zeros(0),
-            obstacle_activation=np.zeros(0),
-            compensate=False,
-        )
-        th = cls()
-        slots = polygon_offsets(graph.n, 0.5)
-        th.reset(config, slots, slots)
-        if t0 or not np.allclose(y0, config.initial_error_bound):
-            th.restart(graph, np.asarray(y0, float), t0)
-        return th
-
-    def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
-        """Start anew at ``t0`` on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]`` (NOTES 7)."""
-        self.graph, self.y0, self.t0 = graph, y0, t0
-        self.kappa, self.lam = decay_bounds(graph, self.ko)
-        n = graph.n
-        eye = np.eye(n)
-        self._coef = np.sqrt(self.n_dim) * graph.in_degree()[:, None] + eye  # √n dᵢ + δᵢₖ
-        self._eta = self.eta_bar * eye  # δᵢₖ η̄
-        with np.errstate(divide="ignore", invalid="ignore"):
-            self._steady = np.where(
-                self.lam > 0,
-                self.kappa * (self.ko * self.eta_bar + np.sqrt(n) * self.xi_bar) / self.lam,
-                np.inf,
-            )
-        self._finite = self.lam > 0
-        self._all_finite = bool(self._finite.all())
-        self._start = np.where(self._finite, y0 * self.kappa, 0.0)  # finite parts only
-        self._steady_f = np.where(self._finite, self._steady, 0.0)
-        # after this long every transient term of eq. 40 is below 1e-12 of its start
-        finite = self.lam[self.lam > 0]
-        self._settled = t0 + (28.0 / finite.min() if len(finite) else np.inf)
-        self._mu_steady: np.ndarray | None = None
-        self._mu_buf = np.empty((n, n))
-
-    def drop(self, p: int, graph: Graph, t: float) -> None:
-        """Restart on the reduced graph from the bound ‖ỹ*_k(t)‖ of the robots left."""
-        keep = np.delete(np.arange(self.graph.n), p)
-        self.restart(graph, self.bracket(t)[keep], t)
-
-    def bracket(self, t: float) -> np.ndarray:
-        """‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt}), per k: bounds ‖ỹ*_k(t)‖."""
-        decay = np.exp(-self.lam * max(t - self.t0, 0.0))
-        b = self._start * decay + self._steady_f * (1.0 - decay)
-        if not self._all_finite:
-            b[~self._finite] = np.inf
-        return b
-
-    def mu(self, t: float) -> np.ndarray:
-        """ⁱμ_k(t) (M, M) for every observer i (rows) and monitored robot k (columns) (eq. 40).
-
-        Where no bound exists (λ_k = 0: the graph is not strongly connected) the
-        threshold is +inf: robot k cannot be judged. The array returned is
-        valid until the next call.
-        """
-        if t >= self._settled:
-            if self._mu_steady is None:
-                self._mu_steady = self._mu(t).copy()
-            return self._mu_steady
-        return self._mu(t)
-
-    def _mu(self, t: float) -> np.ndarray:
-        elapsed = max(t - self.t0, 0.0)
-        eq40(self._start, self._steady_f, self.lam, elapsed, self._coef, self._eta, self._mu_buf)
-        return self._mu_buf
-
-
-@njit(cache=True)
-def decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # pragma: no cover
-    """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
-
-    Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
-    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns
-    how many were raised. With ``exclusive`` (eq. 39's second clause) robot i counts
-    ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals stay at or below their thresholds.
-    """
-    count = 0
-    for i in range(r_norm.shape[0]):
-        n_over = 0
-        if exclusive:
-            for k in range(r_norm.shape[1]):
-                if r_norm[i, k] > mu[i, k]:
-                    n_over += 1
-        for k in range(r_norm.shape[1]):
-            raised[i, k] = False
-            if r_norm[i, k] > mu[i, k] and not (exclusive and n_over > 1):
-                above[i, k] += dt
-                below[i, k] = 0.0
-                if not flag[i, k] and above[i, k] >= window - 1e-9:
-                    flag[i, k] = True
-                    raised[i, k] = True
-                    count += 1
-            else:
-                above[i, k] = 0.0
-                below[i, k] += dt
-                if flag[i, k] and below[i, k] >= window - 1e-9:
-                    flag[i, k] = False
-    return count
-
-
-class Decision(Block):
-    """Debounced flags: robot i flags k after ``window`` s above ⁱμ_k (eq. 39, Remark 5.2).
-
-    ``window`` defaults to the scenario's ``fdir.detection_window`` and
-    ``isolation`` to ``fdir.isolation``: ``"pairwise"`` (robot i judges each k on
-    its own) or ``"exclusive"`` (eq. 39's second clause: robot i isolates k only
-    while its other residuals stay below their thresholds). Override
-    :meth:`update` to try another decision rule; row i may use only robot i's
-    own residuals and thresholds.
-    """
-
-    kind = "decision"
-
-    def __init__(self, window: float | None = None, isolation: str | None = None) -> None:
-        self.window_param = window
-        self.isolation_param = isolation
-
-    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
-        """All timers at zero, nobody flagged."""
-        self.dt = config.dt
-        self.window = config.detection_window if self.window_param is None else self.window_param
-        isolation = config.isolation if self.isolation_param is None else self.isolation_param
-        if isolation not in ("pairwise", "exclusive"):
-            raise ValueError(f"isolation must be 'pairwise' or 'exclusive', got {isolation!r}")
-        self.exclusive = isolation == "exclusive"
-        n = len(x_m0)
-        self.above = np.zeros((n, n))
-        self.below = np.zeros((n, n))
-        self.flag = np.zeros((n, n), bool)
-        self._raised = np.zeros((n, n), bool)
-
-    @classmethod
-    def standalone(cls, n: int, window: float, dt: float) -> Decision:
-        """A decision block for ``n`` robots outside any team."""
-        d = cls(window)
-        d.dt, d.window, d.exclusive = dt, window, False
-        d.above, d.below = np.zeros((n, n)), np.zeros((n, n))
-        d.flag, d._raised = np.zeros((n, n), bool), np.zeros((n, n), bool)
-        return d
-
-    def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
-        """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
-        decide(
-            np.ascontiguousarray(r_norm, float),
-            np.ascontiguousarray(mu, float),
-            self.above,
-            self.below,
-            self.flag,
-            self.dt,
-            self.window,
-            self.exclusive,
-            self._raised,
-        )
-        return self._raised
-
-    def drop(self, p: int, graph: Graph, t: float) -> None:
-        """Forget robot at position ``p`` (vectors resized after an exclusion)."""
-        for name in ("above", "below", "flag", "_raised"):
-            a = getattr(self, name)
-            setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))

@@ -1,0 +1,109 @@
+"""The decision of eq. 39 with the time window of Remark 5.2.
+
+:class:`Decision` (block) raises robot i's flag on robot k when ‖ⁱr_k‖ > ⁱμ_k has held for
+``window`` seconds, and lowers it after as long below; with ``isolation = "exclusive"``
+(eq. 39's second clause) a robot flags k only while no other robot is above its threshold.
+The rule is the compiled :func:`decide`, which the compiled period calls too."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..graph import Graph
+from .block import Block, TeamConfig
+
+
+@njit(cache=True)
+def decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # pragma: no cover
+    """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
+
+    Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
+    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns
+    how many were raised. With ``exclusive`` (eq. 39's second clause) robot i counts
+    ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals stay at or below their thresholds.
+    """
+    count = 0
+    for i in range(r_norm.shape[0]):
+        n_over = 0
+        if exclusive:
+            for k in range(r_norm.shape[1]):
+                if r_norm[i, k] > mu[i, k]:
+                    n_over += 1
+        for k in range(r_norm.shape[1]):
+            raised[i, k] = False
+            if r_norm[i, k] > mu[i, k] and not (exclusive and n_over > 1):
+                above[i, k] += dt
+                below[i, k] = 0.0
+                if not flag[i, k] and above[i, k] >= window - 1e-9:
+                    flag[i, k] = True
+                    raised[i, k] = True
+                    count += 1
+            else:
+                above[i, k] = 0.0
+                below[i, k] += dt
+                if flag[i, k] and below[i, k] >= window - 1e-9:
+                    flag[i, k] = False
+    return count
+
+
+class Decision(Block):
+    """Debounced flags: robot i flags k after ``window`` s above ⁱμ_k (eq. 39, Remark 5.2).
+
+    ``window`` defaults to the scenario's ``fdir.detection_window`` and
+    ``isolation`` to ``fdir.isolation``: ``"pairwise"`` (robot i judges each k on
+    its own) or ``"exclusive"`` (eq. 39's second clause: robot i isolates k only
+    while its other residuals stay below their thresholds). Override
+    :meth:`update` to try another decision rule; row i may use only robot i's
+    own residuals and thresholds.
+    """
+
+    kind = "decision"
+
+    def __init__(self, window: float | None = None, isolation: str | None = None) -> None:
+        self.window_param = window
+        self.isolation_param = isolation
+
+    def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
+        """All timers at zero, nobody flagged."""
+        self.dt = config.dt
+        self.window = config.detection_window if self.window_param is None else self.window_param
+        isolation = config.isolation if self.isolation_param is None else self.isolation_param
+        if isolation not in ("pairwise", "exclusive"):
+            raise ValueError(f"isolation must be 'pairwise' or 'exclusive', got {isolation!r}")
+        self.exclusive = isolation == "exclusive"
+        n = len(x_m0)
+        self.above = np.zeros((n, n))
+        self.below = np.zeros((n, n))
+        self.flag = np.zeros((n, n), bool)
+        self._raised = np.zeros((n, n), bool)
+
+    @classmethod
+    def standalone(cls, n: int, window: float, dt: float) -> Decision:
+        """A decision block for ``n`` robots outside any team."""
+        d = cls(window)
+        d.dt, d.window, d.exclusive = dt, window, False
+        d.above, d.below = np.zeros((n, n)), np.zeros((n, n))
+        d.flag, d._raised = np.zeros((n, n), bool), np.zeros((n, n), bool)
+        return d
+
+    def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
+        decide(
+            np.ascontiguousarray(r_norm, float),
+            np.ascontiguousarray(mu, float),
+            self.above,
+            self.below,
+            self.flag,
+            self.dt,
+            self.window,
+            self.exclusive,
+            self._raised,
+        )
+        return self._raised
+
+    def drop(self, p: int, graph: Graph, t: float) -> None:
+        """Forget robot at position ``p`` (vectors resized after an exclusion)."""
+        for name in ("above", "below", "flag", "_raised"):
+            a = getattr(self, name)
+            setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))

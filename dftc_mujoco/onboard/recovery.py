@@ -1,0 +1,76 @@
+"""Recovery: the exclusion of a faulty robot at a common instant (eqs. 42-43, NOTES 10).
+
+The first flag raised on robot k by anyone fixes its exclusion instant
+t_r = min ⁱt_d + Δt_d,max (eq. 43); at t_r robot k is excluded if some member still flags it,
+and the exclusion is cancelled otherwise. :class:`Recovery` keeps that bookkeeping and says
+what is due; :class:`~.team.Team` owns the vectors that an exclusion resizes and applies it
+(the observers, thresholds and decisions drop the robot, the formation is re-planned).
+Robots are on the original axis (0-based); events carry them 1-based.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+
+class Recovery:
+    """Which robots are to be excluded when, from the flags the team raises."""
+
+    def __init__(self, dt_d_max: float) -> None:
+        self.dt_d_max = float(dt_d_max)
+        self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
+        self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
+        self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
+
+    def flagged(self, t: float, pairs: Iterable[tuple[int, int]]) -> list[dict[str, Any]]:
+        """Robot ``by`` raised a flag on ``robot`` at ``t`` for each pair: a ``detection``
+        event for each first flag of a pair, and the exclusion scheduled at t_r (eq. 43)
+        for each robot flagged for the first time."""
+        events: list[dict[str, Any]] = []
+        for by, robot in pairs:
+            if (by, robot) in self.detected:
+                continue
+            self.detected.add((by, robot))
+            events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
+            if robot not in self.first_detection:
+                t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
+                self.first_detection[robot] = t
+                self.pending[robot] = t_r
+                events.append(
+                    {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
+                )
+        return events
+
+    def due(self, t: float) -> list[int]:
+        """The robots whose t_r has come, earliest first; they are no longer pending."""
+        ready = sorted((t_r, r) for r, t_r in self.pending.items() if t + 1e-9 >= t_r)
+        for _, robot in ready:
+            del self.pending[robot]
+            self.first_detection.pop(robot, None)
+        return [robot for _, robot in ready]
+
+    def detectors(self, robot: int) -> list[int]:
+        """Every robot that ever flagged ``robot`` (1-based, sorted)."""
+        return sorted(by + 1 for by, k in self.detected if k == robot)
+
+    def cancel(self, t: float, robot: int) -> dict[str, Any]:
+        """Nobody flags ``robot`` at its t_r: it stays, and its detections are forgotten."""
+        event = {
+            "t": t,
+            "kind": "exclusion_cancelled",
+            "robot": robot + 1,
+            "detected_by": self.detectors(robot),
+        }
+        self.detected = {(b, k) for b, k in self.detected if k != robot}
+        return event
+
+    def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:
+        """The ``exclusion`` event of ``robot``, still flagged at t_r by ``flaggers``."""
+        return {
+            "t": t,
+            "kind": "exclusion",
+            "robot": robot + 1,
+            "flagged_by": flaggers,
+            "detected_by": self.detectors(robot),
+        }

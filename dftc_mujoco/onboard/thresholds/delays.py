@@ -1,0 +1,117 @@
+"""Δt_d of eq. 46: when a constant fault is guaranteed detected, robot by robot.
+
+:func:`predicted_delays` sweeps the signature of a constant fault, h·fault·S_ik(j), against
+twice the steady threshold of any rule (``fdir.dt_d_max = "auto"``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...graph import Graph, reaches_all, rotation_invariant
+from .envelope import CHECK, MAX_PERIODS, MAX_WORK, _slack
+from .kernels import Adjacency, advance_crossing, column_of_row
+
+#: Δt_d: crossings are found period by period up to this much work, then bounded
+EXACT_CROSSING_WORK = 5e8
+
+
+def predicted_delays(
+    graph: Graph,
+    ko: float,
+    h: float,
+    mu_steady: np.ndarray,
+    fault: float,
+    max_work: float = MAX_WORK,
+) -> np.ndarray:
+    """ⁱΔt_d (M, M) [s] for a constant, uncompensated fault of size ``fault`` [m/s] on robot k.
+
+    Such a fault moves robot k's measured y_m,k by h·fault every period, so by eq. (1)
+    of ``docs/thresholds.md`` its signature at robot i after j periods is
+    ‖ⁱf_k‖ = h·fault·S_ik(j), S_ik(j) = Σ_{m<j} [A_k^m]_{ik} (increasing to 1/(h k_o) when
+    A_k ≥ 0), and eq. 46 guarantees detection once it reaches 2 ⁱμ_k (the steady
+    threshold ``mu_steady``, rows i, columns k). The columns A_k^j e_k are swept (batched,
+    :mod:`.columns`) until every pair has crossed or the column is certified monotone;
+    then R = 1/(h k_o) − S decays at least as fast as s^m (A R(t) ≤ s R(t), s =
+    max_i R_i(t+1)/R_i(t)), which bounds the remaining crossing times from above.
+    +inf where fault/k_o ≤ 2 ⁱμ_k (never guaranteed) or robot k does not reach robot i,
+    and everywhere when some A_k has a negative entry (h k_o (d_max + 1) > 1): S_ik then
+    oscillates and can fall back below 2 ⁱμ_k after crossing it, inside the detection
+    window, so no crossing guarantees a flag.
+    """
+    n = graph.n
+    beta = h * ko
+    mass = 1.0 / beta
+    need = 2.0 * np.asarray(mu_steady, float) / (h * fault)  # [i, k], in units of S
+    adj = Adjacency.of(graph)
+    if beta * (adj.deg.max() + 1.0) > 1.0 + 1e-12:
+        return np.full((n, n), np.inf)
+    finite = reaches_all(graph)
+    crossable = np.isfinite(need) & finite[None, :] & (need < mass * (1.0 - 1e-12))
+    circulant = bool(finite.all()) and rotation_invariant(graph)
+    if circulant:  # one column, with the largest need at each offset i − k
+        rot = need[(np.arange(n)[:, None] + np.arange(n)[None, :]) % n, np.arange(n)[None, :]]
+        need0 = rot.max(axis=1, keepdims=True)
+        ok0 = np.isfinite(need0) & (need0 < mass * (1.0 - 1e-12))
+        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work)
+        idx = (np.arange(n)[:, None] - np.arange(n)[None, :]) % n
+        return periods[:, 0][idx] * h
+    out = np.full((n, n), np.inf)
+    ks = np.flatnonzero(crossable.any(axis=0))
+    if len(ks):
+        out[:, ks] = _crossing_periods(adj, beta, ks, need[:, ks], crossable[:, ks], max_work)
+    return out * h
+
+
+def _crossing_periods(
+    adj: Adjacency,
+    beta: float,
+    ks: np.ndarray,
+    need: np.ndarray,
+    crossable: np.ndarray,
+    max_work: float,
+) -> np.ndarray:
+    """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never)."""
+    n, kk = adj.n, len(ks)
+    mass = 1.0 / beta
+    result = np.where(crossable & (need <= 0.0), 0.0, np.inf)
+    v = np.zeros((n, kk))
+    v[ks, np.arange(kk)] = 1.0
+    prev, tot = np.zeros((n, kk)), np.zeros((n, kk))
+    goal = np.where(crossable, need, np.inf)
+    when = np.where(result == 0.0, 0, -1).astype(np.int64)
+    cert = np.full(kk, -1, dtype=np.int64)
+    cols = np.arange(kk)
+    t, work = 0, 0.0
+    while len(cols):
+        advance_crossing(
+            v, prev, tot, goal, when, adj.src, adj.first, adj.deg,
+            column_of_row(ks[cols], n), beta, CHECK, t, cert,
+        )  # fmt: skip
+        t += CHECK
+        work += CHECK * len(cols) * (n + len(adj.src))
+        open_ = (when < 0) & np.isfinite(goal)
+        crossed = ~open_.any(axis=0)
+        out_of_budget = work > max_work or t >= MAX_PERIODS
+        # past its certificate a column's crossings are bounded from R's decay; while the
+        # sweep is cheap it goes on to find them exactly
+        done = crossed | ((cert >= 0) & (work > EXACT_CROSSING_WORK)) | out_of_budget
+        if not done.any():
+            continue
+        idx = np.flatnonzero(done)
+        c = cols[idx]
+        got = when[:, idx] >= 0
+        result[:, c] = np.where(got, when[:, idx], result[:, c])
+        # the rest from R(t + m) <= s^m R(t) (A_k >= 0)
+        rem = mass - tot[:, idx] + _slack(t, mass)
+        s = np.clip(((rem - v[:, idx]) / rem).max(axis=0), 0.0, 1.0)
+        g = goal[:, idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m = np.ceil(np.log((mass - g) / rem) / np.log(s))
+        late = ~got & np.isfinite(g) & (s < 1.0)
+        result[:, c] = np.where(late, t + np.maximum(m, 0.0), result[:, c])
+        keep = ~done
+        v, prev, tot, goal, when = (
+            np.ascontiguousarray(a[:, keep]) for a in (v, prev, tot, goal, when)
+        )
+        cert, cols = cert[keep], cols[keep]
+    return result
