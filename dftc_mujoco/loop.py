@@ -133,7 +133,17 @@ def team_config(
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
         lag=drive_lag(s, robot),
+        max_faults=max_faults(s),
+        self_exclusion=f.self_exclusion,
     )
+
+
+def max_faults(s: Scenario) -> int:
+    """The fault hypothesis: the scenario's ``fdir.max_faults``, or ⌊(N − 1)/2⌋ ("auto", at
+    least 1): more robots flagged at once than that is a systemic anomaly, not faults."""
+    if s.fdir.max_faults != "auto":
+        return int(s.fdir.max_faults)
+    return max(1, (s.team.graph.n - 1) // 2)
 
 
 def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
@@ -577,6 +587,8 @@ class Simulation:
             kind = e.pop("kind")
             if kind == "detection":
                 e["premises"] = monitor.violated(e["robot"] - 1, t)
+            elif kind == "systemic_anomaly":  # what the flagged robots violated then
+                e["premises"] = sorted({p for r in e["robots"] for p in monitor.violated(r - 1, t)})
             elif kind == "exclusion":
                 monitor.watched[e["robot"] - 1] = False
             elif kind == "graph_not_strongly_connected":

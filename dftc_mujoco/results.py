@@ -325,6 +325,10 @@ def summarize(
     healthy_flags = [d for d in summary["detections"] if _healthy_at(events, d["robot"], d["t"])]
     summary["healthy_flags"] = len(healthy_flags)
     summary["healthy_flags_premises_held"] = sum(1 for d in healthy_flags if not d["premises"])
+    summary["healthy_exclusions"] = sum(
+        1 for e in events.of_kind("exclusion") if _healthy_at(events, e["robot"], e["t"])
+    )
+    summary["systemic_anomalies"] = len(events.of_kind("systemic_anomaly"))
     summary["events"] = events.ordered()
     return summary
 

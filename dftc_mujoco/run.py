@@ -161,7 +161,26 @@ def _fmt_event(e: dict) -> str:
         by = ", ".join(str(b) for b in e["flagged_by"])
         return f"robot {r} excluded from the team (still flagged by {by})"
     if k == "exclusion_cancelled":
-        return f"robot {r} kept: nobody flags it any more at t_r"
+        why = {
+            "systemic_anomaly": "a systemic anomaly holds (more robots flagged than faults)",
+            "flagged_only_by_itself": "only its own flag is up (exclusion needs teammates)",
+        }.get(e.get("reason", "").replace(" ", "_"), "nobody flags it any more")
+        return f"robot {r} kept at t_r: {why}"
+    if k == "systemic_anomaly":
+        who = ", ".join(str(b) for b in e["robots"])
+        return (
+            f"SYSTEMIC ANOMALY: robots {who} flagged at once ({e['excluded']} excluded before), "
+            f"more than the {e['max_faults']} faulty robot(s) fdir.max_faults admits; nobody is "
+            "excluded until every flag is down"
+            + (f" — premises violated: {', '.join(e['premises'])}" if e.get("premises") else "")
+        )
+    if k == "systemic_anomaly_over":
+        return "systemic anomaly over: no robot is flagged by a teammate any more"
+    if k == "detection_horizon":
+        return (
+            f"Δt_d,max recomputed on the reduced graph (eq. 46): {e['value']:.2f} s "
+            f"(was {e['before']:.2f} s)"
+        )
     if k == "graph_not_strongly_connected":
         left = ", ".join(str(b) for b in e["robots"])
         return (

@@ -232,7 +232,7 @@ class Fdir:
     phi_low_pass: float = 0.0
     enabled: bool = True
     compensate: bool = True  # false: φ̂ is estimated and logged but not applied
-    isolation: str = "pairwise"  # or "exclusive": eq. 39's second clause
+    isolation: str = "pairwise"  # "exclusive": eq. 39's 2nd clause now; "exclusive_history": ever
     reference_fault: float = 0.0  # [m/s] the fault Δt_d,max = "auto" is sized for (0: path speed)
     # the input that enters y_m, Δu and the fault estimator: "applied" (the nominal input
     # after the robot's own command limits, Remark 4.1) or "nominal" (as computed, eq. 8)
@@ -240,6 +240,9 @@ class Fdir:
     # τ [s] of the first-order drive lag each robot models (onboard/applied.py), or "robot":
     # the robot file's calibrated [calibration] lag (0 when it has none: ẋ = u)
     drive_lag: float | str = "robot"
+    # how many robots may be faulty at once, or "auto": ⌊(N − 1)/2⌋ (onboard/recovery.py)
+    max_faults: int | str = "auto"
+    self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
 
 
 @dataclass(frozen=True)
@@ -1361,13 +1364,29 @@ def _fdir(t: _Table) -> Fdir:
         phi_low_pass=t.number("phi_low_pass", 0.0, low=0.0, strict_low=False),
         enabled=t.boolean("enabled", True),
         compensate=t.boolean("compensate", True),
-        isolation=t.string("isolation", "pairwise", choices=("pairwise", "exclusive")),
+        isolation=t.string(
+            "isolation", "pairwise", choices=("pairwise", "exclusive", "exclusive_history")
+        ),
         reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
         input=t.string("input", "applied", choices=("applied", "nominal")),
         drive_lag=_drive_lag(t),
+        max_faults=_max_faults(t),
+        self_exclusion=t.boolean("self_exclusion", False),
     )
     t.finish()
     return f
+
+
+def _max_faults(t: _Table) -> int | str:
+    """How many robots may be faulty at once: a whole number ≥ 1, or "auto"."""
+    raw = t.data.get("max_faults", "auto")
+    t.raw("max_faults", "auto")
+    if raw == "auto":
+        return "auto"
+    if isinstance(raw, bool) or not isinstance(raw, int) or raw < 1:
+        t.report("max_faults", f'expected a whole number of robots ≥ 1 or "auto", got {raw!r}')
+        return "auto"
+    return raw
 
 
 def _drive_lag(t: _Table) -> float | str:

@@ -1,13 +1,19 @@
 """The exclusion protocol (eqs. 42-43, ``onboard/recovery.py``): one exclusion instant per
-robot from its first flag, cancelled when nobody flags it at that instant."""
+robot from its first flag, cancelled when nobody flags it at that instant; exclusion needs
+teammates, respects the fault hypothesis, and Δt_d,max follows the graph (issue 20)."""
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
+
+from dftc_mujoco import load_scenario, simulate
 from dftc_mujoco.onboard.recovery import Recovery
+from dftc_mujoco.onboard.thresholds import Thresholds
 
 
 def test_the_first_flag_fixes_the_common_instant_and_later_flags_do_not_move_it():
-    rec = Recovery(dt_d_max=5.0)
+    rec = Recovery(dt_d_max=5.0, max_faults=1)
     first = rec.flagged(10.0, [(2, 1)])
     assert [e["kind"] for e in first] == ["detection", "exclusion_scheduled"]
     assert first[1]["t_r"] == 15.0 and first[1]["robot"] == 2
@@ -19,7 +25,7 @@ def test_the_first_flag_fixes_the_common_instant_and_later_flags_do_not_move_it(
 
 
 def test_due_robots_come_earliest_first_and_a_cancelled_one_can_be_scheduled_again():
-    rec = Recovery(dt_d_max=2.0)
+    rec = Recovery(dt_d_max=2.0, max_faults=1)
     rec.flagged(3.0, [(0, 2)])
     rec.flagged(1.0, [(0, 3)])
     assert rec.due(10.0) == [3, 2]
@@ -31,9 +37,106 @@ def test_due_robots_come_earliest_first_and_a_cancelled_one_can_be_scheduled_aga
 
 
 def test_an_exclusion_names_who_flags_at_t_r_and_who_ever_detected():
-    rec = Recovery(dt_d_max=1.0)
+    rec = Recovery(dt_d_max=1.0, max_faults=1)
     rec.flagged(0.5, [(0, 1), (2, 1), (3, 1)])
     assert rec.due(1.5) == [1]
     e = rec.exclusion(1.5, 1, flaggers=[3, 4])
     assert e == {"t": 1.5, "kind": "exclusion", "robot": 2, "flagged_by": [3, 4],
                  "detected_by": [1, 3, 4]}  # fmt: skip
+
+
+def test_a_robots_own_flag_neither_schedules_nor_confirms_its_exclusion():
+    rec = Recovery(dt_d_max=1.0, max_faults=1)
+    events = rec.flagged(0.5, [(1, 1)])  # robot 2 flags itself
+    assert [e["kind"] for e in events] == ["detection"] and rec.pending == {}
+    assert not rec.counts(1, 1) and rec.counts(0, 1)
+    paper = Recovery(dt_d_max=1.0, max_faults=1, self_exclusion=True)  # eq. 43 read literally
+    assert [e["kind"] for e in paper.flagged(0.5, [(1, 1)])][-1] == "exclusion_scheduled"
+
+
+def test_more_robots_flagged_than_the_hypothesis_is_a_systemic_anomaly_until_all_flags_drop():
+    rec = Recovery(dt_d_max=1.0, max_faults=2)
+    assert rec.hypothesis(0.1, [4, 5], excluded=0) is None  # two faults: admitted
+    begin = rec.hypothesis(0.2, [4, 5], excluded=1)  # one robot excluded before: three
+    assert begin["kind"] == "systemic_anomaly" and begin["robots"] == [5, 6]
+    assert rec.hypothesis(0.3, [7], excluded=1) is None  # fewer now, but flags are still up
+    end = rec.hypothesis(0.4, [], excluded=1)
+    assert end["kind"] == "systemic_anomaly_over" and end["robots"] == [5, 6, 8]
+    assert rec.anomaly is None
+
+
+# --------------------------------------------------------------------------- on physics
+
+
+def test_a_100_robot_systemic_anomaly_excludes_nobody():
+    """Issue 20's first problem: 100 robots flag one another at once (here by integrating the
+    nominal input, saturated by the drives). Before, 99 healthy robots were excluded; now a
+    systemic anomaly is reported with the premises the flagged robots violated, every
+    exclusion that comes due is cancelled, and the team goes on."""
+    from tests.test_premises import shuffled
+
+    r = simulate(load_scenario("paper_case", shuffled(100, 12.0, **{"fdir.input": "nominal"})))
+    assert r.ok
+    anomaly = r.events.of_kind("systemic_anomaly")
+    assert anomaly and len(anomaly[0]["robots"]) > 49 and anomaly[0]["max_faults"] == 49
+    assert "saturation" in anomaly[0]["premises"]
+    assert r.summary["systemic_anomalies"] >= 1
+    assert r.events.of_kind("exclusion") == [] and r.summary["healthy_exclusions"] == 0
+    cancelled = r.events.of_kind("exclusion_cancelled")
+    assert cancelled and all(e["reason"] == "systemic_anomaly" for e in cancelled)
+
+
+class SelfOnly(Thresholds):
+    """Only robot 1 can flag, and only itself: every other threshold is infinite."""
+
+    def mu(self, t: float) -> np.ndarray:
+        mu = np.full((len(self.restart_y0), len(self.restart_y0)), np.inf)
+        mu[0, 0] = 1e-9
+        return mu
+
+    def restart(self, graph, y0, t0):
+        super().restart(graph, y0, t0)
+        self.restart_y0 = np.asarray(y0)
+
+
+def test_a_flag_of_a_robot_on_itself_alone_excludes_nobody():
+    """Issue 20's second problem: a robot's own flag scheduled and confirmed its exclusion. Now
+    it is reported but exclusion needs teammates; ``fdir.self_exclusion = true`` keeps eq. 43
+    read literally."""
+    s = load_scenario("paper_case", {"duration": 10.0, "faults": []})
+    r = simulate(s, blocks={"thresholds": SelfOnly()})
+    assert [(d["by"], d["robot"]) for d in r.summary["detections"]] == [(1, 1)]
+    assert r.events.of_kind("exclusion_scheduled") == [] and r.events.of_kind("exclusion") == []
+    literal = load_scenario(
+        "paper_case", {"duration": 10.0, "faults": [], "fdir.self_exclusion": True}
+    )
+    r = simulate(literal, blocks={"thresholds": SelfOnly()})
+    assert [e["robot"] for e in r.events.of_kind("exclusion")] == [1]
+
+
+def test_dt_d_max_is_recomputed_on_the_reduced_graph_at_an_exclusion():
+    """Issue 20's third problem: Δt_d,max ("auto", eq. 46) was kept from the full graph. Now
+    each exclusion recomputes it on the reduced graph and thresholds, and a second stop is
+    excluded at the first flag + the new value."""
+    s = load_scenario(
+        "paper_case",
+        {
+            "onboard.thresholds": "l1",
+            "fdir.dt_d_max": "auto",
+            "faults": [
+                {"robot": 1, "kind": "stop", "t": 41.8},
+                {"robot": 3, "kind": "stop", "t": 52.0},
+            ],
+            "fdir.max_faults": 2,
+            "duration": 62.0,
+        },
+    )
+    r = simulate(s)
+    first = r.summary["dt_d_max"]["value"]
+    (horizon,) = r.events.of_kind("detection_horizon")[:1]
+    assert horizon["before"] == first and horizon["value"] != first
+    assert r.summary["dt_d_max"]["after_exclusions"][0]["value"] == horizon["value"]
+    gone = r.events.of_kind("exclusion")
+    assert [e["robot"] for e in gone] == [1, 3]
+    t_first = min(d["t"] for d in r.summary["detections"] if d["robot"] == 3 and d["by"] != 3)
+    assert gone[1]["t"] == pytest.approx(t_first + horizon["value"], abs=0.011)

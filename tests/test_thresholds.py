@@ -477,23 +477,48 @@ def test_dt_d_max_from_the_analysis_covers_every_robots_detection():
 
 
 def test_exclusive_isolation_needs_the_other_residuals_below_their_thresholds():
-    from dftc_mujoco.onboard.decision import Decision
+    from dftc_mujoco.onboard.decision import ISOLATION, Decision
 
     mu = np.ones((2, 3))
     one = np.array([[0.0, 2.0, 0.0], [0.0, 0.0, 0.0]])  # robot 1 sees only robot 2 over
     two = np.array([[0.0, 2.0, 2.0], [0.0, 0.0, 0.0]])  # robot 1 sees robots 2 and 3 over
-    for residual, expect in (
-        (one, {"pairwise": True, "exclusive": True}),
-        (two, {"pairwise": True, "exclusive": False}),
+    three = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 0.0]])  # then robot 3 alone
+    quiet = np.zeros((2, 3))
+    for sequence, k, expect in (
+        ([one], 1, {"pairwise": True, "exclusive": True, "exclusive_history": True}),
+        ([two], 1, {"pairwise": True, "exclusive": False, "exclusive_history": False}),
+        # robot 1 flagged robot 2 earlier: the history clause never lets it isolate robot 3
+        ([one, quiet, three], 2, {"pairwise": True, "exclusive": True, "exclusive_history": False}),
     ):
         for rule, flagged in expect.items():
             d = Decision.standalone(3, window=0.05, dt=0.01)
             d.above, d.below = np.zeros((2, 3)), np.zeros((2, 3))
             d.flag, d._raised = np.zeros((2, 3), bool), np.zeros((2, 3), bool)
-            d.exclusive = rule == "exclusive"
-            for _ in range(10):
-                d.update(residual, mu)
-            assert bool(d.flag[0, 1]) == flagged, (rule, residual)
+            d.isolated = np.full(2, -1, dtype=np.int64)
+            d.exclusive = ISOLATION[rule]
+            for residual in sequence:
+                for _ in range(10):
+                    d.update(residual, mu)
+            assert bool(d.flag[0, k]) == flagged, (rule, k)
+
+
+def test_the_history_clause_restarts_after_an_exclusion_and_paper_case_keeps_its_outcome():
+    """With eq. 39 as the paper states it, paper_case still isolates robot 1's stop (robot 2's
+    compensated bias never flags); after an exclusion each robot may isolate again."""
+    from dftc_mujoco import load_scenario, simulate
+    from dftc_mujoco.onboard.decision import Decision
+
+    r = simulate(load_scenario("paper_case", {"fdir.isolation": "exclusive_history"}))
+    assert [e["robot"] for e in r.events.of_kind("exclusion")] == [1]
+    assert all(d["robot"] == 1 for d in r.summary["detections"])
+    d = Decision.standalone(3, window=0.05, dt=0.01)
+    d.exclusive = 2
+    d.update(np.array([[0.0, 2.0, 0.0]] * 3), np.ones((3, 3)))
+    for _ in range(5):
+        d.update(np.array([[0.0, 2.0, 0.0]] * 3), np.ones((3, 3)))
+    assert list(d.isolated) == [1, 1, 1]
+    d.drop(1, Graph(2, ((0, 1), (1, 0))), 1.0)
+    assert list(d.isolated) == [-1, -1]
 
 
 def test_fdir_options_are_validated():
@@ -504,7 +529,9 @@ def test_fdir_options_are_validated():
     lines = str(err.value).splitlines()
     assert len(lines) == 2
     assert 'fdir.dt_d_max: expected a number of seconds or "auto"' in lines[0]
-    assert "fdir.isolation: expected one of 'pairwise', 'exclusive'" in lines[1]
+    assert (
+        "fdir.isolation: expected one of 'pairwise', 'exclusive', 'exclusive_history'" in lines[1]
+    )
 
 
 @pytest.mark.parametrize(("model", "G"), [("disk", 0.01), ("hexbot", 0.01), ("diffdrive", 0.02)])

@@ -38,7 +38,7 @@ class TeamConfig:
     obstacle_activation: np.ndarray  # (O,)
     detection_window: float = 0.2
     dt_d_max: float | str = 5.0  # or "auto": eq. 46 (onboard/thresholds/delays.py)
-    isolation: str = "pairwise"  # or "exclusive" (eq. 39's second clause)
+    isolation: str = "pairwise"  # "exclusive", "exclusive_history" (eq. 39, decision.py)
     reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
     initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (premises.py)
     replan_time: float = 4.0
@@ -49,6 +49,8 @@ class TeamConfig:
     # per-axis range of the applied nominal input uᵢ (onboard/applied.py) [m/s]: the command
     # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
     input_limit: float = np.inf
+    max_faults: int = 1  # robots that may be faulty at once (fdir.max_faults, recovery.py)
+    self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)
     compiled: bool = True  # compose the paper's blocks in one compiled period when possible
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)

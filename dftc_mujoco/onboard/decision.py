@@ -13,32 +13,44 @@ from numba import njit
 from ..graph import Graph
 from .block import Block, TeamConfig
 
+#: ``fdir.isolation`` -> the mode of :func:`decide`
+ISOLATION = {"pairwise": 0, "exclusive": 1, "exclusive_history": 2}
+
 
 @njit(cache=True)
-def decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # pragma: no cover
+def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised):  # pragma: no cover
     """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
 
     Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
-    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns
-    how many were raised. With ``exclusive`` (eq. 39's second clause) robot i counts
-    ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals stay at or below their thresholds.
+    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns how many
+    were raised. ``mode`` (:data:`ISOLATION`): 0, pairwise, robot i judges each k on its
+    own; 1, exclusive, robot i counts ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals are
+    at or below their thresholds (eq. 39's second clause, instant by instant); 2,
+    exclusive with history, eq. 39 as the paper states it: also only if robot i has flagged
+    no other robot since the last restart. ``isolated[i]`` (M,) is the robot robot i
+    flagged first since then (−1: none), kept for mode 2.
     """
     count = 0
     for i in range(r_norm.shape[0]):
         n_over = 0
-        if exclusive:
+        if mode > 0:
             for k in range(r_norm.shape[1]):
                 if r_norm[i, k] > mu[i, k]:
                     n_over += 1
         for k in range(r_norm.shape[1]):
             raised[i, k] = False
-            if r_norm[i, k] > mu[i, k] and not (exclusive and n_over > 1):
+            blocked = (mode > 0 and n_over > 1) or (
+                mode == 2 and isolated[i] >= 0 and isolated[i] != k
+            )
+            if r_norm[i, k] > mu[i, k] and not blocked:
                 above[i, k] += dt
                 below[i, k] = 0.0
                 if not flag[i, k] and above[i, k] >= window - 1e-9:
                     flag[i, k] = True
                     raised[i, k] = True
                     count += 1
+                    if isolated[i] < 0:
+                        isolated[i] = k
             else:
                 above[i, k] = 0.0
                 below[i, k] += dt
@@ -52,8 +64,10 @@ class Decision(Block):
 
     ``window`` defaults to the scenario's ``fdir.detection_window`` and
     ``isolation`` to ``fdir.isolation``: ``"pairwise"`` (robot i judges each k on
-    its own) or ``"exclusive"`` (eq. 39's second clause: robot i isolates k only
-    while its other residuals stay below their thresholds). Override
+    its own), ``"exclusive"`` (eq. 39's second clause read instant by instant: robot i
+    isolates k only while its other residuals stay below their thresholds) or
+    ``"exclusive_history"`` (eq. 39 as the paper states it: and only if robot i has
+    flagged no other robot since the last exclusion). Override
     :meth:`update` to try another decision rule; row i may use only robot i's
     own residuals and thresholds.
     """
@@ -69,10 +83,11 @@ class Decision(Block):
         self.dt = config.dt
         self.window = config.detection_window if self.window_param is None else self.window_param
         isolation = config.isolation if self.isolation_param is None else self.isolation_param
-        if isolation not in ("pairwise", "exclusive"):
-            raise ValueError(f"isolation must be 'pairwise' or 'exclusive', got {isolation!r}")
-        self.exclusive = isolation == "exclusive"
+        if isolation not in ISOLATION:
+            raise ValueError(f"isolation must be one of {', '.join(ISOLATION)}, got {isolation!r}")
+        self.exclusive = ISOLATION[isolation]
         n = len(x_m0)
+        self.isolated = np.full(n, -1, dtype=np.int64)
         self.above = np.zeros((n, n))
         self.below = np.zeros((n, n))
         self.flag = np.zeros((n, n), bool)
@@ -82,7 +97,8 @@ class Decision(Block):
     def standalone(cls, n: int, window: float, dt: float) -> Decision:
         """A decision block for ``n`` robots outside any team."""
         d = cls(window)
-        d.dt, d.window, d.exclusive = dt, window, False
+        d.dt, d.window, d.exclusive = dt, window, 0
+        d.isolated = np.full(n, -1, dtype=np.int64)
         d.above, d.below = np.zeros((n, n)), np.zeros((n, n))
         d.flag, d._raised = np.zeros((n, n), bool), np.zeros((n, n), bool)
         return d
@@ -98,12 +114,15 @@ class Decision(Block):
             self.dt,
             self.window,
             self.exclusive,
+            self.isolated,
             self._raised,
         )
         return self._raised
 
     def drop(self, p: int, graph: Graph, t: float) -> None:
-        """Forget robot at position ``p`` (vectors resized after an exclusion)."""
+        """Forget robot at position ``p`` (vectors resized after an exclusion); the isolation
+        history starts again (the fault it recorded has been handled)."""
         for name in ("above", "below", "flag", "_raised"):
             a = getattr(self, name)
             setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))
+        self.isolated = np.full(len(self.flag), -1, dtype=np.int64)

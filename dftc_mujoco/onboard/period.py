@@ -78,6 +78,7 @@ def team_period(
     flag,
     window,
     exclusive,
+    isolated,
     x_own,
     x_d,
     xd_dot,
@@ -147,7 +148,9 @@ def team_period(
         for r in range(u.shape[0]):
             for d in range(2):
                 u_bar[r, d] = command[r, d] - (applied[r, d] if compensate else 0.0)  # eq. 28
-        if decide(r_norm, mu, above, below, flag, dt, window, exclusive, raised):  # eq. 39
+        if decide(
+            r_norm, mu, above, below, flag, dt, window, exclusive, isolated, raised
+        ):  # eq. 39
             code |= RAISED
     else:
         u_bar[:] = command

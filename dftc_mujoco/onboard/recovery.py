@@ -2,9 +2,16 @@
 
 The first flag raised on robot k by anyone fixes its exclusion instant
 t_r = min ⁱt_d + Δt_d,max (eq. 43); at t_r robot k is excluded if some member still flags it,
-and the exclusion is cancelled otherwise. :class:`Recovery` keeps that bookkeeping and says
-what is due; :class:`~.team.Team` owns the vectors that an exclusion resizes and applies it
-(the observers, thresholds and decisions drop the robot, the formation is re-planned).
+and the exclusion is cancelled otherwise. Two rules keep the protocol from destroying the
+team (issue 20): exclusion needs teammates (a robot's own flag is reported but neither
+schedules nor confirms its own exclusion, unless ``self_exclusion``, the paper's eq. 43 read
+literally), and a fault hypothesis: when more robots are flagged by teammates at one instant
+than ``max_faults`` admits (those already excluded counted), something systemic is wrong (a
+premise, not a fault): a ``systemic_anomaly`` event names them and nobody is excluded until
+every flag is down.
+:class:`Recovery` keeps that bookkeeping and says what is due; :class:`~.team.Team` owns
+the vectors that an exclusion resizes and applies it (the observers, thresholds and
+decisions drop the robot, the formation is re-planned).
 Robots are on the original axis (0-based); events carry them 1-based.
 """
 
@@ -17,8 +24,11 @@ from typing import Any
 class Recovery:
     """Which robots are to be excluded when, from the flags the team raises."""
 
-    def __init__(self, dt_d_max: float) -> None:
+    def __init__(self, dt_d_max: float, max_faults: int, self_exclusion: bool = False) -> None:
         self.dt_d_max = float(dt_d_max)
+        self.max_faults = int(max_faults)
+        self.self_exclusion = bool(self_exclusion)
+        self.anomaly: list[int] | None = None  # the robots flagged while an anomaly lasts
         self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
@@ -33,6 +43,8 @@ class Recovery:
                 continue
             self.detected.add((by, robot))
             events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
+            if by == robot and not self.self_exclusion:
+                continue  # its own flag is reported, but exclusion needs teammates
             if robot not in self.first_detection:
                 t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
                 self.first_detection[robot] = t
@@ -41,6 +53,36 @@ class Recovery:
                     {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
                 )
         return events
+
+    def counts(self, by: int, robot: int) -> bool:
+        """Whether robot ``by`` flagging ``robot`` counts towards its exclusion."""
+        return by != robot or self.self_exclusion
+
+    def hypothesis(self, t: float, flagged: list[int], excluded: int) -> dict[str, Any] | None:
+        """The robots flagged by teammates now, and how many were excluded already: an event
+        when a ``systemic_anomaly`` begins or ends.
+
+        It begins when the excluded and the flagged robots together are more than
+        ``max_faults`` (the faulty robots of a mission are counted once excluded too, so no
+        run ever excludes more than ``max_faults`` robots), and it lasts until no robot is
+        flagged by a teammate any more: the whole episode is systemic, and every exclusion
+        that comes due meanwhile is cancelled."""
+        if self.anomaly is None:
+            if excluded + len(flagged) <= self.max_faults:
+                return None
+            self.anomaly = sorted(flagged)
+            return {
+                "t": t,
+                "kind": "systemic_anomaly",
+                "robots": [r + 1 for r in self.anomaly],
+                "max_faults": self.max_faults,
+                "excluded": excluded,
+            }
+        if flagged:
+            self.anomaly = sorted(set(self.anomaly) | set(flagged))
+            return None
+        robots, self.anomaly = self.anomaly, None
+        return {"t": t, "kind": "systemic_anomaly_over", "robots": [r + 1 for r in robots]}
 
     def due(self, t: float) -> list[int]:
         """The robots whose t_r has come, earliest first; they are no longer pending."""
@@ -54,13 +96,15 @@ class Recovery:
         """Every robot that ever flagged ``robot`` (1-based, sorted)."""
         return sorted(by + 1 for by, k in self.detected if k == robot)
 
-    def cancel(self, t: float, robot: int) -> dict[str, Any]:
-        """Nobody flags ``robot`` at its t_r: it stays, and its detections are forgotten."""
+    def cancel(self, t: float, robot: int, reason: str = "not flagged") -> dict[str, Any]:
+        """``robot`` stays at its t_r (no teammate flags it, or a ``systemic_anomaly`` holds),
+        and its detections are forgotten."""
         event = {
             "t": t,
             "kind": "exclusion_cancelled",
             "robot": robot + 1,
             "detected_by": self.detectors(robot),
+            "reason": reason,
         }
         self.detected = {(b, k) for b, k in self.detected if k != robot}
         return event

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import lag_coefficients, lag_input, limit_input
 from .block import Block, TeamConfig
@@ -113,12 +114,16 @@ class Team:
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
         self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
-        self.recovery = Recovery(self.dt_d_max)  # the exclusion protocol (eqs. 42-43)
+        # the exclusion protocol (eqs. 42-43) under the fault hypothesis
+        self.recovery = Recovery(self.dt_d_max, config.max_faults, config.self_exclusion)
+        self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
         self._resize()
 
-    def _detection_horizon(self) -> tuple[float, dict[str, Any]]:
-        """Δt_d,max: the scenario's, or (``"auto"``) eq. 46 for the reference fault."""
+    def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
+        """Δt_d,max: the scenario's, or (``"auto"``) eq. 46 for the reference fault on the
+        current graph and thresholds (recomputed at each exclusion)."""
         cfg = self.config
+        graph = cfg.graph if graph is None else graph
         if cfg.dt_d_max != "auto":
             return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
         from .thresholds import predicted_delays
@@ -126,7 +131,7 @@ class Team:
         # the steady thresholds of the run's rule, whatever it is; the signature of a
         # constant fault comes from the columns A_k^j e_k alone (no tables)
         steady = np.array(self.thresholds.mu(1e9), dtype=float)
-        delays = predicted_delays(cfg.graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
+        delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
         # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
         # reported, not waited for (its own residual sits on its noise and drift offset)
         self_ok = bool(np.isfinite(np.diag(delays)).all())
@@ -203,6 +208,8 @@ class Team:
             code = self._general(x_m, c, c_dot, offsets, rates)
         if code & RAISED:
             self._report(t, self._raised)
+        if code & RAISED or self.recovery.anomaly is not None:
+            self._hypothesis(t)
         if code & SWITCHED:
             self._switches(t)
         return code
@@ -255,6 +262,7 @@ class Team:
             dec.flag,
             dec.window,
             dec.exclusive,
+            dec.isolated,
             self.x_own,
             self.x_d,
             self.xd_dot,
@@ -427,14 +435,34 @@ class Team:
         pairs = ((int(mem[i]), int(mem[k])) for i, k in zip(*np.nonzero(raised), strict=True))
         self.events.extend(self.recovery.flagged(t, pairs))
 
+    def _hypothesis(self, t: float) -> None:
+        """A ``systemic_anomaly`` begins or ends: more robots flagged by teammates now (and
+        excluded before) than the fault hypothesis admits (``fdir.max_faults``)."""
+        m = len(self.members)
+        out = self._teammates[:m]
+        flag = np.asarray(self.flag, bool)
+        if self.recovery.self_exclusion:
+            np.any(flag, axis=0, out=out)
+        else:
+            flagged_by_teammates(flag, out)
+        event = self.recovery.hypothesis(t, [int(k) for k in self.members[out]], len(self.gone))
+        if event is not None:
+            self.events.append(event)
+
     def _exclusions_due(self, t: float) -> None:
-        """At t_r, drop a robot that some teammate still flags (NOTES 10)."""
+        """At t_r, drop a robot that some teammate still flags (NOTES 10), unless a systemic
+        anomaly holds."""
         for robot in self.recovery.due(t):
             p = int(np.flatnonzero(self.members == robot)[0])
             flag = np.asarray(self.flag, bool)
             flaggers = [int(self.members[i]) + 1 for i in np.flatnonzero(flag[:, p])]
-            if not flaggers:
-                self.events.append(self.recovery.cancel(t, robot))
+            counted = [b for b in flaggers if self.recovery.counts(b - 1, robot)]
+            if self.recovery.anomaly is not None:
+                self.events.append(self.recovery.cancel(t, robot, "systemic_anomaly"))
+                continue
+            if not counted:
+                reason = "flagged only by itself" if flaggers else "not flagged"
+                self.events.append(self.recovery.cancel(t, robot, reason))
                 continue
             last_pair = len(self.members) <= 2  # one robot would be left: no team, no mission
             if last_pair:
@@ -472,6 +500,14 @@ class Team:
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+        if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
+            before = self.dt_d_max
+            self.dt_d_max, info = self._detection_horizon(self.graph)
+            self.recovery.dt_d_max = self.dt_d_max
+            self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
+            self.events.append(
+                {"t": t, "kind": "detection_horizon", "value": self.dt_d_max, "before": before}
+            )
 
 
 @njit(cache=True)
