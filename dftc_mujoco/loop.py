@@ -39,6 +39,8 @@ from .sim import faults as sim_faults
 from .sim import robots, scene
 from .sim.plant import NoiseStream, Plant
 
+TEAMMATE_MARGIN = 0.1  # [m] a teammate is avoided from its safe distance + this on
+
 
 def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
     """ξ̄ of the run: the scenario's if it sets one, else the robot model's measured one."""
@@ -100,6 +102,12 @@ def team_config(
         ]
     )
     excluded_safe = max(f.excluded_safe_distance, 2 * reach + CLEARANCE)
+    sup = s.supervisor
+    mate_safe = 0.0
+    if sup.avoid_teammates:
+        hull = reach if robot is not None else 0.1  # without a model: the built-in disk's
+        auto = 2 * hull + CLEARANCE  # two hulls apart by the clearance
+        mate_safe = auto if sup.teammate_distance == "auto" else float(sup.teammate_distance)
     return TeamConfig(
         graph=s.team.graph,
         kc=s.gains.kc,
@@ -134,6 +142,8 @@ def team_config(
         drift_bound=robot.drift_bound if robot is not None else 0.0,
         lag=drive_lag(s, robot),
         max_faults=max_faults(s),
+        teammate_safe=mate_safe,
+        teammate_activation=mate_safe + TEAMMATE_MARGIN if mate_safe > 0 else 0.0,
         self_exclusion=f.self_exclusion,
     )
 

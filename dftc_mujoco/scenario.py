@@ -49,6 +49,7 @@ __all__ = [
     "Onboard",
     "Physics",
     "Scenario",
+    "Supervision",
     "Team",
     "apply_overrides",
     "dropped_faults",
@@ -246,6 +247,20 @@ class Fdir:
 
 
 @dataclass(frozen=True)
+class Supervision:
+    """The supervisor's reactive behaviours beside the cylinders (the ``[supervisor]`` table).
+
+    ``avoid_teammates``: each robot avoids the teammates its range sensor sees, in the null
+    space like an obstacle (eqs. 17-18), so the residuals are unaffected; false keeps the
+    paper's exact behaviour. ``teammate_distance``: the safe distance between two robots'
+    control points [m], or "auto": twice the robot's footprint plus 2 cm.
+    """
+
+    avoid_teammates: bool = True
+    teammate_distance: float | str = "auto"
+
+
+@dataclass(frozen=True)
 class Onboard:
     """The onboard blocks of the paper's Fig. 1 (the ``[onboard]`` table).
 
@@ -296,6 +311,7 @@ class Scenario:
     fdir: Fdir
     source: str = "<memory>"
     onboard: Onboard = field(default_factory=Onboard)
+    supervisor: Supervision = field(default_factory=Supervision)
 
     def __post_init__(self) -> None:
         if not _TRUSTED.get():
@@ -385,6 +401,7 @@ class Scenario:
             "obstacles": [_fields(o) for o in self.obstacles],
             "faults": [{**_fields(f), "robot": _one_based(_plain(f.robot))} for f in self.faults],
             "fdir": _fields(self.fdir),
+            "supervisor": _fields(self.supervisor),
             "onboard": onboard,
         }
 
@@ -491,6 +508,7 @@ def _structure_problems(s: Scenario, file: str) -> list[str]:
             problems.append(f"{file}: {key}: expected a tuple of {cls.__name__}, got {got}")
     check("fdir", s.fdir, Fdir)
     check("onboard", s.onboard, Onboard)
+    check("supervisor", s.supervisor, Supervision)
     if isinstance(s.team, Team) and check("team.graph", s.team.graph, Graph):
         if s.team.graph.n != s.team.robots:
             problems.append(
@@ -1017,6 +1035,7 @@ def _document(doc: _Doc, data: Any) -> Scenario | None:
     )
     fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
     onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
+    supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
     top.finish()
     # Forward Euler on d/dt ŷ = k_o r is stable when every eigenvalue z of
     # k_o (L + Πₖ) satisfies |1 − dt z| < 1; Gershgorin's discs guarantee it
@@ -1054,7 +1073,22 @@ def _document(doc: _Doc, data: Any) -> Scenario | None:
             fdir,
             doc.file,
             onboard,
+            supervision,
         )
+
+
+def _supervision(t: _Table) -> Supervision:
+    raw = t.data.get("teammate_distance", "auto")
+    distance: float | str = "auto"
+    if isinstance(raw, str):
+        t.raw("teammate_distance", "auto")
+        if raw != "auto":
+            t.report("teammate_distance", f'expected a distance in m or "auto", got {raw!r}')
+    else:
+        distance = t.number("teammate_distance", 0.0, low=0.0)
+    s = Supervision(t.boolean("avoid_teammates", True), distance)
+    t.finish()
+    return s
 
 
 def _physics(t: _Table) -> Physics:

@@ -49,6 +49,9 @@ class TeamConfig:
     # per-axis range of the applied nominal input uᵢ (onboard/applied.py) [m/s]: the command
     # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
     input_limit: float = np.inf
+    # teammates avoided by the supervisor within this safe distance [m] (0: not avoided)
+    teammate_safe: float = 0.0
+    teammate_activation: float = 0.0
     max_faults: int = 1  # robots that may be faulty at once (fdir.max_faults, recovery.py)
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)

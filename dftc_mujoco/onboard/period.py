@@ -57,6 +57,9 @@ def team_period(
     theta,
     release,
     active,
+    mates,
+    mate_safe,
+    mate_act,
     fdir,
     compensate,
     input_limit,
@@ -119,7 +122,10 @@ def team_period(
             e = estimate_one(y[i, a], s[i, a])  # eq. 21
             xh[i, a] = e
             s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
-    if supervise(x_own, u_g, obs, safe, act, theta, release, active, u_mem, du):  # eqs. 8, 18
+    # eqs. 8, 18
+    if supervise(
+        x_own, u_g, obs, safe, act, theta, release, active, u_mem, du, mates, mate_safe, mate_act
+    ):
         code |= SWITCHED
     if limit_input(u_mem, u_g, du, input_limit):  # the input the robot applies (Remark 4.1)
         code |= SATURATED

@@ -3,6 +3,10 @@
 Each robot decides alone, from its own measured position and the obstacles
 its sensors report, whether to switch from the global input u_g,i to the
 avoidance input of eq. 18. Only one behaviour is active at a time (eq. 8).
+Teammates are avoided the same way (issue 20): the teammates its range sensor sees
+within their activation distance are obstacles of safe distance ``mate_safe``, so
+the avoidance enters Δuᵢ like any other and the residuals stay unaffected
+(``[supervisor] avoid_teammates``; off, the paper's exact behaviour).
 The equation is the compiled :func:`supervise`; :class:`Supervisor` is the
 block that calls it.
 """
@@ -16,13 +20,17 @@ from .block import Block, TeamConfig
 
 
 @njit(cache=True)
-def supervise(x, u_g, obs, safe, act, theta, release, active, u, delta_u):  # pragma: no cover
+def supervise(
+    x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act
+):  # pragma: no cover - compiled
     """Nominal inputs uᵢ (eq. 8) and Δuᵢ = uᵢ − u_g,i (eq. 22) into ``u``, ``delta_u`` (M, n).
 
     ``x`` (M, n) are the robots' own measured positions, ``obs`` (O, n) the
     sensed obstacle centres with safe distances d (O,) and activation
-    distances (O,); ``active[i]`` (updated) is the obstacle robot i avoids or
-    -1. Returns True when some robot switched behaviour.
+    distances (O,); ``mates`` (M, n) where robot i's range sensor sees its teammates
+    (row i: itself, skipped), avoided within ``mate_act`` at safe distance
+    ``mate_safe`` (0: not avoided); ``active[i]`` (updated) is the obstacle robot i
+    avoids (O + j for teammate j) or -1. Returns True when some robot switched behaviour.
 
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
@@ -50,6 +58,24 @@ def supervise(x, u_g, obs, safe, act, theta, release, active, u, delta_u):  # pr
             rel = release if active[i] == o else 0.0
             if radial < barrier + rel and dist - safe[o] < best_m:
                 best, best_m, r0, r1, bar, rad = o, dist - safe[o], h0, h1, barrier, radial
+        if mate_safe > 0.0:
+            n_obs = obs.shape[0]
+            reach = mate_act * mate_act
+            for j in range(mates.shape[0]):
+                e0 = x[i, 0] - mates[j, 0]
+                e1 = x[i, 1] - mates[j, 1]
+                d2 = e0 * e0 + e1 * e1
+                if j == i or d2 >= reach:
+                    continue
+                dist = np.sqrt(d2)
+                h0 = e0 / max(dist, 1e-9)
+                h1 = e1 / max(dist, 1e-9)
+                radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]
+                barrier = theta * (mate_safe - dist)  # eq. 17 with the teammate as obstacle
+                rel = release if active[i] == n_obs + j else 0.0
+                if radial < barrier + rel and dist - mate_safe < best_m:
+                    best, best_m, r0, r1 = n_obs + j, dist - mate_safe, h0, h1
+                    bar, rad = barrier, radial
         if active[i] != best:
             changed = True
         active[i] = best
@@ -83,6 +109,8 @@ class Supervisor(Block):
         """Every robot starts on the global mission."""
         self.theta = config.theta
         self.active = np.full(len(x_m0), -1, dtype=np.intp)
+        self.mate_safe = float(config.teammate_safe)
+        self.mate_act = float(config.teammate_activation)
 
     def drop(self, p, graph, t) -> None:
         """Forget the excluded robot's behaviour."""
@@ -95,13 +123,17 @@ class Supervisor(Block):
         obstacles: np.ndarray,
         safe: np.ndarray,
         activation: np.ndarray,
+        teammates: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Nominal inputs uᵢ (eq. 8) and Δuᵢ (eq. 22), each (M, n).
 
         ``x`` (M, n) own measured positions, ``u_g`` (M, n) global inputs,
-        ``obstacles`` (O, n) sensed centres, ``safe`` d (O,), ``activation`` (O,).
+        ``obstacles`` (O, n) sensed centres, ``safe`` d (O,), ``activation`` (O,);
+        ``teammates`` (M, n) where each robot's range sensor sees the members (None:
+        no sensor reading, no teammate avoided).
         """
         u, du = np.empty(np.shape(u_g)), np.empty(np.shape(u_g))
+        mates = np.zeros((0, 2)) if teammates is None else np.ascontiguousarray(teammates, float)
         supervise(
             np.ascontiguousarray(x, float),
             np.ascontiguousarray(u_g, float),
@@ -113,6 +145,9 @@ class Supervisor(Block):
             self.active,
             u,
             du,
+            mates,
+            self.mate_safe if teammates is not None else 0.0,
+            self.mate_act,
         )
         return u, du
 

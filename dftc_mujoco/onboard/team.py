@@ -21,6 +21,7 @@ block and keeps running on every robot, member or not.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
@@ -117,6 +118,10 @@ class Team:
         # the exclusion protocol (eqs. 42-43) under the fault hypothesis
         self.recovery = Recovery(self.dt_d_max, config.max_faults, config.self_exclusion)
         self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
+        self._sensed = False  # the last period had range-sensor readings
+        # a plug-in supervisor whose step() predates teammate avoidance is called without it
+        step_params = inspect.signature(self.supervisor.step).parameters
+        self._supervisor_sees_mates = "teammates" in step_params
         self._resize()
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
@@ -169,6 +174,7 @@ class Team:
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
         self._row = np.empty(m * 2)  # one robot's residual (scratch of the compiled period)
+        self._mates = np.zeros((m, 2))  # where the range sensors see the members
         self.r_norm = np.empty((m, m))
         self._raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)
@@ -193,13 +199,18 @@ class Team:
 
         ``x_m`` (N, 2): each robot's own noisy position; ``c``, ``c_dot``: the
         desired centroid and its velocity (σ₁,d, σ̇₁,d); ``sensed_bodies``
-        (N, 2): where each robot's range sensor sees every robot (used only
-        for robots that were excluded, which become obstacles).
+        (N, 2): where each robot's range sensor sees every robot (robots that were
+        excluded become obstacles; teammates are avoided when ``teammate_safe`` > 0;
+        None: no sensor reading).
         """
         if self.recovery.pending:
             self._exclusions_due(t)
-        if len(self.gone) and sensed_bodies is not None:
-            self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
+        self._sensed = sensed_bodies is not None
+        if sensed_bodies is not None:
+            if len(self.gone):
+                self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
+            if self.config.teammate_safe > 0:
+                np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
         self.mu = self.thresholds.mu(t)
         if self.compiled:
@@ -241,6 +252,9 @@ class Team:
             sup.theta,
             sup.release,
             sup.active,
+            self._mates,
+            cfg.teammate_safe if self._sensed else 0.0,
+            cfg.teammate_activation,
             cfg.fdir,
             cfg.compensate,
             cfg.input_limit,
@@ -291,7 +305,13 @@ class Team:
         self.x_hat = np.array(x_hat, dtype=float)
         u_hat_g = self.controller.collective_input(x_hat, self.x_d, self.xd_dot)  # eq. 15
         u_g = self.controller.own_input(u_hat_g)  # eq. 16
-        u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
+        mates = self._mates if self._sensed and cfg.teammate_safe > 0 else None
+        if mates is not None and self._supervisor_sees_mates:
+            u_mem, delta_u = self.supervisor.step(
+                x_own, u_g, self._obs_p, self._obs_d, self._obs_a, teammates=mates
+            )
+        else:
+            u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
         u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
         delta_u = np.array(delta_u, dtype=float)
         saturated = limit_input(u_mem, np.ascontiguousarray(u_g, float), delta_u, cfg.input_limit)
@@ -394,13 +414,13 @@ class Team:
                 log["threshold"][row_nn] = self.mu
 
     def avoiding(self) -> np.ndarray:
-        """What each robot avoids: cylinder o as o, excluded robot j as O + j, nothing as -1."""
+        """What each robot avoids, on the original axis: cylinder o as o, robot j (excluded,
+        or a teammate) as O + j, nothing as -1."""
         n_cyl = len(self.config.obstacle_position)
         act = np.asarray(self.supervisor.active)
-        gone = self.gone
-        label = np.where(
-            act >= n_cyl, n_cyl + gone[np.clip(act - n_cyl, 0, None)] if len(gone) else act, act
-        )
+        robots = np.concatenate([self.gone, self.members])  # obstacles after the cylinders
+        idx = np.clip(act - n_cyl, 0, max(len(robots) - 1, 0))
+        label = np.where(act >= n_cyl, n_cyl + robots[idx] if len(robots) else act, act)
         out = np.full(self.n, -1)
         out[self.members] = label
         return out
