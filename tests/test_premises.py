@@ -59,7 +59,11 @@ def test_a_100_robot_team_started_far_from_its_slots_flags_nobody_and_then_isola
     assert {d["robot"] for d in out["detections"]} == {37}
     assert len({d["by"] for d in out["detections"]}) == 100
     assert [e["robot"] for e in out["exclusions"]] == [37]
-    assert out["healthy_flags"] == 0 and out["margin"] < 1.0
+    assert out["healthy_flags"] == 0
+    # teammate avoidance switches the crossing robots' commands in the crowd of the first
+    # seconds: a healthy residual may then exceed its threshold (robot 81's own, 1.87 x at
+    # 1.2 s), but only while that robot violated a premise (its lag against the jumps)
+    assert_crossings_labelled(r, faulty={37: 25.0})
 
 
 def test_with_contacts_every_flag_on_a_healthy_robot_is_labelled():
@@ -115,17 +119,22 @@ def test_drive_starts_from_the_first_periods_measurement_at_the_largest_gain():
     assert_crossings_labelled(r)
 
 
-def assert_crossings_labelled(r) -> None:
-    """Every instant a residual on a robot k without a fault is above its threshold lies
-    within LOOKBACK of a span in which robot k violated a premise."""
+def assert_crossings_labelled(r, faulty: dict[int, float] | None = None) -> None:
+    """Every instant a residual on a robot k without a fault (``faulty``: robot -> fault
+    time) is above its threshold lies within LOOKBACK of a span in which robot k violated a
+    premise."""
     from dftc_mujoco.premises import LOOKBACK
+    from dftc_mujoco.results import matrix_rows
 
     ratio = r.log["residual"] / r.log["threshold"]
+    times = r.log["t"][matrix_rows(r.log)]
+    for robot, t_f in (faulty or {}).items():
+        ratio[times >= t_f, :, robot - 1] = 0.0
     spans = r.events.of_kind("premise_violated")
     rows, _, ks = np.nonzero(ratio > 1.0)
     assert len(rows), "nothing crossed: the test would pass trivially"
     for row, k in zip(rows, ks, strict=True):
-        t = r.log["t"][row]
+        t = times[row]
         assert any(
             e["robot"] == k + 1 and e["t"] - LOOKBACK <= t <= e["until"] + LOOKBACK for e in spans
         ), (t, k + 1)
