@@ -405,3 +405,67 @@ def test_a_grid_design_runs_every_combination_in_turn(tmp_path):
     assert len(set(combos)) == 12  # each of the 2 x 2 x 3 combinations exactly once
     assert spec.draw(s, 3) == spec.draw(s, 3)  # still a function of (seed, index) alone
     assert {spec.draw(s, i)["seed"] for i in range(12)} != {spec.draw(s, 0)["seed"]}
+
+
+# --------------------------------------------------------------------------- facts per fault
+
+
+def _campaign(tmp_path: Path, name: str, text: str) -> dict[int, dict]:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    out = tmp_path / name
+    assert campaign_main([str(path), "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    return _rows(out)
+
+
+def test_rows_describe_a_fault_of_the_base_scenario(tmp_path):
+    """Issue 20's seventh problem: a campaign over a scenario with its own stop fault (no
+    faulty_robot drawn) reported detected: false, 4 false alarms and a wrong isolation for a
+    run in which every teammate flagged the stopped robot and it alone was excluded."""
+    rows = _campaign(
+        tmp_path,
+        "base_fault",
+        'name = "base_fault"\nscenario = "paper_case"\nruns = 1\nseed = 1\n'
+        "[set]\nduration = 52.0\n",
+    )
+    (row,) = rows.values()
+    assert row["fault_kind"] == "base" and row["main_fault_kind"] == "stop"
+    faults = json.loads(row["faults"])
+    assert [(f["robot"], f["kind"]) for f in faults] == [(2, "bias"), (1, "stop")]
+    stop = faults[1]
+    assert stop["detected"] and stop["detected_by"] == 3 and stop["excluded"]
+    # excluded at its t_r: the first teammate's flag + Δt_d,max (eq. 43)
+    assert stop["exclusion_delay"] == pytest.approx(
+        stop["delay_first"] + row["dt_d_max"], abs=0.011
+    )
+    assert row["detected"] and row["detected_by"] == 3 and row["excluded_faulty"]
+    assert row["false_flags"] == 0 and row["healthy_exclusions"] == 0
+    assert not row["wrong_isolation"]
+    table = pq.read_table(tmp_path / "base_fault" / "results.parquet")
+    assert {"faults", "false_flags", "false_flags_premises_held", "healthy_exclusions"} <= set(
+        table.column_names
+    )
+
+
+def test_rows_describe_two_faults_in_one_run(tmp_path):
+    """Two sequential stops from the base scenario: one entry each in ``faults``."""
+    base = tmp_path / "two.toml"
+    text = (ROOT / "scenarios" / "paper_case.toml").read_text()
+    head, _, _ = text.partition("[[faults]]")
+    base.write_text(
+        head
+        + '[[faults]]\nrobot = 1\nkind = "stop"\nt = 30.0\n\n'
+        + '[[faults]]\nrobot = 3\nkind = "stop"\nt = 45.0\n\n'
+        + text[text.index("[fdir]") :]
+    )
+    rows = _campaign(
+        tmp_path,
+        "two_faults",
+        f'name = "two_faults"\nscenario = "{base}"\nruns = 1\nseed = 1\n'
+        "[set]\nduration = 60.0\n[set.fdir]\nmax_faults = 2\n",
+    )
+    (row,) = rows.values()
+    faults = json.loads(row["faults"])
+    assert [(f["robot"], f["kind"]) for f in faults] == [(1, "stop"), (3, "stop")]
+    assert all(f["detected"] and f["excluded"] for f in faults)
+    assert row["fault_count"] == 2 and row["healthy_exclusions"] == 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from collections import defaultdict
 from pathlib import Path
@@ -27,9 +28,11 @@ def _rate(xs: list[bool]) -> float | None:
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """The campaign's figures of merit (all rates are fractions)."""
     ok = [r for r in rows if r.get("status") == "ok"]
-    stops = [r for r in ok if r["fault_kind"] == "stop"]
-    biases = [r for r in ok if r["fault_kind"] == "bias"]
-    clean = [r for r in ok if r["fault_kind"] == "none"]
+    stops = [r for r in ok if _kind(r) == "stop"]
+    biases = [r for r in ok if _kind(r) == "bias"]
+    clean = [r for r in ok if _kind(r) == "none"]
+    faults = [f for r in ok for f in json.loads(r.get("faults") or "[]")]
+    stop_faults = [f for f in faults if f["kind"] == "stop"]
     delays = [r["delay_first"] for r in ok if r.get("delay_first") is not None]
     delays_last = [r["delay_last"] for r in ok if r.get("delay_last") is not None]
     robot_hours = sum(r["robots"] * r["duration"] for r in ok) / 3600.0
@@ -51,6 +54,14 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "false_alarm_rate_fault_free": _rate([r["false_alarms"] > 0 for r in clean]),
         "false_alarms_per_robot_hour": false_robots / robot_hours if robot_hours else None,
         "wrong_isolations": sum(r["wrong_isolation"] for r in ok),
+        "healthy_exclusions": sum(r.get("healthy_exclusions", 0) for r in ok),
+        "false_flags": sum(r.get("false_flags", 0) for r in ok),
+        "false_flags_premises_held": sum(r.get("false_flags_premises_held", 0) for r in ok),
+        "systemic_anomalies": sum(r.get("systemic_anomalies", 0) for r in ok),
+        "faults": len(faults),
+        "stop_faults": len(stop_faults),
+        "stop_faults_detected_rate": _rate([f["detected"] for f in stop_faults]),
+        "stop_faults_excluded_rate": _rate([f["excluded"] for f in stop_faults]),
         "delay_median": float(np.median(delays)) if delays else None,
         "delay_p95": float(np.percentile(delays, 95)) if delays else None,
         "delay_max": float(np.max(delays)) if delays else None,
@@ -64,6 +75,11 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "success_all": _rate([r["success"] for r in ok]),
         "margin_max": max((r["margin"] for r in ok if r.get("margin") is not None), default=None),
     }
+
+
+def _kind(row: dict[str, Any]) -> str:
+    """The kind of a run's main fault: from its own faults, else from what was drawn."""
+    return str(row.get("main_fault_kind") or row["fault_kind"])
 
 
 def _by(rows: list[dict[str, Any]], *keys: str) -> dict[tuple, list[dict[str, Any]]]:
@@ -101,7 +117,15 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"| false alarms in fault-free runs | {_pct(s['false_alarm_rate_fault_free'])} of "
         f"{s['fault_free_runs']} |",
         f"| false alarms per robot-hour | {per_hour} |",
-        f"| wrong isolations (a healthy robot excluded) | {s['wrong_isolations']} |",
+        f"| wrong isolations (runs where a healthy robot was excluded) | {s['wrong_isolations']} |",
+        f"| healthy robots excluded (all runs) | {s['healthy_exclusions']} |",
+        f"| flags on healthy robots: all / while every premise held | {s['false_flags']} / "
+        f"{s['false_flags_premises_held']} |",
+        f"| systemic anomalies (more robots flagged than fdir.max_faults) | "
+        f"{s['systemic_anomalies']} |",
+        f"| faults in all runs: stops flagged by a teammate / excluded | "
+        f"{_pct(s['stop_faults_detected_rate'])} / {_pct(s['stop_faults_excluded_rate'])} "
+        f"of {s['stop_faults']} |",
         f"| largest healthy residual / threshold (margin) | {_num(s['margin_max'], 3)} |",
     ]
     if s["delay_median"] is not None:

@@ -68,29 +68,75 @@ def spec_folders(spec: Spec) -> list[Path]:
     return folders
 
 
+def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """One entry per fault the run actually had (the base scenario's, the drawn ones, any
+    number), from its own ``fault`` events: whether teammates flagged it, how many, the
+    first and last flag's delay, whether and when that robot was excluded."""
+    events = summary.get("events", [])
+    out = []
+    for f in (e for e in events if e["kind"] == "fault"):
+        robot, t_f = f["robot"], f["t"]
+        on = [
+            d
+            for d in summary["detections"]
+            if d["robot"] == robot and d["by"] != robot and d["t"] >= t_f
+        ]
+        gone = next(
+            (e["t"] for e in summary["exclusions"] if e["robot"] == robot and e["t"] >= t_f), None
+        )
+        out.append(
+            {
+                "robot": robot,
+                "kind": f.get("fault"),
+                "t": t_f,
+                "detected": bool(on),
+                "detected_by": len({d["by"] for d in on}),
+                "delay_first": min(d["t"] for d in on) - t_f if on else None,
+                "delay_last": max(d["t"] for d in on) - t_f if on else None,
+                "excluded": gone is not None,
+                "exclusion_delay": None if gone is None else gone - t_f,
+            }
+        )
+    return out
+
+
 def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[str, Any]:
-    faulty = p.get("faulty_robot")
-    det = summary["detections"]
-    on_faulty = [d for d in det if d["robot"] == faulty]
-    false_pairs = [d for d in det if d["robot"] != faulty]
+    """A run's row: per fault (``faults``, from the run's own fault events) and per run.
+
+    The single-fault columns (``detected``, ``delay_first``, ...) describe the run's main
+    fault: the drawn one (``faulty_robot``), else its first stop, else its first fault.
+    ``false_flags`` counts flags on robots without an active fault (split by whether every
+    premise held), ``healthy_exclusions`` exclusions of such robots."""
+    faults = fault_facts(summary)
+    drawn = p.get("faulty_robot")
+    main = next((f for f in faults if f["robot"] == drawn), None) if drawn is not None else None
+    main = main or next((f for f in faults if f["kind"] == "stop"), None)
+    main = main or (faults[0] if faults else None)
+    faulty = {f["robot"] for f in faults}
     excluded = [e["robot"] for e in summary["exclusions"]]
-    t_excl = next((e["t"] for e in summary["exclusions"] if e["robot"] == faulty), None)
     err = summary["errors"]
-    first = min((d["t"] for d in on_faulty), default=None)
-    last = max((d["t"] for d in on_faulty), default=None)
-    t_f = p.get("fault_t")
+    false_flags = summary.get("healthy_flags", 0)
     return {
-        "detected": bool(on_faulty),
-        "detected_by": len({d["by"] for d in on_faulty}),
-        "delay_first": None if first is None or t_f is None else first - t_f,
-        "delay_last": None if last is None or t_f is None else last - t_f,
+        "faults": json.dumps(faults),
+        "fault_count": len(faults),
+        "main_fault_kind": main["kind"] if main else "none",
+        "detected": bool(main and main["detected"]),
+        "detected_by": main["detected_by"] if main else 0,
+        "delay_first": main["delay_first"] if main else None,
+        "delay_last": main["delay_last"] if main else None,
         "dt_d_max": dt_d_max,
-        "false_alarms": len(false_pairs),
-        "false_alarm_robots": len({d["robot"] for d in false_pairs}),
+        "false_flags": false_flags,
+        "false_flags_premises_held": summary.get("healthy_flags_premises_held", 0),
+        "false_alarms": false_flags,
+        "false_alarm_robots": len(
+            {d["robot"] for d in summary["detections"] if d["robot"] not in faulty}
+        ),
         "excluded": json.dumps(excluded),
-        "excluded_faulty": faulty in excluded,
-        "exclusion_delay": None if t_excl is None or t_f is None else t_excl - t_f,
-        "wrong_isolation": any(r != faulty for r in excluded),
+        "excluded_faulty": bool(main and main["excluded"]),
+        "exclusion_delay": main["exclusion_delay"] if main else None,
+        "healthy_exclusions": summary.get("healthy_exclusions", 0),
+        "wrong_isolation": summary.get("healthy_exclusions", 0) > 0,
+        "systemic_anomalies": summary.get("systemic_anomalies", 0),
         "final_centroid": err["final_centroid"],
         "final_formation": err["final_formation"],
         "success": bool(
