@@ -435,6 +435,7 @@ class Simulation:
             x0=x0,
             z0=self.plant.data.xpos[sc.body, 2],
             events=self.events,
+            memory=premises.memory(cfg.graph, cfg.ko),
         )
 
     @property
@@ -591,7 +592,8 @@ class Simulation:
 
     def _take_team_events(self, t: float) -> None:
         """Move the team's events into the run's, each flag labelled with the premises its
-        robot violated (``premises.LOOKBACK``), and tell the monitor of exclusions."""
+        robot violated within its residuals' memory (``premises.memory``), and tell the monitor
+        of exclusions."""
         monitor = self.monitor
         for e in self.team.events:
             kind = e.pop("kind")

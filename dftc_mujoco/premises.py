@@ -29,13 +29,15 @@ import numpy as np
 from numba import njit
 
 from .errors import SimulationError
+from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 #: the premises, in the order the tables print them, with a one-line meaning each
 PREMISES: dict[str, str] = {
     "noise": "‖η_i‖ ≤ η̄ (eq. 4)",
     "mismatch": "‖ẋ_i − applied input‖ ≤ ξ̄ (eq. 2; the applied input after the drive's limits)",
     "initial_error": "every robot starts within ε̄ of its planned slot (initial_error_bound)",
-    "saturation": "the nominal input is within the robot's command range (no saturation)",
+    "saturation": "the compensated command ū stays out of the anti-windup's band below the "
+    "robot's command range (no saturation, ∫e never skipped)",
     "contact": "no contact between a robot and a teammate or a cylinder",
     "planar": "the base stays on the floor, level, inside the arena",
     "connectivity": "the members' graph is strongly connected",
@@ -129,9 +131,12 @@ HEIGHT_TOLERANCE = 0.05
 #: ... and tilt this far from level [rad] (about 29°) before the run stops: the planar
 #: model of eq. 1 no longer describes it
 TILT_TOLERANCE = 0.5
-#: a flag is labelled with the premises its robot violated this long before it [s]: the
-#: residual remembers an offset for a while (the decision window plus the observer's mixing)
+#: a flag is labelled with the premises its robot violated at least this long before it [s]
+#: (the decision window plus the observer's mixing); on slow graphs the observer's own memory
+#: (:func:`memory`) is longer and is used instead
 LOOKBACK = 2.0
+#: the observer's memory is the time its error needs to decay to this fraction (eq. 41)
+MEMORY_FRACTION = 0.01
 #: a span of a violated premise ends once the premise has held this long [s]
 GAP = 0.1
 
@@ -226,8 +231,9 @@ class Monitor:
     ``bounds`` names each premise's bound as the rule uses it. Each span during which a
     premise is violated becomes one ``premise_violated`` event (``premise``, ``robot``
     1-based or None for the team, ``value`` the worst, ``bound``, ``t``, ``until``);
-    :meth:`violated` says which premises robot k violated within :data:`LOOKBACK` s
-    before an instant, for labelling its flags; :meth:`table` summarises the run.
+    :meth:`violated` says which premises robot k violated within its ``memory`` (at least
+    :data:`LOOKBACK` s) before an instant, for labelling its flags; :meth:`table`
+    summarises the run.
     A base that leaves the plane raises :class:`~dftc_mujoco.errors.SimulationError`
     (the run stops: the planar model no longer holds).
     """
@@ -248,17 +254,21 @@ class Monitor:
         x0: np.ndarray,
         z0: np.ndarray,
         events: Any,
+        memory: np.ndarray | None = None,
     ) -> None:
         self.n, self.h, self.events = n, dt, events
+        self.memory = np.full(n, LOOKBACK) if memory is None else np.maximum(memory, LOOKBACK)
         self.eta_bar, self.step = eta_bar, dt * xi_bar
         self.offset, self.phi_bar = drift_bound, phi_bar
-        self.limit = command_limit if np.isfinite(command_limit) else 1e300
+        # the anti-windup may skip ∫e from ANTI_WINDUP_BAND below the range on: from there the
+        # identity y_m,k − y_m,k(0) = G φ̂_k of the rules may fail
+        self.limit = command_limit - ANTI_WINDUP_BAND if np.isfinite(command_limit) else 1e300
         self.start = start
         self.bounds = {
             "noise": eta_bar,
             "mismatch": phi_bar if phi_bar > 0 else drift_bound,
             "initial_error": start.value,
-            "saturation": command_limit,
+            "saturation": self.limit,
             "contact": 0.0,
             "planar": HEIGHT_TOLERANCE,
             "connectivity": 0.0,
@@ -391,9 +401,9 @@ class Monitor:
                 )
 
     def violated(self, robot: int, t: float) -> list[str]:
-        """The premises robot ``robot`` (0-based), or the team, violated within
-        :data:`LOOKBACK` s before ``t``, in :data:`PREMISES` order."""
-        since = t - LOOKBACK
+        """The premises robot ``robot`` (0-based), or the team, violated within the memory of
+        its residuals before ``t``, in :data:`PREMISES` order."""
+        since = t - self.memory[robot]
         return [
             p
             for k, p in enumerate(PREMISES)
@@ -422,3 +432,16 @@ class Monitor:
             }
         out["initial_error"]["derived"] = self.start.derived
         return out
+
+
+def memory(graph: Any, ko: float) -> np.ndarray:
+    """How long each robot k's residuals remember what happened to it [s]: the time after
+    which κ_k e^(−λ_k t) of eq. 41 (the decay of the observer's error for k) is below
+    :data:`MEMORY_FRACTION`. 8 s on the paper's graph, 210 s on a 100-robot ring with
+    chord 2, 1360 s at 400: a premise violated that long before a flag may still be in it."""
+    from .onboard.thresholds import decay_bounds
+
+    kappa, lam = decay_bounds(graph, ko)
+    with np.errstate(divide="ignore"):
+        out = np.log(np.maximum(kappa, 1.0) / MEMORY_FRACTION) / np.asarray(lam, float)
+    return np.where(np.isfinite(out), out, np.inf)

@@ -13,6 +13,10 @@ from numba import njit
 
 from .block import Block, TeamConfig
 
+#: [m/s] the anti-windup acts once ū comes this close to the per-axis range (and then the
+#: identity y_m,k − y_m,k(0) = G φ̂_k that the threshold rules use may no longer hold)
+ANTI_WINDUP_BAND = 0.05
+
 
 @njit(cache=True)
 def estimate_faults(
@@ -22,7 +26,7 @@ def estimate_faults(
 
     ``x_m`` own measurements and ``u`` nominal inputs (N, 2). φ̂ᵢ = G⁻¹(eᵢ + K∫eᵢ)
     (eq. 31) with eᵢ = x_m,i − zᵢ; żᵢ = uᵢ + K eᵢ (eq. 29); ūᵢ = uᵢ − φ̂ᵢ (eq. 28).
-    Conditional-integration anti-windup: when ū is within 5 cm/s of the
+    Conditional-integration anti-windup: when ū is within ANTI_WINDUP_BAND (5 cm/s) of the
     per-axis range ``limit``, the step of ∫e is skipped for a robot it would
     drive further out of range. ``alpha`` < 1 low-pass filters the applied φ̂.
     """
@@ -44,7 +48,7 @@ def estimate_faults(
         s0, s1 = dt * e0, dt * e1
         v0 = u[i, 0] - p0
         v1 = u[i, 1] - p1
-        if max(abs(v0), abs(v1)) > limit - 0.05:  # anti-windup look-ahead
+        if max(abs(v0), abs(v1)) > limit - ANTI_WINDUP_BAND:  # anti-windup look-ahead
             now = max(abs(v0) - limit, 0.0) + max(abs(v1) - limit, 0.0)
             a0 = K[0, 0] * (int_e[i, 0] + s0) + K[0, 1] * (int_e[i, 1] + s1)
             a1 = K[1, 0] * (int_e[i, 0] + s0) + K[1, 1] * (int_e[i, 1] + s1)
