@@ -131,6 +131,9 @@ def test_a_slow_robot_isolates_a_stop_and_flags_no_healthy_robot():
     bare = simulate(load_scenario("paper_case", slow_case(**{"fdir.drive_lag": 0.0})))
     assert bare.summary["healthy_flags"] > 0
     assert bare.summary["healthy_flags_premises_held"] == 0  # each one is labelled
+    # the lagging actuator is the violated premise the labels name
+    assert not bare.summary["premises"]["mismatch"]["held"]
+    assert all("mismatch" in d["premises"] for d in bare.summary["detections"] if d["robot"] != 1)
 
 
 @pytest.fixture(params=["compiled", "general"])

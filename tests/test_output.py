@@ -249,12 +249,12 @@ def small_disk(tmp_path):
 def _fill(disk: Path, leave: int = 0) -> None:
     """Fill ``disk`` up, then give back ``leave`` bytes."""
     filler = disk / "filler"
-    with open(filler, "wb") as fh:
+    # unbuffered: a buffered file that hit ENOSPC raises again when it is closed
+    with open(filler, "wb", buffering=0) as fh:
         chunk = b"\0" * 2**16
         try:
             while True:
                 fh.write(chunk)
-                fh.flush()
         except OSError:
             pass
     os.truncate(filler, max(0, filler.stat().st_size - leave))
