@@ -140,3 +140,11 @@ def guarded(body: Callable[[Signals], int], said: str) -> int:
         except Interrupted as exc:
             print(f"interrupted by {exc.name}{said}", file=sys.stderr)
             return exc.exit_code
+        except Exception:
+            if not signals.caught:
+                raise
+            # the signal surfaced wrapped: raised inside a ctypes call's argument conversion
+            # (an EGL call while rendering) it arrives as ctypes.ArgumentError
+            exc = Interrupted(signals.caught[0])
+            print(f"interrupted by {exc.name}{said}", file=sys.stderr)
+            return exc.exit_code

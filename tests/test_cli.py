@@ -112,3 +112,26 @@ def test_a_scenario_that_is_not_utf8_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {bad}: not UTF-8 text (byte 0xe9"), err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_signal_that_surfaces_inside_a_ctypes_call_is_still_an_interruption(tmp_path):
+    """SIGTERM while an EGL call converts its arguments arrived as ctypes.ArgumentError and
+    `plot --video` died with a traceback and exit 1 (seen in CI); it is exit 143 now."""
+    script = tmp_path / "victim.py"
+    script.write_text(
+        "import ctypes, os, signal, sys\n"
+        "from dftc_mujoco import interrupt\n"
+        "class Arg:\n"
+        "    @property\n"
+        "    def _as_parameter_(self):\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        return 1\n"
+        "def body(signals):\n"
+        "    with signals.active():\n"
+        "        ctypes.CDLL(None).abs(Arg())\n"
+        "    return 0\n"
+        "sys.exit(interrupt.guarded(body, ''))\n"
+    )
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True)
+    assert done.returncode == 143, done.stderr
+    assert "Traceback" not in done.stderr and "interrupted by SIGTERM" in done.stderr
