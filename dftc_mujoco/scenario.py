@@ -1153,7 +1153,11 @@ def _team(t: _Table, mission: Mission | None, seed: int) -> Team:
 def _initial_positions(
     t: _Table, n: int | None, mission: Mission | None, seed: int
 ) -> np.ndarray | None:
-    """A list of N [x, y], or {layout = "formation", jitter = m}: the planned slots at t = 0."""
+    """A list of N [x, y], or a generated layout: {layout = "formation", jitter = m} (the
+    planned slots at t = 0), {layout = "random", spread = m, spacing = m} (uniform in a square
+    of half-width ``spread`` around the path's start, points ``spacing`` apart) or
+    {layout = "circle", radius = m} (on a circle around the start, in a shuffled order;
+    radius 0: the formation's)."""
     assert t.doc is not None
     raw = t.raw("initial_positions")
     if not isinstance(raw, dict):
@@ -1161,17 +1165,20 @@ def _initial_positions(
         x0 = t.array(
             "initial_positions",
             (n, N_DIM),
-            what=f'{pairs}, or a table {{layout = "formation", jitter = ...}}',
+            what=f'{pairs}, or a table {{layout = "formation" | "random" | "circle", ...}}',
         )
         return x0 if t.ok("initial_positions") else None
     lay = t.table("initial_positions")
-    lay.string("layout", choices=("formation",))
+    layout = lay.string("layout", choices=("formation", "random", "circle"))
     jitter = lay.number("jitter", 0.0, low=0.0, strict_low=False)
+    spread = lay.number("spread", 5.0, low=0.0)  # random: half-width of the square [m]
+    spacing = lay.number("spacing", 0.5, low=0.0, strict_low=False)  # random: least gap [m]
+    radius = lay.number("radius", 0.0, low=0.0, strict_low=False)  # circle: 0 = formation's
     lay.finish()
     if (
         n is None
         or mission is None
-        or not lay.ok("layout", "jitter")
+        or not lay.ok("layout", "jitter", "spread", "spacing", "radius")
         or not t.doc.ok("mission.centroid.waypoints", "mission.formation")
     ):
         return None
@@ -1179,8 +1186,28 @@ def _initial_positions(
 
     start = np.asarray(mission.centroid.waypoints[0])
     rng = np.random.default_rng([seed, 7])
-    pts = start + formation_offsets(mission.formation, n) + rng.uniform(-jitter, jitter, (n, 2))
-    return _ro(pts)
+    if layout == "random":  # uniform in a square around the path's start, points apart
+        pts: list[np.ndarray] = []
+        for _ in range(2000 * n):
+            p = start + rng.uniform(-spread, spread, 2)
+            if all(np.hypot(*(p - q)) >= spacing for q in pts):
+                pts.append(p)
+                if len(pts) == n:
+                    return _ro(np.array(pts))
+        t.report(
+            "initial_positions",
+            f"cannot place {n} robots {spacing:g} m apart within ±{spread:g} m: raise spread "
+            "or lower spacing",
+        )
+        return None
+    offsets = formation_offsets(mission.formation, n)
+    if layout == "circle":  # on a circle around the start, in a shuffled order: each robot
+        # starts up to a diameter away from its own slot
+        r = radius or float(np.linalg.norm(offsets, axis=1).max())
+        ang = 2 * np.pi * rng.permutation(n) / n
+        return _ro(start + r * np.c_[np.cos(ang), np.sin(ang)])
+    pts_ = start + offsets + rng.uniform(-jitter, jitter, (n, 2))
+    return _ro(pts_)
 
 
 def _graph(

@@ -37,7 +37,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     delays_last = [r["delay_last"] for r in ok if r.get("delay_last") is not None]
     robot_hours = sum(r["robots"] * r["duration"] for r in ok) / 3600.0
     false_robots = sum(r["false_alarm_robots"] for r in ok)
-    dt_max = max((r["dt_d_max"] for r in ok), default=None)
+    dt_max = max(
+        (r["dt_d_max"] for r in ok if isinstance(r.get("dt_d_max"), int | float)), default=None
+    )
     excluded_stop = [r for r in stops if r["excluded_faulty"]]
     return {
         "runs": len(rows),
@@ -132,7 +134,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         lines.append(
             f"| detection delay, first flag: median / 95th pct / max | "
             f"{s['delay_median']:.2f} / {s['delay_p95']:.2f} / {s['delay_max']:.2f} s "
-            f"(Δt_d,max = {s['dt_d_max']:g} s) |"
+            f"(Δt_d,max up to {_num(s['dt_d_max'], 2)} s) |"
         )
         lines.append(f"| detection delay, last flag: max | {s['delay_last_max']:.2f} s |")
     lines.append(

@@ -108,6 +108,9 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
     ``false_flags`` counts flags on robots without an active fault (split by whether every
     premise held), ``healthy_exclusions`` exclusions of such robots."""
     faults = fault_facts(summary)
+    horizon = summary.get("dt_d_max")  # the value the run used ("auto": from the analysis)
+    if isinstance(horizon, dict) and horizon.get("value") is not None:
+        dt_d_max = float(horizon["value"])
     drawn = p.get("faulty_robot")
     main = next((f for f in faults if f["robot"] == drawn), None) if drawn is not None else None
     main = main or next((f for f in faults if f["kind"] == "stop"), None)
