@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from dftc_mujoco import run, scenario
+from dftc_mujoco import load_scenario, run, scenario
 from dftc_mujoco.errors import ScenarioError
 from tests.conftest import scenario_dict
 
@@ -121,3 +121,38 @@ def test_dict_validation_names_nested_keys():
     d["mission"]["centroid"]["speed"] = -1
     with pytest.raises(ScenarioError, match=r"mission\.centroid\.speed: expected a number > 0"):
         scenario.from_dict(d, source="x.toml")
+
+
+def test_generated_start_layouts_for_untuned_batteries():
+    """random: uniform around the path's start, points at least ``spacing`` apart; circle: on
+    a circle in a shuffled order; an impossible random layout is one line naming the key."""
+    base = {
+        "team.robots": 40,
+        "team.graph": {"family": "ring_chords", "chords": [2]},
+        "fdir.initial_error_bound": "auto",
+        "obstacles": [],
+    }
+    rand = load_scenario(
+        "paper_case",
+        {**base, "team.initial_positions": {"layout": "random", "spread": 4.0, "spacing": 0.6}},
+    )
+    x = np.asarray(rand.team.initial_positions)
+    gaps = np.linalg.norm(x[:, None] - x[None], axis=-1) + np.eye(40) * 9
+    assert gaps.min() >= 0.6 and np.abs(x).max() <= 4.0
+    circle = load_scenario(
+        "paper_case", {**base, "team.initial_positions": {"layout": "circle", "radius": 7.0}}
+    )
+    r = np.linalg.norm(np.asarray(circle.team.initial_positions), axis=1)
+    np.testing.assert_allclose(r, 7.0)
+    again = load_scenario(
+        "paper_case", {**base, "team.initial_positions": {"layout": "circle", "radius": 7.0}}
+    )
+    assert np.array_equal(again.team.initial_positions, circle.team.initial_positions)
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(
+            "paper_case",
+            {**base, "team.initial_positions": {"layout": "random", "spread": 1.0}},
+        )
+    assert "team.initial_positions: cannot place 40 robots 0.5 m apart within ±1 m" in str(
+        err.value
+    )
