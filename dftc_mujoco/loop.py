@@ -396,6 +396,11 @@ class Simulation:
         self.team = Team(config, x_m0, self.path.position[0], blocks)
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
+        # eq. 46's domain: faults from the rule's settle time on (docs/thresholds.md)
+        self.settle_time = self.team.settle_time(s.duration)
+        self.team.dt_d_max_info["settle_time"] = (
+            self.settle_time if np.isfinite(self.settle_time) else None
+        )
         self.monitor = self._monitor(x0)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
@@ -544,6 +549,13 @@ class Simulation:
                         for f in faults.apply(t):
                             events.add(t, "fault", robot=f.robot + 1, fault=f.kind)
                             monitor.watched[f.robot] = False  # the fault is to be detected
+                            if t < self.settle_time:  # outside eq. 46's domain
+                                events.add(
+                                    t,
+                                    "detection_not_guaranteed",
+                                    robot=f.robot + 1,
+                                    until=self.settle_time,
+                                )
                     plant.positions(out=x)
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)

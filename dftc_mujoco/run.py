@@ -174,6 +174,13 @@ def _fmt_event(e: dict) -> str:
             "excluded until every flag is down"
             + (f" — premises violated: {', '.join(e['premises'])}" if e.get("premises") else "")
         )
+    if k == "detection_not_guaranteed":
+        until = e["until"]
+        when = f"{until:.2f} s" if until == until and until != float("inf") else "the end"
+        return (
+            f"robot {r}'s fault comes before the thresholds settle: its detection within "
+            f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
+        )
     if k == "systemic_anomaly_over":
         return "systemic anomaly over: no robot is flagged by a teammate any more"
     if k == "detection_horizon":

@@ -140,3 +140,26 @@ def test_dt_d_max_is_recomputed_on_the_reduced_graph_at_an_exclusion():
     assert [e["robot"] for e in gone] == [1, 3]
     t_first = min(d["t"] for d in r.summary["detections"] if d["robot"] == 3 and d["by"] != 3)
     assert gone[1]["t"] == pytest.approx(t_first + horizon["value"], abs=0.011)
+
+
+def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain():
+    """Eq. 46 guarantees a detection within Δt_d,max for faults once the thresholds have
+    settled (within 10 % of their steady values): a stop at 1.5 s is reported with the time
+    from which the guarantee holds; paper_case's stop at 41.8 s is inside the domain."""
+    early = simulate(
+        load_scenario(
+            "paper_case",
+            {
+                "onboard.thresholds": "l1",
+                "faults": [{"robot": 1, "kind": "stop", "t": 1.5}],
+                "duration": 20.0,
+            },
+        )
+    )
+    (note,) = early.events.of_kind("detection_not_guaranteed")
+    settle = early.summary["dt_d_max"]["settle_time"]
+    assert note["robot"] == 1 and note["t"] == 1.5 and note["until"] == settle
+    assert 5.0 < settle < 20.0
+    late = simulate(load_scenario("paper_case", {"duration": 48.0}))
+    assert late.events.of_kind("detection_not_guaranteed") == []
+    assert late.summary["dt_d_max"]["settle_time"] < 41.8
