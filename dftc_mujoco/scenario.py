@@ -1078,14 +1078,7 @@ def _document(doc: _Doc, data: Any) -> Scenario | None:
 
 
 def _supervision(t: _Table) -> Supervision:
-    raw = t.data.get("teammate_distance", "auto")
-    distance: float | str = "auto"
-    if isinstance(raw, str):
-        t.raw("teammate_distance", "auto")
-        if raw != "auto":
-            t.report("teammate_distance", f'expected a distance in m or "auto", got {raw!r}')
-    else:
-        distance = t.number("teammate_distance", 0.0, low=0.0)
+    distance = _number_or_word(t, "teammate_distance", "auto", "a distance in m")
     s = Supervision(t.boolean("avoid_teammates", True), distance)
     t.finish()
     return s
@@ -1450,37 +1443,39 @@ def _max_faults(t: _Table) -> int | str:
     return raw
 
 
+def _number_or_word(
+    t: _Table,
+    name: str,
+    word: str,
+    what: str,
+    absent: float | None = None,
+    low: float = 0.0,
+    strict_low: bool = True,
+) -> float | str:
+    """Key ``name``: a number (at least ``low``), or the keyword ``word``; absent, ``absent``
+    (``word`` when None). A string other than ``word`` says it expected ``what``."""
+    raw = t.data.get(name, word if absent is None else absent)
+    if isinstance(raw, str):
+        t.raw(name, word)
+        if raw != word:
+            t.report(name, f'expected {what} or "{word}", got {raw!r}')
+        return word
+    return t.number(name, 0.0 if absent is None else absent, low=low, strict_low=strict_low)
+
+
 def _drive_lag(t: _Table) -> float | str:
     """τ of the modelled drive lag in seconds, or "robot" (the robot file's calibration)."""
-    raw = t.data.get("drive_lag", "robot")
-    if isinstance(raw, str):
-        t.raw("drive_lag", "robot")
-        if raw != "robot":
-            t.report("drive_lag", f'expected a time constant in s or "robot", got {raw!r}')
-        return "robot"
-    return t.number("drive_lag", 0.0, low=0.0, strict_low=False)
+    return _number_or_word(t, "drive_lag", "robot", "a time constant in s", strict_low=False)
 
 
 def _initial_error_bound(t: _Table) -> float | str:
     """ε̄ in metres, or "auto" (derived per run from the start positions and the slots)."""
-    raw = t.data.get("initial_error_bound", "auto")
-    if isinstance(raw, str):
-        t.raw("initial_error_bound", "auto")
-        if raw != "auto":
-            t.report("initial_error_bound", f'expected a distance in m or "auto", got {raw!r}')
-        return "auto"
-    return t.number("initial_error_bound", 1.0, low=0.0, strict_low=False)
+    return _number_or_word(t, "initial_error_bound", "auto", "a distance in m", strict_low=False)
 
 
 def _dt_d_max(t: _Table) -> float | str:
     """Δt_d,max: seconds, or "auto" (computed per run from the graph and the rule)."""
-    raw = t.data.get("dt_d_max", 5.0)
-    if isinstance(raw, str):
-        t.raw("dt_d_max")
-        if raw != "auto":
-            t.report("dt_d_max", f'expected a number of seconds or "auto", got {raw!r}')
-        return "auto"
-    return t.number("dt_d_max", 5.0, low=0.0)
+    return _number_or_word(t, "dt_d_max", "auto", "a number of seconds", absent=5.0)
 
 
 def _onboard(t: _Table) -> Onboard:
