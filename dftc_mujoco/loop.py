@@ -440,7 +440,7 @@ class Simulation:
             x0=x0,
             z0=self.plant.data.xpos[sc.body, 2],
             events=self.events,
-            memory=premises.memory(cfg.graph, cfg.ko),
+            memory=lambda: premises.memory(cfg.graph, cfg.ko),  # the start's graph
         )
 
     @property

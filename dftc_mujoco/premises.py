@@ -22,6 +22,7 @@ know the truth, the simulator does.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -254,10 +255,12 @@ class Monitor:
         x0: np.ndarray,
         z0: np.ndarray,
         events: Any,
-        memory: np.ndarray | None = None,
+        memory: Callable[[], np.ndarray] | None = None,
     ) -> None:
         self.n, self.h, self.events = n, dt, events
-        self.memory = np.full(n, LOOKBACK) if memory is None else np.maximum(memory, LOOKBACK)
+        # each robot's residual memory [s], computed when a flag is first labelled
+        self._memory_of = memory
+        self._memory: np.ndarray | None = None
         self.eta_bar, self.step = eta_bar, dt * xi_bar
         self.offset, self.phi_bar = drift_bound, phi_bar
         # the anti-windup may skip ∫e from ANTI_WINDUP_BAND below the range on: from there the
@@ -403,7 +406,10 @@ class Monitor:
     def violated(self, robot: int, t: float) -> list[str]:
         """The premises robot ``robot`` (0-based), or the team, violated within the memory of
         its residuals before ``t``, in :data:`PREMISES` order."""
-        since = t - self.memory[robot]
+        if self._memory is None:
+            found = self._memory_of() if self._memory_of is not None else 0.0
+            self._memory = np.maximum(np.broadcast_to(found, (self.n,)), LOOKBACK)
+        since = t - self._memory[robot]
         return [
             p
             for k, p in enumerate(PREMISES)

@@ -43,7 +43,7 @@ class Recovery:
                 continue
             self.detected.add((by, robot))
             events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
-            if by == robot and not self.self_exclusion:
+            if not self.counts(by, robot):
                 continue  # its own flag is reported, but exclusion needs teammates
             if robot not in self.first_detection:
                 t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
