@@ -4,7 +4,8 @@
 
 Each size runs the same scenario alternately with ``loop.MONITOR_ALLOWED`` on and off in
 one process (numba's cache warm, the first pair discarded) and prints the median wall time
-of the stepping loop (set-up excluded) and the ratio.
+of the stepping loop (set-up excluded) and the ratio; then the checks timed call by call
+inside the loop (``Monitor.period``), which the machine's noise disturbs far less.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import argparse
 import statistics
 import time
 
-from dftc_mujoco import Simulation, load_scenario
+from dftc_mujoco import Simulation, load_scenario, premises
 from dftc_mujoco import loop as loop_mod
 
 
@@ -61,6 +62,36 @@ def main() -> None:
             on.append(loop_time(s, True))
         m_off, m_on = statistics.median(off), statistics.median(on)
         print(f"| {n} | {m_off:.3f} | {m_on:.3f} | {100 * (m_on / m_off - 1):+.1f} % |")
+    print("\n| N | checks per period [us] | share of the loop |")
+    print("|---|---|---|")
+    for n in a.n:
+        per, share = per_call(scenario(n, a.duration), a.repeat)
+        print(f"| {n} | {per:.1f} | {share:.1f} % |")
+
+
+def per_call(s, repeat: int) -> tuple[float, float]:
+    """Median time of one ``Monitor.period`` call [us] and its share of the loop [%]."""
+    original = premises.Monitor.period
+    spent = [0.0, 0]
+
+    def timed(self, *args):
+        t0 = time.perf_counter()
+        original(self, *args)
+        spent[0] += time.perf_counter() - t0
+        spent[1] += 1
+
+    premises.Monitor.period = timed
+    loop_mod.MONITOR_ALLOWED = True
+    per, share = [], []
+    try:
+        for _ in range(repeat + 1):  # the first run warms the caches
+            spent[:] = [0.0, 0]
+            total = loop_time(s, True)
+            per.append(1e6 * spent[0] / spent[1])
+            share.append(100 * spent[0] / total)
+    finally:
+        premises.Monitor.period = original
+    return statistics.median(per[1:]), statistics.median(share[1:])
 
 
 if __name__ == "__main__":
