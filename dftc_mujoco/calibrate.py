@@ -424,7 +424,10 @@ def compensation(
     sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
     nsub = round(CONTROL_PERIOD / TIMESTEP)
     K = np.ascontiguousarray(s.gains.K, float)
-    g0 = float(np.asarray(s.gains.G)[0, 0])
+    from .loop import PAPER_G
+
+    # the search starts from the scenario's G, or the paper's where it says "auto"
+    g0 = PAPER_G if s.gains.G is None else float(np.asarray(s.gains.G)[0, 0])
     eta_bar = s.noise.eta_bar
     out = []
     for factor in G_CANDIDATES:

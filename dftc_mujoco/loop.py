@@ -39,6 +39,7 @@ from .sim import faults as sim_faults
 from .sim import robots, scene
 from .sim.plant import NoiseStream, Plant
 
+PAPER_G = 0.01  # eq. 30's G = 0.01 I, the paper's value
 TEAMMATE_MARGIN = 0.1  # [m] a teammate is avoided from its safe distance + this on
 
 
@@ -47,6 +48,16 @@ def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
     if s.noise.xi_bar is not None:
         return s.noise.xi_bar
     return robot.xi_bar if robot is not None else 0.0
+
+
+def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:
+    """G of eq. 30 for the run: the scenario's, or with ``gains.G = "auto"`` the robot model's
+    calibrated ``compensation_G`` (the smallest G x I whose compensation loop does not ring
+    on it, ``python -m dftc_mujoco.calibrate``), the paper's 0.01 I without one."""
+    if s.gains.G is not None:
+        return np.asarray(s.gains.G, float)
+    g = robot.calibration.get("compensation_G") if robot is not None else None
+    return float(g or PAPER_G) * np.eye(2)
 
 
 def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: float) -> float:
@@ -64,7 +75,7 @@ def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: flo
         try:
             headroom = estimator_gain(
                 np.asarray(s.gains.K),
-                np.asarray(s.gains.G),
+                effective_G(s, robot),
                 s.physics.control_period,
                 s.noise.eta_bar,
                 effective_xi_bar(s, robot),
@@ -113,7 +124,7 @@ def team_config(
         kc=s.gains.kc,
         ko=s.gains.ko,
         K=np.asarray(s.gains.K),
-        G=np.asarray(s.gains.G),
+        G=effective_G(s, robot),
         theta=s.gains.theta,
         dt=s.physics.control_period,
         eta_bar=s.noise.eta_bar,
@@ -358,6 +369,19 @@ class Simulation:
                     f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
                     f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise "
                     "false alarms"
+                ),
+            )
+        need_g = model.calibration.get("compensation_G")
+        g = effective_G(s, model)
+        if s.fdir.enabled and s.fdir.compensate and need_g and np.linalg.eigvalsh(g).min() < need_g:
+            self.events.add(
+                0.0,
+                "warning",
+                message=(
+                    f"gains.G = {np.linalg.eigvalsh(g).min():g} I is below the {model.name} "
+                    f"model's calibrated compensation_G = {need_g:g}: its compensation loop "
+                    "rings (healthy robots' phi_hat and commands swing, thresholds raise false "
+                    f'alarms); set gains.G = "auto" or at least {need_g:g}'
                 ),
             )
         for note in sc.notes:

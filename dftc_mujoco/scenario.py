@@ -147,7 +147,7 @@ class Gains:
     kc: float
     ko: float
     K: np.ndarray  # (2, 2), symmetric positive definite
-    G: np.ndarray  # (2, 2), symmetric positive definite
+    G: np.ndarray | None  # (2, 2), symmetric positive definite; None ("auto"): the robot's
     theta: float
 
 
@@ -391,7 +391,7 @@ class Scenario:
                 "graph": edges,
                 "graph_family": _plain(team.graph_family),
             },
-            "gains": _fields(self.gains),
+            "gains": {**_fields(self.gains), **({"G": "auto"} if self.gains.G is None else {})},
             "noise": noise,
             "mission": {
                 "transient": _plain(mission.transient),
@@ -728,17 +728,19 @@ class _Table:
                 return _ro(default)
             return _ro(np.zeros([1 if s is None else s for s in shape]))
 
-    def gain_matrix(self, name: str) -> np.ndarray:
-        """A scalar (meaning scalar x I) or a symmetric positive definite 2x2 matrix."""
+    def gain_matrix(self, name: str, auto: bool = False) -> np.ndarray:
+        """A scalar (meaning scalar x I) or a symmetric positive definite 2x2 matrix
+        (``auto``: the word "auto" is also accepted, by the caller)."""
+        what = "a positive number" + (', "auto"' if auto else "") + " or a 2x2 matrix"
         try:
             v = self.raw(name)
             if isinstance(v, int | float) and not isinstance(v, bool):
                 if not v > 0:
-                    self.fail(name, f"expected a positive number or a 2x2 matrix, got {v}")
+                    self.fail(name, f"expected {what}, got {v}")
                 return _ro(float(v) * np.eye(N_DIM))
             m = _numeric_array(v)
             if m is None or m.shape != (N_DIM, N_DIM):
-                self.fail(name, f"expected a positive number or a 2x2 matrix, got {_describe(v)}")
+                self.fail(name, f"expected {what}, got {_describe(v)}")
             if (
                 not np.all(np.isfinite(m))
                 or not np.allclose(m, m.T)
@@ -1297,7 +1299,7 @@ def _gains(t: _Table) -> Gains:
         kc=t.number("kc", low=0.0),
         ko=t.number("ko", low=0.0),
         K=t.gain_matrix("K"),
-        G=t.gain_matrix("G"),
+        G=None if t.raw("G", None) == "auto" else t.gain_matrix("G", auto=True),
         theta=t.number("theta", 2.0, low=0.0),
     )
     t.finish()

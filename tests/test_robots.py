@@ -188,6 +188,27 @@ def test_a_low_xi_bar_for_the_model_is_warned_about(tmp_path, capsys):
     assert any("below the diffdrive model" in w for w in summary["warnings"])
 
 
+def test_a_G_below_the_models_compensation_G_is_warned_about(tmp_path, capsys):
+    """The campaigns drew the diffdrive under paper_case's explicit G = 0.01 (below its
+    calibrated 0.02): its compensation loop rang, healthy φ̂ reached 4.8 m/s and healthy
+    robots were excluded, with no word said. Now "auto" takes the robot's value and an
+    explicit one below it is warned about before the run."""
+    d = scenario_dict()
+    d["gains"]["G"] = 0.01
+    d["duration"] = 6.0
+    d["faults"] = []
+    d["team"]["robot_model"] = "diffdrive"
+    path = tmp_path / "ring.toml"
+    path.write_text(_toml(d))
+    assert run.main([str(path), "--out", str(tmp_path / "o"), "--no-video", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "WARNING: gains.G = 0.01 I is below the diffdrive model's calibrated" in out
+    d["gains"]["G"] = "auto"
+    path.write_text(_toml(d))
+    assert run.main([str(path), "--out", str(tmp_path / "a"), "--no-video", "--no-progress"]) == 0
+    assert "gains.G" not in capsys.readouterr().out
+
+
 def _toml(d, prefix=""):
     """A tiny TOML writer for the scenario dicts used here."""
     lines, tables = [], []
@@ -212,10 +233,11 @@ def _toml(d, prefix=""):
 
 @pytest.mark.parametrize(("model", "G"), [("hexbot", 0.01), ("diffdrive", 0.02)])
 def test_paper_case_outcome_with_every_robot_model(model, G):
-    """paper_case with each built-in model, at the G its calibration recommends (the
-    paper's 0.01 makes the diffdrive's compensation loop ring)."""
+    """paper_case with each built-in model runs at the G its calibration recommends
+    (``gains.G = "auto"``; the paper's 0.01 makes the diffdrive's compensation loop ring)."""
     assert robots.get(model).calibration["compensation_G"] == G
-    s = scenario.load_scenario("paper_case", {"team.robot_model": model, "gains.G": G})
+    s = scenario.load_scenario("paper_case", {"team.robot_model": model})
+    assert s.gains.G is None and (loop.effective_G(s, robots.get(model)) == G * np.eye(2)).all()
     r = loop.simulate(s)
     out = r.summary
     assert out["status"] == "ok" and out["warnings"] == []

@@ -35,7 +35,8 @@ def _error(fn, *args, **kwargs) -> str:
 
 def _arrays(s: Scenario) -> list[np.ndarray]:
     """Every numpy field of a scenario, in a fixed order."""
-    out = [s.team.initial_positions, s.gains.K, s.gains.G, s.mission.centroid.waypoints]
+    out = [s.team.initial_positions, s.gains.K, s.mission.centroid.waypoints]
+    out += [] if s.gains.G is None else [s.gains.G]
     out += [o.position for o in s.obstacles] + [f.value for f in s.faults]
     return out
 
