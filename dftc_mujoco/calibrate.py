@@ -444,6 +444,7 @@ def compensation(
         x_m = data.site_xpos[site][:2][None] + eta[:1]
         z, int_e = x_m.copy(), np.zeros((1, 2))
         phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
+        free = np.zeros(1, bool)  # no contact holds the estimator here
         g_inv = np.eye(2) / g
         ids = drive.controlled()[0]
         norms = np.empty(steps)
@@ -468,6 +469,7 @@ def compensation(
                 CONTROL_PERIOD,
                 drive.command_limit,
                 1.0,
+                free,
                 u_bar,
             )
             norms[k] = np.linalg.norm(phi)

@@ -37,6 +37,7 @@ from .results import RunResult, summarize
 from .scenario import Scenario
 from .sim import faults as sim_faults
 from .sim import robots, scene
+from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
 
 PAPER_G = 0.01  # eq. 30's G = 0.01 I, the paper's value
@@ -156,6 +157,7 @@ def team_config(
         teammate_safe=mate_safe,
         teammate_activation=mate_safe + TEAMMATE_MARGIN if mate_safe > 0 else 0.0,
         self_exclusion=f.self_exclusion,
+        postpone_on_contact=f.postpone_on_contact,
     )
 
 
@@ -425,6 +427,7 @@ class Simulation:
         self.team.dt_d_max_info["settle_time"] = (
             self.settle_time if np.isfinite(self.settle_time) else None
         )
+        self.bumpers = Bumpers(self.scene, self.plant.data)  # each robot's touch sensor
         self.monitor = self._monitor(x0)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
@@ -441,12 +444,6 @@ class Simulation:
     def _monitor(self, x0: np.ndarray) -> premises.Monitor:
         """The premises of the run's threshold rule, watched against the truth."""
         sc, th, cfg = self.scene, self.team.thresholds, self.team.config
-        model = sc.model
-        geom_robot = np.full(model.ngeom, -1, dtype=np.int64)
-        root = model.body_rootid
-        for i, b in enumerate(sc.body):
-            geom_robot[root[model.geom_bodyid] == root[b]] = i
-        geom_robot[np.asarray(sc.obstacle_geom, dtype=np.int64)] = -2
         drive = self.block_names["thresholds"] == "drive"
         phi_bar = float(getattr(th, "phi_bar", 0.0)) if drive else 0.0
         drift = float(getattr(th, "drift", cfg.drift_bound))
@@ -459,7 +456,7 @@ class Simulation:
             phi_bar=phi_bar,
             command_limit=self.command_limit,
             start=self.start_bound,
-            geom_robot=geom_robot,
+            geom_robot=self.bumpers.owner,
             body=sc.body,
             x0=x0,
             z0=self.plant.data.xpos[sc.body, 2],
@@ -543,7 +540,7 @@ class Simulation:
             self.adapter,
             self.noise,
         )
-        events, hook, monitor = self.events, self.hook, self.monitor
+        events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
         watch = MONITOR_ALLOWED
         data = plant.data
         xpos, xmat = data.xpos, data.xmat
@@ -584,7 +581,7 @@ class Simulation:
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)
                     j = k if k < last else last
-                    team.step(t, x_m, position[j], velocity[j], x)
+                    team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
                     ncon = data.ncon
                     if watch:
                         monitor.period(

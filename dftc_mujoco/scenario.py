@@ -244,6 +244,7 @@ class Fdir:
     # how many robots may be faulty at once, or "auto": ⌊(N − 1)/2⌋ (onboard/recovery.py)
     max_faults: int | str = "auto"
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
+    postpone_on_contact: bool = True  # a bumper contact postpones the exclusion instant t_r
 
 
 @dataclass(frozen=True)
@@ -1428,6 +1429,7 @@ def _fdir(t: _Table) -> Fdir:
         drive_lag=_drive_lag(t),
         max_faults=_max_faults(t),
         self_exclusion=t.boolean("self_exclusion", False),
+        postpone_on_contact=t.boolean("postpone_on_contact", True),
     )
     t.finish()
     return f

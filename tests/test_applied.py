@@ -20,6 +20,7 @@ from dftc_mujoco.onboard.thresholds import estimator_gain
 
 SLOWBASE = Path(__file__).parent / "data" / "robots" / "slowbase.robot.toml"
 H = 0.01
+FREE = np.zeros(1, bool)  # the estimator's contact hold, off
 
 
 def test_the_lag_model_integrates_what_a_first_order_lag_delivers():
@@ -73,7 +74,7 @@ def estimator_loop(lag: float, eta: np.ndarray, xi: np.ndarray) -> np.ndarray:
     for k in range(len(eta)):
         x_m = np.array([[x + eta[k], 0.0]])
         estimate_faults(
-            x_m, np.zeros((1, 2)), z, int_e, phi, applied, K, g_inv, H, np.inf, 1.0, u_bar
+            x_m, np.zeros((1, 2)), z, int_e, phi, applied, K, g_inv, H, np.inf, 1.0, FREE, u_bar
         )
         out[k] = phi[0, 0]
         c = -phi[0, 0]

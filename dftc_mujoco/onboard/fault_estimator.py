@@ -20,7 +20,7 @@ ANTI_WINDUP_BAND = 0.05
 
 @njit(cache=True)
 def estimate_faults(
-    x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, u_bar
+    x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, hold, u_bar
 ):  # pragma: no cover - compiled
     """One period of every robot's fault estimator, in place; ū into ``u_bar`` (N, 2).
 
@@ -28,7 +28,9 @@ def estimate_faults(
     (eq. 31) with eᵢ = x_m,i − zᵢ; żᵢ = uᵢ + K eᵢ (eq. 29); ūᵢ = uᵢ − φ̂ᵢ (eq. 28).
     Conditional-integration anti-windup: when ū is within ANTI_WINDUP_BAND (5 cm/s) of the
     per-axis range ``limit``, the step of ∫e is skipped for a robot it would
-    drive further out of range. ``alpha`` < 1 low-pass filters the applied φ̂.
+    drive further out of range. ``alpha`` < 1 low-pass filters the applied φ̂. A robot whose
+    bumper touches something (``hold``) holds ∫e and its compensation: a push or a blocked
+    wheel is no actuator fault, and integrating it winds φ̂ up (10 m/s measured in a crowd).
     """
     for i in range(x_m.shape[0]):
         e0 = x_m[i, 0] - z[i, 0]
@@ -39,6 +41,12 @@ def estimate_faults(
         p1 = g_inv[1, 0] * (e0 + k0) + g_inv[1, 1] * (e1 + k1)
         phi_hat[i, 0] = p0
         phi_hat[i, 1] = p1
+        if hold[i]:  # contact: φ̂ is logged, nothing of it is integrated or applied
+            u_bar[i, 0] = u[i, 0] - applied[i, 0]
+            u_bar[i, 1] = u[i, 1] - applied[i, 1]
+            z[i, 0] += dt * (u[i, 0] + K[0, 0] * e0 + K[0, 1] * e1)  # eq. 29
+            z[i, 1] += dt * (u[i, 1] + K[1, 0] * e0 + K[1, 1] * e1)
+            continue
         if alpha == 1.0:
             applied[i, 0] = p0
             applied[i, 1] = p1
@@ -96,9 +104,12 @@ class FaultEstimator(Block):
         self.phi_hat = np.zeros_like(self.z)
         self.applied = np.zeros_like(self.z)
 
-    def step(self, x_m: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """Update from own measurements ``x_m`` and nominal inputs ``u`` (N, 2); return ū (N, 2)."""
+    def step(self, x_m: np.ndarray, u: np.ndarray, hold: np.ndarray | None = None) -> np.ndarray:
+        """Update from own measurements ``x_m`` and nominal inputs ``u`` (N, 2); return ū (N, 2).
+        ``hold`` (N,): robots whose bumpers touch something hold ∫e and the compensation."""
         u_bar = np.empty(self.z.shape)
+        if hold is None:
+            hold = np.zeros(len(self.z), bool)
         estimate_faults(
             np.ascontiguousarray(x_m, float),
             np.ascontiguousarray(u, float),
@@ -111,6 +122,7 @@ class FaultEstimator(Block):
             self.dt,
             self.command_limit,
             self.alpha,
+            np.ascontiguousarray(hold, bool),
             u_bar,
         )
         return u_bar

@@ -75,6 +75,7 @@ def team_period(
     g_inv,
     limit,
     alpha,
+    hold,
     mu,
     above,
     below,
@@ -150,7 +151,7 @@ def team_period(
         command[:] = u
     integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
     if fdir:
-        estimate_faults(x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, u_bar)
+        estimate_faults(x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, hold, u_bar)
         for r in range(u.shape[0]):
             for d in range(2):
                 u_bar[r, d] = command[r, d] - (applied[r, d] if compensate else 0.0)  # eq. 28

@@ -8,7 +8,11 @@ schedules nor confirms its own exclusion, unless ``self_exclusion``, the paper's
 literally), and a fault hypothesis: when more robots are flagged by teammates at one instant
 than ``max_faults`` admits (those already excluded counted), something systemic is wrong (a
 premise, not a fault): a ``systemic_anomaly`` event names them and nobody is excluded until
-every flag is down.
+every flag is down. A contact postpones: a robot whose bumper touched something from
+Δt_d,max before its first flag on (a contact breaks the premises, and the flags it causes
+say nothing of the actuators) is excluded only if a teammate still flags it T_s + Δt_d,max
+after its last contact (``postpone_on_contact``): a contact is a new start for the residuals
+it disturbed, which eq. 46 covers from the thresholds' settle time T_s on.
 :class:`Recovery` keeps that bookkeeping and says what is due; :class:`~.team.Team` owns
 the vectors that an exclusion resizes and applies it (the observers, thresholds and
 decisions drop the robot, the formation is re-planned).
@@ -20,14 +24,26 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+import numpy as np
+
 
 class Recovery:
     """Which robots are to be excluded when, from the flags the team raises."""
 
-    def __init__(self, dt_d_max: float, max_faults: int, self_exclusion: bool = False) -> None:
+    def __init__(
+        self,
+        dt_d_max: float,
+        max_faults: int,
+        self_exclusion: bool = False,
+        postpone_on_contact: bool = True,
+    ) -> None:
         self.dt_d_max = float(dt_d_max)
         self.max_faults = int(max_faults)
         self.self_exclusion = bool(self_exclusion)
+        self.postpone_on_contact = bool(postpone_on_contact)
+        self.last_contact: dict[int, float] = {}  # robot -> the last time its bumper touched
+        self.since: dict[int, float] = {}  # robot -> from when a contact postpones its t_r
+        self.settle = 0.0  # T_s of the thresholds (Team.settle_time), waited after a contact
         self.anomaly: list[int] | None = None  # the robots flagged while an anomaly lasts
         self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
@@ -49,6 +65,7 @@ class Recovery:
                 t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
                 self.first_detection[robot] = t
                 self.pending[robot] = t_r
+                self.since[robot] = t - self.dt_d_max  # a contact this early may explain it
                 events.append(
                     {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
                 )
@@ -92,6 +109,32 @@ class Recovery:
             self.first_detection.pop(robot, None)
         return [robot for _, robot in ready]
 
+    def contact(self, t: float, robots: Iterable[int]) -> None:
+        """The bumpers of ``robots`` touch something at ``t``."""
+        for robot in robots:
+            self.last_contact[int(robot)] = t
+
+    def postpone(self, t: float, robot: int) -> dict[str, Any] | None:
+        """At t_r: an ``exclusion_postponed`` event when ``robot`` touched something since its
+        window began (its new t_r is its last contact + T_s + Δt_d,max, and that window must
+        be free of contact in turn); None when it may be excluded now."""
+        since = self.since.pop(robot, np.inf)
+        last = self.last_contact.get(robot, -np.inf)
+        if not self.postpone_on_contact or last < since:
+            return None
+        t_r = max(last + self.settle + self.dt_d_max, t + 1e-9)  # inf: T_s beyond the run
+        self.pending[robot] = t_r
+        self.first_detection[robot] = last
+        self.since[robot] = last + 1e-9  # only a later contact postpones it again
+        return {
+            "t": t,
+            "kind": "exclusion_postponed",
+            "robot": robot + 1,
+            "reason": "contact",
+            "last_contact": last,
+            "t_r": t_r if np.isfinite(t_r) else None,  # None: not within the run
+        }
+
     def detectors(self, robot: int) -> list[int]:
         """Every robot that ever flagged ``robot`` (1-based, sorted)."""
         return sorted(by + 1 for by, k in self.detected if k == robot)
@@ -107,6 +150,7 @@ class Recovery:
             "reason": reason,
         }
         self.detected = {(b, k) for b, k in self.detected if k != robot}
+        self.since.pop(robot, None)
         return event
 
     def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:

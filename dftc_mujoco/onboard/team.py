@@ -116,12 +116,16 @@ class Team:
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
         self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
         # the exclusion protocol (eqs. 42-43) under the fault hypothesis
-        self.recovery = Recovery(self.dt_d_max, config.max_faults, config.self_exclusion)
+        self.recovery = Recovery(
+            self.dt_d_max, config.max_faults, config.self_exclusion, config.postpone_on_contact
+        )
         self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
         self._sensed = False  # the last period had range-sensor readings
         # a plug-in supervisor whose step() predates teammate avoidance is called without it
         step_params = inspect.signature(self.supervisor.step).parameters
         self._supervisor_sees_mates = "teammates" in step_params
+        self._estimator_holds = "hold" in inspect.signature(self.estimator.step).parameters
+        self._touch = np.zeros(n, bool)  # each robot's bumper, the last period
         self._resize()
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
@@ -175,6 +179,7 @@ class Team:
                 settled = float(t)
             else:
                 break
+        self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
         return settled
 
     @property
@@ -213,6 +218,7 @@ class Team:
         c: np.ndarray,
         c_dot: np.ndarray,
         sensed_bodies: np.ndarray | None = None,
+        touching: np.ndarray | None = None,
     ) -> int:
         """One control period for every robot; returns RAISED | SWITCHED bits.
 
@@ -220,8 +226,12 @@ class Team:
         desired centroid and its velocity (σ₁,d, σ̇₁,d); ``sensed_bodies``
         (N, 2): where each robot's range sensor sees every robot (robots that were
         excluded become obstacles; teammates are avoided when ``teammate_safe`` > 0;
-        None: no sensor reading).
+        None: no sensor reading); ``touching`` (N,): each robot's bumper (None: no bumpers).
         """
+        if touching is not None:
+            np.copyto(self._touch, touching)
+            if touching.any():
+                self.recovery.contact(t, np.flatnonzero(touching & self.active))
         if self.recovery.pending:
             self._exclusions_due(t)
         self._sensed = sensed_bodies is not None
@@ -289,6 +299,7 @@ class Team:
             est.g_inv,
             est.command_limit,
             est.alpha,
+            self._touch,
             self.mu,
             dec.above,
             dec.below,
@@ -350,7 +361,10 @@ class Team:
         if saturated:
             code |= SATURATED
         if cfg.fdir:
-            u_bar = self.estimator.step(x_m, self.u)  # eqs. 28-31, nominal u (NOTES 2)
+            if self._estimator_holds:  # eqs. 28-31, nominal u (NOTES 2)
+                u_bar = self.estimator.step(x_m, self.u, hold=self._touch)
+            else:
+                u_bar = self.estimator.step(x_m, self.u)
             if not cfg.compensate:
                 self.u_bar[:] = self.command
             elif self._lag_a > 0.0:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
@@ -502,6 +516,10 @@ class Team:
             if not counted:
                 reason = "flagged only by itself" if flaggers else "not flagged"
                 self.events.append(self.recovery.cancel(t, robot, reason))
+                continue
+            later = self.recovery.postpone(t, robot)
+            if later is not None:  # a contact may explain the flags: wait Δt_d,max past it
+                self.events.append(later)
                 continue
             last_pair = len(self.members) <= 2  # one robot would be left: no team, no mission
             if last_pair:
