@@ -163,3 +163,83 @@ def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain()
     late = simulate(load_scenario("paper_case", {"duration": 48.0}))
     assert late.events.of_kind("detection_not_guaranteed") == []
     assert late.summary["dt_d_max"]["settle_time"] < 41.8
+
+
+def test_a_contact_postpones_the_exclusion_past_the_settle_time():
+    """Contacts from Δt_d,max before the first flag on postpone t_r to the last contact +
+    T_s + Δt_d,max; a later contact postpones it again; one before that window does not."""
+    rec = Recovery(dt_d_max=1.0, max_faults=1)
+    rec.settle = 4.0
+    rec.contact(2.5, [1])  # 0.5 s before its first flag: it may explain it
+    rec.flagged(3.0, [(0, 1)])
+    assert rec.due(4.0) == [1]
+    later = rec.postpone(4.0, 1)
+    assert later is not None and later["reason"] == "contact"
+    assert later["t_r"] == pytest.approx(7.5) and rec.pending == {1: pytest.approx(7.5)}
+    rec.contact(5.0, [1])  # touched again while waiting
+    assert rec.due(7.5) == [1]
+    assert rec.postpone(7.5, 1)["t_r"] == pytest.approx(10.0)
+    assert rec.due(10.0) == [1] and rec.postpone(10.0, 1) is None  # free since: excluded
+    early = Recovery(dt_d_max=1.0, max_faults=1)
+    early.contact(1.0, [1])  # 2 s before its first flag: not its cause
+    early.flagged(3.0, [(0, 1)])
+    assert early.due(4.0) == [1] and early.postpone(4.0, 1) is None
+    never = Recovery(dt_d_max=1.0, max_faults=1, postpone_on_contact=False)
+    never.contact(3.0, [1])
+    never.flagged(3.0, [(0, 1)])
+    assert never.due(4.0) == [1] and never.postpone(4.0, 1) is None
+
+
+def test_the_fault_estimator_holds_while_its_robot_touches_something():
+    """A push is no actuator fault: with the bumper on, ∫e and the applied compensation
+    stay where they were (φ̂ is still computed, for the logs)."""
+    from dftc_mujoco.onboard.fault_estimator import estimate_faults
+
+    K, g_inv = 3.0 * np.eye(2), np.eye(2) / 0.01
+    out = {}
+    for hold in (False, True):
+        z, int_e = np.zeros((1, 2)), np.zeros((1, 2))
+        phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
+        for _ in range(50):  # pushed 1 cm away from where the robot believes it is
+            x_m = np.array([[0.01, 0.0]])
+            estimate_faults(
+                x_m,
+                np.zeros((1, 2)),
+                z,
+                int_e,
+                phi,
+                applied,
+                K,
+                g_inv,
+                0.01,
+                np.inf,
+                1.0,
+                np.array([hold]),
+                u_bar,
+            )
+        out[hold] = (int_e.copy(), applied.copy(), phi.copy())
+    assert np.abs(out[False][1]).max() > 0.1  # the push winds the compensation up
+    assert not out[True][0].any() and not out[True][1].any()  # held
+    assert np.abs(out[True][2]).max() > 0  # φ̂ is still estimated
+
+
+def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
+    """Run 281 of the no-false-exclusion battery: 16 disks from random starts cross at
+    0.3 m/s under the drive rule, and robots 7 and 8 jam against teammates. Without the
+    postponement both were excluded at 12.9 s (healthy); with it, neither."""
+    from pathlib import Path
+
+    from dftc_mujoco import scenario
+    from dftc_mujoco.campaign import spec as spec_mod
+
+    sp = spec_mod.load(Path(__file__).parents[1] / "campaigns" / "no_false_exclusion.toml")
+    d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 281))
+    assert d["team"]["robots"] == 16 and d.get("faults", []) == []
+    out = {}
+    for postpone in (True, False):
+        d.setdefault("fdir", {})["postpone_on_contact"] = postpone
+        out[postpone] = simulate(scenario.from_dict(d)).summary
+    assert sorted(e["robot"] for e in out[False]["exclusions"]) == [7, 8]
+    assert out[True]["exclusions"] == []
+    later = [e for e in out[True]["events"] if e["kind"] == "exclusion_postponed"]
+    assert {e["robot"] for e in later} >= {7} and all(e["reason"] == "contact" for e in later)
