@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import breadth_first_order, connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components, shortest_path
 
 
 @dataclass(frozen=True)
@@ -52,14 +52,40 @@ class Graph:
         count, _ = connected_components(m, directed=True, connection="strong")
         return bool(count == 1)
 
-    def without(self, k: int) -> Graph:
-        """The graph with robot ``k`` and its edges removed; later robots shift down by one."""
+    def without(self, k: int, relay: bool = False) -> Graph:
+        """The graph with robot ``k`` and its edges removed; later robots shift down by one.
+
+        ``relay``: ``k`` stays on the network as a static relay (an excluded robot whose
+        radio still works): every message it heard from j it forwards to every i it spoke
+        to, so j -> i joins the survivors' graph for each j -> k -> i."""
 
         def shift(v: int) -> int:
             return v - 1 if v > k else v
 
-        kept = tuple((shift(j), shift(i)) for j, i in self.edges if k not in (j, i))
-        return Graph(self.n - 1, kept)
+        kept = {(shift(j), shift(i)) for j, i in self.edges if k not in (j, i)}
+        if relay:
+            heard = [j for j, i in self.edges if i == k]
+            told = [i for j, i in self.edges if j == k]
+            kept |= {(shift(j), shift(i)) for j in heard for i in told if j != i}
+        return Graph(self.n - 1, tuple(sorted(kept)))
+
+    def components(self) -> list[list[int]]:
+        """The strongly connected components (0-based robots), largest first."""
+        src = [j for j, _ in self.edges]
+        dst = [i for _, i in self.edges]
+        m = csr_matrix((np.ones(len(src)), (src, dst)), shape=(self.n, self.n))
+        _, label = connected_components(m, directed=True, connection="strong")
+        groups = [np.flatnonzero(label == c).tolist() for c in range(int(label.max()) + 1)]
+        return sorted(groups, key=lambda g: (-len(g), g))
+
+    def unheard(self) -> np.ndarray:
+        """(n, n) bool: ``[i, k]`` when no directed path leads from k to i, so robot i's
+        estimate of robot k is not driven by k's measurements and has no bound (eq. 19)."""
+        src = [j for j, _ in self.edges]
+        dst = [i for _, i in self.edges]
+        m = csr_matrix((np.ones(len(src)), (src, dst)), shape=(self.n, self.n))
+        reach = np.isfinite(shortest_path(m, directed=True, unweighted=True))  # [k, i]
+        return ~reach.T
 
 
 # --------------------------------------------------------------------------- generated graphs

@@ -158,6 +158,7 @@ def team_config(
         teammate_activation=mate_safe + TEAMMATE_MARGIN if mate_safe > 0 else 0.0,
         self_exclusion=f.self_exclusion,
         postpone_on_contact=f.postpone_on_contact,
+        excluded_relay=f.excluded_relay,
     )
 
 

@@ -105,6 +105,32 @@ def open_run(folder: str | Path) -> RunResult:
     return RunResult(scenario, log, events, summary, error)
 
 
+def split_text(e: dict[str, Any]) -> str:
+    """One line for a ``graph_not_strongly_connected`` event: who is left, in which groups,
+    and which estimates lost their bound."""
+    groups = e.get("components") or [e["robots"]]
+    text = (
+        f"after an exclusion the graph of robots {', '.join(str(r) for r in e['robots'])} "
+        "is not strongly connected"
+    )
+    if len(groups) > 1:
+        parts = []
+        for g, lost in zip(groups, e.get("unheard", []), strict=False):
+            if lost:
+                parts.append(f"robots {_span(g)} hear nothing from robots {_span(lost)}")
+        text += f" ({len(groups)} groups; " + "; ".join(parts) + ")"
+    return text + (
+        ": those estimates, and the residuals and thresholds built on them, have no bound "
+        "(fdir.excluded_relay = true keeps an excluded robot relaying)"
+    )
+
+
+def _span(robots: list[int]) -> str:
+    """Robots as a short list (at most 8 named)."""
+    head = ", ".join(str(r) for r in robots[:8])
+    return head + (f" and {len(robots) - 8} more" if len(robots) > 8 else "")
+
+
 def _one_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
@@ -307,9 +333,7 @@ def summarize(
         "xi_bar_source": "scenario" if s.noise.xi_bar is not None else "robot model",
         "warnings": [e["message"] for e in events.of_kind("warning")]
         + [
-            f"t = {e['t']:g} s: after an exclusion the graph of robots "
-            f"{', '.join(str(r) for r in e['robots'])} is not strongly connected; "
-            "some estimates and thresholds are no longer bounded"
+            f"t = {e['t']:g} s: " + split_text(e)
             for e in events.of_kind("graph_not_strongly_connected")
         ],
         "min_obstacle_clearance": _finite_or_none(gap),

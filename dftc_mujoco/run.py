@@ -31,6 +31,7 @@ from .errors import ScenarioError
 from .interrupt import Interrupted, Signals
 from .output import OutputError, free_space_check, os_problem, run_folder
 from .render import gl
+from .results import split_text
 
 if TYPE_CHECKING:
     from .results import RunResult
@@ -189,11 +190,7 @@ def _fmt_event(e: dict) -> str:
             f"(was {e['before']:.2f} s)"
         )
     if k == "graph_not_strongly_connected":
-        left = ", ".join(str(b) for b in e["robots"])
-        return (
-            f"WARNING: the graph of robots {left} is not strongly connected: "
-            "estimates and thresholds of some robots are no longer bounded"
-        )
+        return "WARNING: " + split_text(e)
     if k == "warning":
         return f"WARNING: {e['message']}"
     if k == "mission_ended":

@@ -245,6 +245,7 @@ class Fdir:
     max_faults: int | str = "auto"
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     postpone_on_contact: bool = True  # a bumper contact postpones the exclusion instant t_r
+    excluded_relay: bool = False  # an excluded robot keeps relaying its neighbours' messages
 
 
 @dataclass(frozen=True)
@@ -1430,6 +1431,7 @@ def _fdir(t: _Table) -> Fdir:
         max_faults=_max_faults(t),
         self_exclusion=t.boolean("self_exclusion", False),
         postpone_on_contact=t.boolean("postpone_on_contact", True),
+        excluded_relay=t.boolean("excluded_relay", False),
     )
     t.finish()
     return f

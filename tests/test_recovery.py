@@ -243,3 +243,43 @@ def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
     assert out[True]["exclusions"] == []
     later = [e for e in out[True]["events"] if e["kind"] == "exclusion_postponed"]
     assert {e["robot"] for e in later} >= {7} and all(e["reason"] == "contact" for e in later)
+
+
+def test_an_excluded_robot_that_relays_keeps_the_survivors_connected():
+    """A line with back-links 1 ⇄ 2 ⇄ 3 ⇄ 4: robot 2 stops and is excluded, which cuts robot 1
+    off from robots 3 and 4. Without a relay the split is reported (its groups and which
+    estimates lost their bound) and robot 1's own stop at 45 s goes unseen by anyone; with
+    ``fdir.excluded_relay`` robot 2's radio forwards 1 ⇄ 3, the graph stays strongly
+    connected and robots 3 and 4 flag robot 1."""
+    line = [[1, 2], [2, 1], [2, 3], [3, 2], [3, 4], [4, 3]]
+    faults = [{"robot": 2, "kind": "stop", "t": 30.0}, {"robot": 1, "kind": "stop", "t": 45.0}]
+    out = {}
+    for relay in (False, True):
+        s = load_scenario(
+            "paper_case", {"team.graph": line, "faults": faults, "fdir.excluded_relay": relay}
+        )
+        out[relay] = simulate(s).summary
+    for summary in out.values():
+        assert [e["robot"] for e in summary["exclusions"]] == [2]
+    split = [e for e in out[False]["events"] if e["kind"] == "graph_not_strongly_connected"]
+    assert len(split) == 1
+    assert split[0]["components"] == [[3, 4], [1]] and split[0]["unheard"] == [[1], [3, 4]]
+    assert any("robots 3, 4 hear nothing from robots 1" in w for w in out[False]["warnings"])
+    late = {
+        relay: {d["by"] for d in o["detections"] if d["robot"] == 1 and d["t"] >= 45.0}
+        for relay, o in out.items()
+    }
+    assert late[False] == set() and {3, 4} <= late[True]
+    assert not [e for e in out[True]["events"] if e["kind"] == "graph_not_strongly_connected"]
+    assert out[True]["warnings"] == []
+
+
+def test_relayed_edges_join_what_the_excluded_robot_heard_to_whom_it_told():
+    from dftc_mujoco.graph import Graph
+
+    g = Graph(4, ((0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2)))
+    assert not g.without(1).is_strongly_connected()
+    relayed = g.without(1, relay=True)
+    assert relayed.is_strongly_connected() and set(relayed.edges) >= {(0, 1), (1, 0)}
+    assert g.without(1).components() == [[1, 2], [0]]
+    assert g.without(1).unheard().sum() == 4

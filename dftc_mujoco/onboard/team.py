@@ -535,13 +535,28 @@ class Team:
                 )
                 return
             if not self.graph.is_strongly_connected():
-                self.events.append(
-                    {
-                        "t": t,
-                        "kind": "graph_not_strongly_connected",
-                        "robots": [int(k) + 1 for k in self.members],
-                    }
-                )
+                self.events.append(self._split(t))
+
+    def _split(self, t: float) -> dict[str, Any]:
+        """The ``graph_not_strongly_connected`` event: the members' strongly connected
+        components and, for each, the robots it hears nothing from (directly or through
+        others): its estimates of them, and the residuals and thresholds built on them, have
+        no bound any more (eqs. 19, 35)."""
+        ids = self.members + 1
+        groups = self.graph.components()
+        unheard = self.graph.unheard()
+        cost = []
+        for g in groups:
+            lost = np.flatnonzero(unheard[g[0]])
+            cost.append([int(k) for k in ids[lost]])
+        return {
+            "t": t,
+            "kind": "graph_not_strongly_connected",
+            "robots": [int(k) for k in ids],
+            "components": [[int(k) for k in ids[g]] for g in groups],
+            "unheard": cost,  # per component: the robots whose estimates lost their bound
+            "pairs": int(unheard.sum()),
+        }
 
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
@@ -550,7 +565,7 @@ class Team:
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
         self.members = self.members[keep]
-        self.graph = self.graph.without(p)
+        self.graph = self.graph.without(p, relay=self.config.excluded_relay)
         for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
             self.blocks[name].drop(p, self.graph, t)
         self._resize()
