@@ -99,6 +99,13 @@ def ring_with_chords(n: int, chords: tuple[int, ...] = ()) -> Graph:
     return Graph(n, tuple(sorted(edges)))
 
 
+def line_with_back_links(n: int) -> Graph:
+    """Robots in a line, each talking with the next both ways: i ⇄ i + 1. Strongly
+    connected, and every inner robot is a cut: excluding it splits the team."""
+    edges = [(i, i + 1) for i in range(n - 1)] + [(i + 1, i) for i in range(n - 1)]
+    return Graph(n, tuple(sorted(edges)))
+
+
 def random_strongly_connected(n: int, in_degree: int, rng: np.random.Generator) -> Graph:
     """A random ring (a random order, so strongly connected) plus random in-edges until
     every robot hears exactly ``in_degree`` others (at most n − 1)."""

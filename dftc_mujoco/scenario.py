@@ -1122,7 +1122,7 @@ def _physics(t: _Table) -> Physics:
     return Physics(timestep, period, log_rate, contacts, matrix_rate)
 
 
-_FAMILIES = ("explicit", "ring_chords", "random", "knn")
+_FAMILIES = ("explicit", "ring_chords", "random", "knn", "line")
 
 
 def _team(t: _Table, mission: Mission | None, seed: int) -> Team:
@@ -1228,11 +1228,11 @@ def _graph(
 def _generated_graph(
     g: _Table, n: int | None, x0: np.ndarray | None, seed: int
 ) -> tuple[Graph | None, str | None]:
-    """{family = "ring_chords", chords = [...]}, {family = "random", in_degree = d}
-    or {family = "knn", k = k}."""
-    from .graph import k_nearest, random_strongly_connected, ring_with_chords
+    """{family = "ring_chords", chords = [...]}, {family = "random", in_degree = d},
+    {family = "knn", k = k} or {family = "line"} (i ⇄ i + 1: every inner robot a cut)."""
+    from .graph import k_nearest, line_with_back_links, random_strongly_connected, ring_with_chords
 
-    family = g.string("family", choices=("ring_chords", "random", "knn"))
+    family = g.string("family", choices=("ring_chords", "random", "knn", "line"))
     if not g.ok("family"):
         return None, None
     graph: Graph | None = None
@@ -1250,6 +1250,9 @@ def _generated_graph(
         d = g.integer("in_degree", low=1)
         if n is not None and g.ok("in_degree"):
             graph = random_strongly_connected(n, d, np.random.default_rng([seed, 11]))
+    elif family == "line":
+        if n is not None:
+            graph = line_with_back_links(n)
     else:
         k = g.integer("k", low=1)
         if x0 is not None and g.ok("k"):

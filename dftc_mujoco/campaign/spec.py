@@ -13,7 +13,7 @@ faulty_robot = "any"             # or a list of robot numbers
 fault_time = [15.0, 45.0]        # uniform range [s]
 bias_magnitude = [0.05, 1.5]     # uniform range [m/s], random direction
 robots = [4, 8, 16]              # choices of N (layout and graph then generated)
-graph_family = ["ring_chords", "random", "knn"]
+graph_family = ["ring_chords", "random", "knn", "line"]  # or "ring"
 eta_bar = [0.0005, 0.002]        # uniform ranges
 xi_bar = [0.002, 0.01]
 "gains.ko" = [3.0, 6.0]          # any scenario key by dotted path (quoted): a list
@@ -45,7 +45,7 @@ from ..errors import ScenarioError
 from ..scenario import _describe, _Table
 
 FAULT_KINDS = ("stop", "bias", "none")
-FAMILIES = ("ring", "ring_chords", "random", "knn")
+FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
 
 
 @dataclass(frozen=True)
@@ -288,6 +288,8 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
             team["graph"] = {"family": "random", "in_degree": g["in_degree"]}
         elif family == "knn":
             team["graph"] = {"family": "knn", "k": g["k"]}
+        elif family == "line":
+            team["graph"] = {"family": "line"}
     kind = p["fault_kind"]
     if kind == "none":
         d["faults"] = []
