@@ -469,3 +469,24 @@ def test_rows_describe_two_faults_in_one_run(tmp_path):
     assert [(f["robot"], f["kind"]) for f in faults] == [(1, "stop"), (3, "stop")]
     assert all(f["detected"] and f["excluded"] for f in faults)
     assert row["fault_count"] == 2 and row["healthy_exclusions"] == 0
+
+
+def test_a_drawn_two_stops_fault_gives_two_sequential_stops_and_a_line_graph(tmp_path):
+    """``fault_kind = "two_stops"``: two different robots stop, the second 5-15 s after the
+    first; ``graph_family = "line"``: i ⇄ i + 1."""
+    path = tmp_path / "two.toml"
+    path.write_text(
+        'name = "two"\nscenario = "paper_case"\nruns = 8\nseed = 3\n'
+        '[vary]\nrobots = [6]\nfault_kind = ["two_stops"]\ngraph_family = ["line"]\n'
+        'faulty_robot = "any"\nfault_time = [10.0, 20.0]\n'
+    )
+    sp = spec.load(path)
+    for i in range(8):
+        p = spec.draw(sp, i)
+        s = spec.scenario_for(sp, p)
+        first, second = s.faults
+        assert first.kind == second.kind == "stop" and first.robot != second.robot
+        assert 5.0 <= second.t - first.t <= 15.0
+        assert sorted(s.team.graph.edges) == sorted(
+            [(k, k + 1) for k in range(5)] + [(k + 1, k) for k in range(5)]
+        )

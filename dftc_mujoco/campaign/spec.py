@@ -8,7 +8,7 @@ seed = 7                         # campaign seed: run i draws from (seed, i)
 duration = 60.0
 [vary]
 seed = true                      # a different scenario seed per run (default)
-fault_kind = ["stop"]            # choices among stop, bias, none
+fault_kind = ["stop"]            # choices among stop, bias, none, two_stops
 faulty_robot = "any"             # or a list of robot numbers
 fault_time = [15.0, 45.0]        # uniform range [s]
 bias_magnitude = [0.05, 1.5]     # uniform range [m/s], random direction
@@ -44,7 +44,7 @@ from .. import scenario as scenario_mod
 from ..errors import ScenarioError
 from ..scenario import _describe, _Table
 
-FAULT_KINDS = ("stop", "bias", "none")
+FAULT_KINDS = ("stop", "bias", "none", "two_stops")
 FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
 
 
@@ -225,7 +225,7 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
     )
     kind = str(pick("fault_kind")) if "fault_kind" in v else "base"
     p["fault_kind"] = kind
-    if kind in ("stop", "bias"):
+    if kind in ("stop", "bias", "two_stops"):
         choices = (
             list(range(1, n + 1))
             if v["faulty_robot"] == "any"
@@ -238,6 +238,10 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
             lo, hi = v.get("bias_magnitude", [0.3, 0.3])
             p["bias_magnitude"] = round(float(rng.uniform(lo, hi)), 4)
             p["bias_angle"] = round(float(rng.uniform(0, 2 * np.pi)), 4)
+        if kind == "two_stops":  # a second robot stops 5-15 s after the first
+            others = [r for r in range(1, n + 1) if r != p["faulty_robot"]]
+            p["second_robot"] = int(rng.choice(others))
+            p["second_t"] = round(p["fault_t"] + float(rng.uniform(5.0, 15.0)), 3)
     for key in ("eta_bar", "xi_bar"):
         if key in v:
             p[key] = round(float(rng.uniform(*v[key])), 6)
@@ -295,6 +299,11 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
         d["faults"] = []
     elif kind == "stop":
         d["faults"] = [{"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]}]
+    elif kind == "two_stops":
+        d["faults"] = [
+            {"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]},
+            {"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]},
+        ]
     elif kind == "bias":
         a, m = p["bias_angle"], p["bias_magnitude"]
         d["faults"] = [
