@@ -47,6 +47,7 @@ import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -148,6 +149,7 @@ class Calibration:
     lag_fit: float = 0.0  # the best-fitting τ, modelled or not [s]
     rms_command: float = 0.0  # rms ‖ẋ − u‖ over the programme [m/s]
     rms_lag: float = 0.0  # rms ‖ẋ − v̂‖ with the fitted lag [m/s]
+    accel: float = math.inf  # a_max of the nominal input's change (inf: not limited) [m/s²]
 
     @property
     def recommended_xi_bar(self) -> float:
@@ -165,6 +167,7 @@ class Calibration:
             "saturation": round(self.saturation, 4),
             **({"lag": round(self.lag, 4)} if self.lag > 0 else {}),
             **({"compensation_G": self.compensation_G} if self.compensation_G else {}),
+            **({"accel": self.accel} if math.isfinite(self.accel) else {}),
             **(
                 {
                     "drift_bound": round(self.drift.drift_bound, 6),
@@ -388,6 +391,14 @@ class Compensation:
         """The loop amplifies the robot's lag: healthy ‖φ̂‖ beyond 1.5 Φ̄ of an ideal plant."""
         return self.phi_p99 > 1.5 * self.ideal
 
+    @property
+    def runs_away(self) -> bool:
+        """On jumping commands (:func:`acceleration`): healthy ‖φ̂‖ beyond 3 Φ̄ of an ideal
+        plant at its 99th percentile. A jump's own transient is a spike of a few periods
+        (the disk and the hexbot: 2.2 Φ̄ and 2.1 Φ̄ unlimited); a loop that feeds it back runs
+        away (the diffdrive: 53 Φ̄ unlimited, 4.5 Φ̄ at 4 m/s², 1.7 Φ̄ at 2 m/s²)."""
+        return self.phi_p99 > 3.0 * self.ideal
+
 
 G_CANDIDATES = (1.0, 1.5, 2.0, 3.0, 5.0, 10.0)  # multiples of the scenario's G tried
 
@@ -410,10 +421,7 @@ def compensation(
     robot models its drive as the team will (``onboard/applied.py``): the estimator is
     driven by the modelled velocity, the drive by the command.
     """
-    import mujoco
-
-    from .onboard.applied import lag_coefficients, lag_input
-    from .onboard.fault_estimator import estimate_faults
+    from .loop import PAPER_G
     from .onboard.thresholds import estimator_gain
     from .scenario import load_scenario
     from .sim import robots, scene
@@ -422,9 +430,7 @@ def compensation(
     s = load_scenario(scenario_name, overrides)
     robot = robots.get(name, where="MODEL")
     sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
-    nsub = round(CONTROL_PERIOD / TIMESTEP)
     K = np.ascontiguousarray(s.gains.K, float)
-    from .loop import PAPER_G
 
     # the search starts from the scenario's G, or the paper's where it says "auto"
     g0 = PAPER_G if s.gains.G is None else float(np.asarray(s.gains.G)[0, 0])
@@ -437,44 +443,7 @@ def compensation(
         prog = programme(drive.command_limit)
         steps = min(len(prog.u) - prog.startup, round(seconds / CONTROL_PERIOD))
         u_all = prog.u[prog.startup : prog.startup + steps]
-        rng = np.random.default_rng(seed)
-        ang = rng.uniform(0, 2 * np.pi, steps)
-        eta = eta_bar * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-        site = int(sc.site[0])
-        x_m = data.site_xpos[site][:2][None] + eta[:1]
-        z, int_e = x_m.copy(), np.zeros((1, 2))
-        phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
-        free = np.zeros(1, bool)  # no contact holds the estimator here
-        g_inv = np.eye(2) / g
-        ids = drive.controlled()[0]
-        norms = np.empty(steps)
-        lag_a, lag_b = lag_coefficients(lag, CONTROL_PERIOD)
-        v_hat, command = np.zeros((1, 2)), np.zeros((1, 2))
-        for k in range(steps):
-            x_m = data.site_xpos[site][:2][None] + eta[k]
-            u = u_all[k][None].copy()
-            if lag_a > 0.0:
-                lag_input(u, v_hat, command, lag_a, lag_b)  # u: the modelled velocity
-            else:
-                command[:] = u
-            estimate_faults(
-                x_m,
-                u,
-                z,
-                int_e,
-                phi,
-                applied,
-                K,
-                g_inv,
-                CONTROL_PERIOD,
-                drive.command_limit,
-                1.0,
-                free,
-                u_bar,
-            )
-            norms[k] = np.linalg.norm(phi)
-            data.ctrl[ids] = drive.command(command - applied)[0]  # ū (eq. 28)
-            mujoco.mj_step(sc.model, data, nstep=nsub)
+        norms = closed_loop(sc, data, drive, u_all, K, g, eta_bar, lag, seed=seed)
         settled = norms[round(1.0 / CONTROL_PERIOD) :]  # after the first second
         ideal = estimator_gain(K, g * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0, lag=lag)
         result = Compensation(g, float(np.percentile(settled, 99)), float(settled.max()), ideal)
@@ -482,6 +451,139 @@ def compensation(
         if not result.rings:
             break
     return out
+
+
+def closed_loop(
+    sc: Any,
+    data: Any,
+    drive: Any,
+    u_all: np.ndarray,
+    K: np.ndarray,
+    g: float,
+    eta_bar: float,
+    lag: float = 0.0,
+    accel: float = math.inf,
+    seed: int = 0,
+) -> np.ndarray:
+    """One robot driven by the nominal commands ``u_all`` (steps, 2) with the paper's fault
+    estimator and compensation (eqs. 28-31) at G = ``g`` I in the loop, η at its bound; the
+    drive modelled as the team will (``lag``; ``accel``: the nominal input's change held to
+    a_max h per period, ``onboard/applied.py``). Returns ‖φ̂‖ of every period."""
+    import mujoco
+
+    from .onboard.applied import lag_coefficients, lag_input, limit_input
+    from .onboard.fault_estimator import estimate_faults
+
+    steps = len(u_all)
+    nsub = round(CONTROL_PERIOD / TIMESTEP)
+    rng = np.random.default_rng(seed)
+    ang = rng.uniform(0, 2 * np.pi, steps)
+    eta = eta_bar * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    site = int(sc.site[0])
+    x_m = data.site_xpos[site][:2][None] + eta[:1]
+    z, int_e = x_m.copy(), np.zeros((1, 2))
+    phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
+    free = np.zeros(1, bool)  # no contact holds the estimator here
+    g_inv = np.eye(2) / g
+    ids = drive.controlled()[0]
+    norms = np.empty(steps)
+    lag_a, lag_b = lag_coefficients(lag, CONTROL_PERIOD)
+    v_hat, command = np.zeros((1, 2)), np.zeros((1, 2))
+    rows, scratch = np.zeros(1, np.int64), np.zeros((1, 2))
+    step = accel * CONTROL_PERIOD
+    for k in range(steps):
+        x_m = data.site_xpos[site][:2][None] + eta[k]
+        u = u_all[k][None].copy()
+        limit_input(u, scratch, scratch.copy(), math.inf, command, rows, step)
+        if lag_a > 0.0:
+            lag_input(u, v_hat, command, lag_a, lag_b)  # u: the modelled velocity
+        else:
+            command[:] = u
+        estimate_faults(
+            x_m,
+            u,
+            z,
+            int_e,
+            phi,
+            applied,
+            K,
+            g_inv,
+            CONTROL_PERIOD,
+            drive.command_limit,
+            1.0,
+            free,
+            u_bar,
+        )
+        norms[k] = np.linalg.norm(phi)
+        data.ctrl[ids] = drive.command(command - applied)[0]  # ū (eq. 28)
+        mujoco.mj_step(sc.model, data, nstep=nsub)
+    return norms
+
+
+ACCEL_CANDIDATES = (math.inf, 8.0, 4.0, 2.0, 1.0, 0.5)  # a_max tried [m/s²], fastest first
+
+
+def turns(limit: float, dt: float = CONTROL_PERIOD, hold: float = 2.0) -> np.ndarray:
+    """Nominal commands that jump between velocities at 0.8 of the range: start, 90°
+    switches, reversals, stops (what an avoidance switch or a far start asks of a drive)."""
+    v = 0.8 * min(limit, 1e9) / math.sqrt(2)
+    targets = [(v, 0), (0, v), (0, -v), (-v, -v), (v, v), (0, 0), (-v, 0), (v, -v), (0, 0)]
+    k = round(hold / dt)
+    return np.vstack([np.tile(np.asarray(t, float), (k, 1)) for t in targets])
+
+
+def acceleration(
+    name: str, G: float, lag: float = 0.0, eta_bar: float = 0.001, seed: int = 0
+) -> list[tuple[float, Compensation]]:
+    """The compensation loop at G on commands that jump (:func:`turns`), with the nominal
+    input's change held to a_max per second for each of ``ACCEL_CANDIDATES`` until the loop
+    no longer rings: a drive that cannot follow a jump (a differential drive swinging its
+    offset point round) reads the jump as a fault, the compensation adds it to the command
+    and the loop runs away (healthy ‖φ̂‖ 4.6 m/s measured on the diffdrive in a crowd)."""
+    from .onboard.thresholds import estimator_gain
+    from .sim import robots, scene
+    from .sim.plant import Plant
+
+    robot = robots.get(name, where="MODEL")
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
+    K = 3.0 * np.eye(2)  # the paper's K
+    ideal = estimator_gain(K, G * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0, lag=lag)
+    out = []
+    for a in ACCEL_CANDIDATES:
+        data = Plant.initial_data(sc)
+        drive = robot.adapter(sc, data, CONTROL_PERIOD)
+        u_all = turns(drive.command_limit)
+        norms = closed_loop(sc, data, drive, u_all, K, G, eta_bar, lag, accel=a, seed=seed)
+        result = Compensation(G, float(np.percentile(norms, 99)), float(norms.max()), ideal)
+        out.append((a, result))
+        if not result.runs_away:
+            break
+    return out
+
+
+def acceleration_report(results: list[tuple[float, Compensation]]) -> tuple[str, bool]:
+    """The line to print about jumping commands, and whether it is a warning."""
+    first, (a, last) = results[0][1], results[-1]
+    if not first.runs_away:
+        return (
+            f"jumping commands: healthy |phi_hat| p99 {first.phi_p99:.3g} m/s against "
+            f"Phi_bar = {first.ideal:.3g} m/s with no acceleration limit (it does not run away)",
+            False,
+        )
+    if last.runs_away:
+        return (
+            f"jumping commands run the compensation loop away (|phi_hat| p99 "
+            f"{first.phi_p99:.3g} m/s) even at {a:g} m/s²: this drive cannot follow the "
+            "team's commands",
+            True,
+        )
+    return (
+        f"jumping commands run the compensation loop away unlimited (|phi_hat| p99 "
+        f"{first.phi_p99:.3g} m/s against Phi_bar = {first.ideal:.3g}); held to accel = {a:g} "
+        f"m/s² it stays at {last.phi_p99:.3g} m/s: the robot limits its nominal input's "
+        "change to that (onboard/applied.py)",
+        False,
+    )
 
 
 def compensation_report(results: list[Compensation]) -> tuple[str, bool]:
@@ -798,6 +900,11 @@ def main(argv: list[str] | None = None) -> int:
             overrides["gains.G"] = loop_results[-1].G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
         cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
+        jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag)
+        line, warn = acceleration_report(jumps)
+        print(f"WARNING: {line}" if warn else line)
+        if not jumps[-1][1].runs_away:
+            cal = dataclasses.replace(cal, accel=jumps[-1][0])
         if path is not None:  # the drift runs then see the robot's new mismatch
             write(path, cal)
         try:

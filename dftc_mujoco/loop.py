@@ -30,6 +30,7 @@ from . import checks, mission, premises
 from .checks import CLEARANCE
 from .errors import ScenarioError, SimulationError
 from .onboard.block import Block
+from .onboard.fault_estimator import ANTI_WINDUP_BAND
 from .onboard.team import Team, TeamConfig
 from .onboard.thresholds import estimator_gain
 from .record import Events, Log, matrix_every
@@ -84,7 +85,8 @@ def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: flo
             )
         except ScenarioError:  # an unstable estimator loop is refused elsewhere
             headroom = 0.0
-    return max(command_limit - headroom, 0.5 * command_limit)
+    # and the anti-windup's band: a healthy ū never enters it (the saturation premise)
+    return max(command_limit - headroom - ANTI_WINDUP_BAND, 0.5 * command_limit)
 
 
 def team_config(
@@ -153,6 +155,7 @@ def team_config(
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
         lag=drive_lag(s, robot),
+        accel=drive_accel(s, robot),
         max_faults=max_faults(s),
         teammate_safe=mate_safe,
         teammate_activation=mate_safe + TEAMMATE_MARGIN if mate_safe > 0 else 0.0,
@@ -168,6 +171,14 @@ def max_faults(s: Scenario) -> int:
     if s.fdir.max_faults != "auto":
         return int(s.fdir.max_faults)
     return max(1, (s.team.graph.n - 1) // 2)
+
+
+def drive_accel(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """a_max each robot holds its nominal input's change to: the scenario's
+    ``fdir.drive_accel`` (0: none), or the robot file's calibrated one ("robot")."""
+    if s.fdir.drive_accel != "robot":
+        return float(s.fdir.drive_accel) or np.inf
+    return robot.accel if robot is not None else np.inf
 
 
 def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:

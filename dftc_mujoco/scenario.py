@@ -241,6 +241,9 @@ class Fdir:
     # τ [s] of the first-order drive lag each robot models (onboard/applied.py), or "robot":
     # the robot file's calibrated [calibration] lag (0 when it has none: ẋ = u)
     drive_lag: float | str = "robot"
+    # a_max [m/s²] each robot holds its nominal input's change to (onboard/applied.py), or
+    # "robot": the robot file's calibrated [calibration] accel (none when it has none); 0: none
+    drive_accel: float | str = "robot"
     # how many robots may be faulty at once, or "auto": ⌊(N − 1)/2⌋ (onboard/recovery.py)
     max_faults: int | str = "auto"
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
@@ -1431,6 +1434,9 @@ def _fdir(t: _Table) -> Fdir:
         reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
         input=t.string("input", "applied", choices=("applied", "nominal")),
         drive_lag=_drive_lag(t),
+        drive_accel=_number_or_word(
+            t, "drive_accel", "robot", "an acceleration in m/s²", strict_low=False
+        ),
         max_faults=_max_faults(t),
         self_exclusion=t.boolean("self_exclusion", False),
         postpone_on_contact=t.boolean("postpone_on_contact", True),

@@ -12,11 +12,12 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from dftc_mujoco import calibrate as cal_mod
-from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco import load_scenario, loop, simulate
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard import team as team_mod
 from dftc_mujoco.onboard.applied import lag_coefficients, lag_input
 from dftc_mujoco.onboard.thresholds import estimator_gain
+from dftc_mujoco.sim import robots
 
 SLOWBASE = Path(__file__).parent / "data" / "robots" / "slowbase.robot.toml"
 H = 0.01
@@ -162,3 +163,55 @@ def test_a_bad_drive_lag_is_one_line_naming_the_key(value, message):
     with pytest.raises(ScenarioError, match=message) as err:
         load_scenario("paper_case", {"fdir.drive_lag": tomllib.loads(f"v = {value}")["v"]})
     assert "fdir.drive_lag" in str(err.value)
+
+
+def test_the_nominal_input_changes_at_most_a_max_h_per_period():
+    """``limit_input`` with an acceleration: the change since the last command is held to
+    a_max h in norm (direction kept), then each axis to the range; Δu follows."""
+    from dftc_mujoco.onboard.applied import limit_input
+
+    u = np.array([[1.0, 0.0], [0.05, 0.0], [-3.0, 4.0]])
+    u_g = u.copy()
+    du = np.zeros_like(u)
+    previous = np.array([[0.0, 0.0], [0.0, 0.0], [9.0, 9.0], [0.0, 0.0]])
+    rows = np.array([0, 1, 3])
+    hit = limit_input(u, u_g, du, 0.5, previous, rows, 0.1)  # a_max = 10 m/s², h = 0.01 s
+    assert hit == 2
+    assert np.allclose(u[0], [0.1, 0.0]) and np.allclose(u[1], [0.05, 0.0])  # within the step
+    assert np.allclose(u[2], [-0.06, 0.08])  # 0.1 along (-3, 4)/5, from robot 3's command
+    assert np.allclose(du, u - u_g)
+    none = np.array([[2.0, 0.0]])
+    limit_input(none, none.copy(), np.zeros((1, 2)), 0.5, np.zeros((1, 2)), rows[:1], np.inf)
+    assert np.allclose(none, [[0.5, 0.0]])  # no acceleration limit: the range only
+
+
+def test_calibrate_finds_the_acceleration_a_drive_follows():
+    """Jumping commands run the diffdrive's compensation loop away (healthy ‖φ̂‖ p99 ≫ Φ̄);
+    held to 2 m/s² they do not. The disk follows jumps unlimited."""
+    from dftc_mujoco import calibrate
+
+    disk = calibrate.acceleration("disk", 0.01)
+    assert len(disk) == 1 and disk[0][0] == np.inf and not disk[0][1].runs_away
+    diff = calibrate.acceleration("diffdrive", 0.02)
+    assert diff[0][1].runs_away and diff[0][1].phi_p99 > 10 * diff[0][1].ideal
+    assert diff[-1][0] == 2.0 and not diff[-1][1].runs_away
+    assert robots.get("diffdrive").accel == 2.0 and robots.get("disk").accel == np.inf
+
+
+def test_an_acceleration_limit_keeps_a_healthy_diffdrive_in_the_team():
+    """Run 69 of the no-false-exclusion battery: 4 diffdrives from a 6 m circle at 0.3 m/s,
+    robot 3 stops at 39.7 s. Unlimited (``drive_accel = 0``) robot 2's reversal at 11.2 s
+    runs its compensation away (ū 4.8 m/s) and the healthy robot 2 is excluded; at the
+    calibrated 2 m/s² only the stopped robot 3 is."""
+    from dftc_mujoco import scenario
+    from dftc_mujoco.campaign import spec as spec_mod
+
+    sp = spec_mod.load(Path(__file__).parents[1] / "campaigns" / "no_false_exclusion.toml")
+    d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 69))
+    assert d["team"]["robot_model"] == "diffdrive" and d["faults"][0]["robot"] == 3
+    out = {}
+    for accel in ("robot", 0.0):
+        d.setdefault("fdir", {})["drive_accel"] = accel
+        out[accel] = loop.simulate(scenario.from_dict(d)).summary
+    assert [e["robot"] for e in out[0.0]["exclusions"]] == [2]
+    assert [e["robot"] for e in out["robot"]["exclusions"]] == [3]

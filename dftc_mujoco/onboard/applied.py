@@ -52,16 +52,28 @@ def lag_input(u, v_hat, command, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def limit_input(u, u_g, delta_u, limit):  # pragma: no cover - compiled
-    """Saturate the nominal inputs ``u`` (M, n) per axis at ±``limit`` in place and set
-    Δuᵢ = uᵢ − u_g,i (eq. 22) for the saturated input; returns the number of robots whose
-    input was saturated."""
+def limit_input(u, u_g, delta_u, limit, previous, rows, step):  # pragma: no cover - compiled
+    """Saturate the nominal inputs ``u`` (M, n) in place: first their change since the last
+    period's command ``previous[rows[i]]`` at ``step`` = a_max h in norm (the drive's
+    acceleration, inf: none), then each axis at ±``limit``; Δuᵢ = uᵢ − u_g,i (eq. 22) for
+    the input that results. Returns the number of robots whose input was changed."""
     hit = 0
     for i in range(u.shape[0]):
-        if max(abs(u[i, 0]), abs(u[i, 1])) <= limit:
-            continue  # within range: u and Δu as the supervisor made them
-        hit += 1
-        for d in range(u.shape[1]):
-            u[i, d] = min(max(u[i, d], -limit), limit)
-            delta_u[i, d] = u[i, d] - u_g[i, d]
+        changed = False
+        if step < math.inf:
+            p0, p1 = previous[rows[i], 0], previous[rows[i], 1]
+            d0, d1 = u[i, 0] - p0, u[i, 1] - p1
+            gap = math.sqrt(d0 * d0 + d1 * d1)
+            if gap > step:
+                u[i, 0] = p0 + d0 * step / gap
+                u[i, 1] = p1 + d1 * step / gap
+                changed = True
+        if max(abs(u[i, 0]), abs(u[i, 1])) > limit:
+            changed = True
+            for d in range(u.shape[1]):
+                u[i, d] = min(max(u[i, d], -limit), limit)
+        if changed:
+            hit += 1
+            for d in range(u.shape[1]):
+                delta_u[i, d] = u[i, d] - u_g[i, d]
     return hit

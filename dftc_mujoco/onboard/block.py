@@ -49,6 +49,7 @@ class TeamConfig:
     # per-axis range of the applied nominal input uᵢ (onboard/applied.py) [m/s]: the command
     # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
     input_limit: float = np.inf
+    accel: float = np.inf  # [m/s²] the drive's acceleration, applied to u (onboard/applied.py)
     # teammates avoided by the supervisor within this safe distance [m] (0: not avoided)
     teammate_safe: float = 0.0
     teammate_activation: float = 0.0

@@ -63,6 +63,7 @@ def team_period(
     fdir,
     compensate,
     input_limit,
+    accel_step,
     lag_a,
     lag_b,
     v_hat,
@@ -128,7 +129,8 @@ def team_period(
         x_own, u_g, obs, safe, act, theta, release, active, u_mem, du, mates, mate_safe, mate_act
     ):
         code |= SWITCHED
-    if limit_input(u_mem, u_g, du, input_limit):  # the input the robot applies (Remark 4.1)
+    # the input the robot applies (Remark 4.1): its drive's acceleration and range
+    if limit_input(u_mem, u_g, du, input_limit, command, rows, accel_step):
         code |= SATURATED
     yn = y_next.reshape(m, m * n)
     for i in range(m):  # pass 2: every robot reads its in-neighbours' current messages

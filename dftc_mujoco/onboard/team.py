@@ -111,6 +111,7 @@ class Team:
         self.command = np.zeros((n, 2))
         self.v_hat = np.zeros((n, 2))
         self._lag_a, self._lag_b = lag_coefficients(config.lag, config.dt)
+        self._accel_step = float(config.accel) * config.dt  # the drive's Δu per period
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
@@ -287,6 +288,7 @@ class Team:
             cfg.fdir,
             cfg.compensate,
             cfg.input_limit,
+            self._accel_step,
             self._lag_a,
             self._lag_b,
             self.v_hat,
@@ -344,7 +346,15 @@ class Team:
             u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
         u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
         delta_u = np.array(delta_u, dtype=float)
-        saturated = limit_input(u_mem, np.ascontiguousarray(u_g, float), delta_u, cfg.input_limit)
+        saturated = limit_input(
+            u_mem,
+            np.ascontiguousarray(u_g, float),
+            delta_u,
+            cfg.input_limit,
+            self.command,
+            mem,
+            self._accel_step,
+        )
         if not whole:
             self.u[:] = 0.0  # an excluded robot is told to stay where it is
         self.u[mem] = u_mem

@@ -55,6 +55,7 @@ CALIBRATION_KEYS = (
     "drift_settle",  # how long the start-up lasts [s]
     "saturation",  # fraction of the programme's commands the actuators clamped
     "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
+    "accel",  # a_max the robot holds its nominal input's change to (onboard/applied.py) [m/s²]
 )
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -103,6 +104,12 @@ class RobotModel:
         """τ of the drive's first-order lag from calibration (0: the robot is taken to move at
         its command, the paper's ẋ = u)."""
         return float(self.calibration.get("lag", 0.0))
+
+    @property
+    def accel(self) -> float:
+        """a_max from calibration: the fastest change of its nominal input the robot's drive
+        follows without running its compensation loop away (inf: not limited)."""
+        return float(self.calibration.get("accel", 0.0)) or math.inf
 
     def spec(self) -> mujoco.MjSpec:
         """A fresh MjSpec of the robot's MJCF with, in memory only: file paths made absolute,
