@@ -587,7 +587,10 @@ class Simulation:
                                     t,
                                     "detection_not_guaranteed",
                                     robot=f.robot + 1,
-                                    until=self.settle_time,
+                                    # None: the thresholds do not settle within the run
+                                    until=self.settle_time
+                                    if np.isfinite(self.settle_time)
+                                    else None,
                                 )
                     plant.positions(out=x)
                     eta, xi = noise.next()

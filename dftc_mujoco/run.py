@@ -167,6 +167,12 @@ def _fmt_event(e: dict) -> str:
             "flagged_only_by_itself": "only its own flag is up (exclusion needs teammates)",
         }.get(e.get("reason", "").replace(" ", "_"), "nobody flags it any more")
         return f"robot {r} kept at t_r: {why}"
+    if k == "exclusion_postponed":
+        when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
+        return (
+            f"robot {r}'s exclusion postponed to {when}: its bumper touched something at "
+            f"{e['last_contact']:.2f} s, and a contact, not a fault, may explain its flags"
+        )
     if k == "systemic_anomaly":
         who = ", ".join(str(b) for b in e["robots"])
         return (
@@ -177,7 +183,7 @@ def _fmt_event(e: dict) -> str:
         )
     if k == "detection_not_guaranteed":
         until = e["until"]
-        when = f"{until:.2f} s" if until == until and until != float("inf") else "the end"
+        when = f"{until:.2f} s" if until is not None else "after the end of the run"
         return (
             f"robot {r}'s fault comes before the thresholds settle: its detection within "
             f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"

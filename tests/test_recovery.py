@@ -283,3 +283,23 @@ def test_relayed_edges_join_what_the_excluded_robot_heard_to_whom_it_told():
     assert relayed.is_strongly_connected() and set(relayed.edges) >= {(0, 1), (1, 0)}
     assert g.without(1).components() == [[1, 2], [0]]
     assert g.without(1).unheard().sum() == 4
+
+
+def test_a_fault_when_the_thresholds_never_settle_in_the_run_is_written_and_said(tmp_path, capsys):
+    """l1 on a 6 s run never settles within it (T_s = inf): the stop at 1.5 s gets a
+    ``detection_not_guaranteed`` event with ``until = null`` (an inf there made summary.json
+    unwritable: JSON has no Infinity), and the console says so."""
+    import json
+
+    from dftc_mujoco import run
+
+    args = ["paper_case", "--out", str(tmp_path / "o"), "--no-video", "--no-progress"]
+    args += ["--duration", "6", "--set", 'onboard.thresholds="l1"', "--set", "mission.transient=1"]
+    args += ["--set", 'faults=[{robot = 1, kind = "stop", t = 1.5}]']
+    assert run.main(args) == 0
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    (note,) = [e for e in summary["events"] if e["kind"] == "detection_not_guaranteed"]
+    assert note["until"] is None
+    assert "guaranteed (eq. 46) only for faults from after the end of the run" in (
+        capsys.readouterr().out
+    )
