@@ -52,3 +52,15 @@ def test_a_bad_teammate_distance_is_one_line_naming_the_key():
     with pytest.raises(ScenarioError, match=r"supervisor\.teammate_distance") as err:
         load_scenario("paper_case", {"supervisor.teammate_distance": "far"})
     assert 'expected a distance in m or "auto"' in str(err.value)
+
+
+@pytest.mark.parametrize("model", ["disk", "diffdrive"])
+def test_no_contact_between_teammates_in_paper_case(model):
+    """paper_case (robot contacts on) with teammate avoidance: no hull ever touches another
+    robot or a cylinder, before or after robot 1 is excluded; its outcome is the paper's."""
+    r = simulate(load_scenario("paper_case", {"team.robot_model": model}))
+    out = r.summary
+    assert out["premises"]["contact"]["held"], out["premises"]["contact"]
+    assert not [e for e in r.events.of_kind("premise_violated") if e["premise"] == "contact"]
+    assert [e["robot"] for e in out["exclusions"]] == [1]
+    assert not [e for e in out["events"] if e["kind"] == "exclusion_postponed"]
