@@ -162,7 +162,7 @@ def test_report_rates_from_rows():
             "run": 0,
             "fault_kind": "stop",
             "detected": True,
-            "detected_by": 4,
+            "detected_by": 3,  # every teammate
             "delay_first": 2.0,
             "false_alarms": 0,
             "false_alarm_robots": 0,
@@ -193,6 +193,7 @@ def test_report_rates_from_rows():
     assert s["false_alarm_rate_fault_free"] == 1.0
     assert s["false_alarms_per_robot_hour"] == pytest.approx(1 / 12)  # 1 robot in 12 robot-hours
     assert s["delay_median"] == 2.0
+    assert s["detected_by_all_rate"] == 0.5  # teammates: the robot itself never counts
 
 
 # --------------------------------------------------------------------------- interruption

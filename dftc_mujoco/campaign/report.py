@@ -33,6 +33,22 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     clean = [r for r in ok if _kind(r) == "none"]
     faults = [f for r in ok for f in json.loads(r.get("faults") or "[]")]
     stop_faults = [f for f in faults if f["kind"] == "stop"]
+    # eq. 46's promise: a stop after T_s, on a run whose premises held, is flagged by every
+    # teammate within Δt_d,max
+    domain = [
+        f
+        for r in ok
+        if r.get("premises_held")
+        for f in json.loads(r.get("faults") or "[]")
+        if f["kind"] == "stop" and f.get("after_settle")
+    ]
+    kept = [
+        f["detected_by"] >= (f.get("teammates") or 0)
+        and f["delay_last"] is not None
+        and f.get("dt_d_max") is not None
+        and f["delay_last"] <= f["dt_d_max"] + 1e-9
+        for f in domain
+    ]
     delays = [r["delay_first"] for r in ok if r.get("delay_first") is not None]
     delays_last = [r["delay_last"] for r in ok if r.get("delay_last") is not None]
     robot_hours = sum(r["robots"] * r["duration"] for r in ok) / 3600.0
@@ -47,7 +63,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "failed": len(rows) - len(ok),
         "stop_runs": len(stops),
         "detection_rate": _rate([r["detected"] for r in stops]),
-        "detected_by_all_rate": _rate([r["detected_by"] == r["robots"] for r in stops]),
+        # by every teammate (``detected_by`` counts teammates, the robot itself never)
+        "detected_by_all_rate": _rate([r["detected_by"] >= r["robots"] - 1 for r in stops]),
         "missed": sum(not r["detected"] for r in stops),
         "bias_runs": len(biases),
         "bias_detection_rate": _rate([r["detected"] for r in biases]),
@@ -64,6 +81,9 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "stop_faults": len(stop_faults),
         "stop_faults_detected_rate": _rate([f["detected"] for f in stop_faults]),
         "stop_faults_excluded_rate": _rate([f["excluded"] for f in stop_faults]),
+        "eq46_stops": len(domain),
+        "eq46_kept": int(sum(kept)),
+        "runs_premises_held": sum(bool(r.get("premises_held")) for r in ok),
         "delay_median": float(np.median(delays)) if delays else None,
         "delay_p95": float(np.percentile(delays, 95)) if delays else None,
         "delay_max": float(np.max(delays)) if delays else None,
@@ -128,6 +148,9 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"| faults in all runs: stops flagged by a teammate / excluded | "
         f"{_pct(s['stop_faults_detected_rate'])} / {_pct(s['stop_faults_excluded_rate'])} "
         f"of {s['stop_faults']} |",
+        f"| runs in which every premise held | {s['runs_premises_held']} of {s['ok']} |",
+        f"| stops after T_s on those runs flagged by every teammate within Δt_d,max (eq. 46) | "
+        f"{s['eq46_kept']} of {s['eq46_stops']} |",
         f"| largest healthy residual / threshold (margin) | {_num(s['margin_max'], 3)} |",
     ]
     if s["delay_median"] is not None:

@@ -73,9 +73,17 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     number), from its own ``fault`` events: whether teammates flagged it, how many, the
     first and last flag's delay, whether and when that robot was excluded."""
     events = summary.get("events", [])
+    horizon = summary.get("dt_d_max") if isinstance(summary.get("dt_d_max"), dict) else {}
+    settle = horizon.get("settle_time")  # T_s (None: not within the run)
+    n = int(summary.get("robots") or 0)
     out = []
     for f in (e for e in events if e["kind"] == "fault"):
         robot, t_f = f["robot"], f["t"]
+        gone_before = sum(1 for e in summary["exclusions"] if e["t"] < t_f)
+        dt = horizon.get("value")
+        for e in events:  # Δt_d,max as recomputed by the exclusions before the fault
+            if e["kind"] == "detection_horizon" and e["t"] < t_f:
+                dt = e["value"]
         on = [
             d
             for d in summary["detections"]
@@ -95,6 +103,9 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
                 "delay_last": max(d["t"] for d in on) - t_f if on else None,
                 "excluded": gone is not None,
                 "exclusion_delay": None if gone is None else gone - t_f,
+                "teammates": max(n - gone_before - 1, 0) if n else None,
+                "after_settle": settle is not None and t_f >= settle,  # eq. 46's domain
+                "dt_d_max": dt,
             }
         )
     return out
@@ -140,6 +151,9 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
         "healthy_exclusions": summary.get("healthy_exclusions", 0),
         "wrong_isolation": summary.get("healthy_exclusions", 0) > 0,
         "systemic_anomalies": summary.get("systemic_anomalies", 0),
+        # every premise of the run's rule held for the whole run (premises.PREMISES)
+        "premises_held": all(p.get("held", True) for p in summary.get("premises", {}).values()),
+        "settle_time": (horizon or {}).get("settle_time") if isinstance(horizon, dict) else None,
         "final_centroid": err["final_centroid"],
         "final_formation": err["final_formation"],
         "success": bool(
