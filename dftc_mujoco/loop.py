@@ -30,7 +30,6 @@ from . import checks, mission, premises
 from .checks import CLEARANCE
 from .errors import ScenarioError, SimulationError
 from .onboard.block import Block
-from .onboard.fault_estimator import ANTI_WINDUP_BAND
 from .onboard.team import Team, TeamConfig
 from .onboard.thresholds import estimator_gain
 from .record import Events, Log, matrix_every
@@ -85,8 +84,7 @@ def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: flo
             )
         except ScenarioError:  # an unstable estimator loop is refused elsewhere
             headroom = 0.0
-    # and the anti-windup's band: a healthy ū never enters it (the saturation premise)
-    return max(command_limit - headroom - ANTI_WINDUP_BAND, 0.5 * command_limit)
+    return max(command_limit - headroom, 0.5 * command_limit)
 
 
 def team_config(

@@ -61,9 +61,17 @@ def test_a_100_robot_team_started_far_from_its_slots_flags_nobody_and_then_isola
     assert [e["robot"] for e in out["exclusions"]] == [37]
     assert out["healthy_flags"] == 0
     # teammate avoidance switches the crossing robots' commands in the crowd of the first
-    # seconds: a healthy residual may then exceed its threshold (robot 81's own, 1.87 x at
-    # 1.2 s), but only while that robot violated a premise (its lag against the jumps)
-    assert_crossings_labelled(r, faulty={37: 25.0})
+    # seconds; unlimited, a healthy residual then exceeded its threshold (robot 81's own,
+    # 1.87 x at 1.2 s, while it violated a premise: its lag against the jumps). Held to the
+    # disk's calibrated 16 m/s² (fdir.drive_accel), no healthy residual crosses at all
+    from dftc_mujoco.results import matrix_rows
+
+    ratio = r.log["residual"] / r.log["threshold"]
+    healthy = np.ones(ratio.shape[-1], bool)
+    healthy[36] = False
+    times = r.log["t"][matrix_rows(r.log)]
+    assert np.nanmax(ratio[:, :, healthy]) <= 1.0
+    assert np.nanmax(ratio[times >= 25.0][:, :, 36]) > 1.0  # the stop crosses
 
 
 def test_with_contacts_every_flag_on_a_healthy_robot_is_labelled():

@@ -232,7 +232,7 @@ def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
     from dftc_mujoco import scenario
     from dftc_mujoco.campaign import spec as spec_mod
 
-    sp = spec_mod.load(Path(__file__).parents[1] / "campaigns" / "no_false_exclusion.toml")
+    sp = spec_mod.load(Path(__file__).parent / "data" / "battery_v1.toml")
     d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 281))
     assert d["team"]["robots"] == 16 and d.get("faults", []) == []
     out = {}

@@ -639,4 +639,6 @@ def test_the_drift_split_keeps_slow_drift_and_bounds_jumps():
 def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
     d = calibrate.drift("disk", runs=1)
     assert d.period_max > 0.1  # per period the drift is far beyond h ξ̄ (compensation, start-up)
-    assert d.drift_bound < 0.005 < d.startup  # a bounded offset once started
+    # a bounded offset once started, the start-up larger (4.4 mm with the disk's 16 m/s²
+    # acceleration, 7.6 mm unlimited)
+    assert d.drift_bound < 0.003 < 0.004 < d.startup
