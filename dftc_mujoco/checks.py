@@ -119,11 +119,13 @@ def preflight(
     activation: np.ndarray,
     path: np.ndarray,
     path_dt: float,
+    input_limit: float = math.inf,
 ) -> Findings:
     """Check scenario ``s`` with robot model ``robot`` (footprint, drive) whose planar
     command range is ``command_limit`` per axis; ``safe`` and ``activation`` are the
     cylinders' distances after they were raised for the robot's footprint; ``path`` (T, 2)
-    the desired centroid every ``path_dt`` seconds."""
+    the desired centroid every ``path_dt`` seconds; ``input_limit`` the applied input's
+    range per axis (``loop.input_limit``)."""
     out = Findings()
     src = s.source
     reach = robot.footprint_radius
@@ -210,6 +212,15 @@ def preflight(
             "mission.centroid.speed",
             f"{speed:g} m/s is beyond the {name} robots' command range of "
             f"±{command_limit:.3g} m/s per axis: the team cannot follow the path",
+            refuse=True,
+        )
+    elif speed > input_limit:
+        finding(
+            "mission.centroid.speed",
+            f"{speed:g} m/s is beyond the {name} robots' applied range of ±{input_limit:.3g} "
+            f"m/s per axis (the command range ±{command_limit:.3g} m/s less the compensation's "
+            "headroom Φ̄): the team could follow the path only with every command saturated, "
+            "where no threshold rule holds (its premise 'saturation'); lower the speed",
             refuse=True,
         )
     cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))

@@ -420,6 +420,7 @@ class Simulation:
             config.obstacle_activation,
             self.path.position[::every],
             every * dt,
+            input_limit=config.input_limit,
         )
         if refusal:
             found.refusals.append(refusal)

@@ -166,8 +166,9 @@ def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain()
 
 
 def test_a_contact_postpones_the_exclusion_past_the_settle_time():
-    """Contacts from Δt_d,max before the first flag on postpone t_r to the last contact +
-    T_s + Δt_d,max; a later contact postpones it again; one before that window does not."""
+    """Contacts from T_s + Δt_d,max before the first flag on postpone t_r to the last
+    contact + T_s + Δt_d,max; a later contact postpones it again; one before that window
+    does not."""
     rec = Recovery(dt_d_max=1.0, max_faults=1)
     rec.settle = 4.0
     rec.contact(2.5, [1])  # 0.5 s before its first flag: it may explain it
@@ -181,9 +182,14 @@ def test_a_contact_postpones_the_exclusion_past_the_settle_time():
     assert rec.postpone(7.5, 1)["t_r"] == pytest.approx(10.0)
     assert rec.due(10.0) == [1] and rec.postpone(10.0, 1) is None  # free since: excluded
     early = Recovery(dt_d_max=1.0, max_faults=1)
-    early.contact(1.0, [1])  # 2 s before its first flag: not its cause
+    early.contact(1.0, [1])  # 2 s before its first flag, T_s = 0: not its cause
     early.flagged(3.0, [(0, 1)])
     assert early.due(4.0) == [1] and early.postpone(4.0, 1) is None
+    slow = Recovery(dt_d_max=1.0, max_faults=1)
+    slow.settle = 4.0
+    slow.contact(1.0, [1])  # 2 s before its first flag, within T_s + Δt_d,max = 5 s
+    slow.flagged(3.0, [(0, 1)])
+    assert slow.due(4.0) == [1] and slow.postpone(4.0, 1)["t_r"] == pytest.approx(6.0)
     never = Recovery(dt_d_max=1.0, max_faults=1, postpone_on_contact=False)
     never.contact(3.0, [1])
     never.flagged(3.0, [(0, 1)])

@@ -280,3 +280,17 @@ def test_a_fourth_model_from_an_mjcf_file(tmp_path):
     assert summary["robot_model"] == str(path)
     assert {d["robot"] for d in summary["detections"]} <= {1}
     assert summary["min_obstacle_clearance"] > 0.0
+
+
+def test_a_path_faster_than_the_applied_range_is_refused_before_the_run():
+    """The battery's diffdrives at 0.6 m/s: within the 0.7 m/s command range but beyond the
+    0.59 m/s the applied input keeps after the compensation's headroom, so every command
+    stayed saturated and a healthy robot was excluded. Refused now, naming the key."""
+    s = scenario.load_scenario(
+        "paper_case", {"team.robot_model": "diffdrive", "mission.centroid.speed": 0.6}
+    )
+    with pytest.raises(ScenarioError) as info:
+        loop.simulate(s)
+    msg = str(info.value)
+    assert "mission.centroid.speed: 0.6 m/s is beyond the diffdrive robots' applied range" in msg
+    assert "±0.59 m/s" in msg

@@ -9,10 +9,11 @@ literally), and a fault hypothesis: when more robots are flagged by teammates at
 than ``max_faults`` admits (those already excluded counted), something systemic is wrong (a
 premise, not a fault): a ``systemic_anomaly`` event names them and nobody is excluded until
 every flag is down. A contact postpones: a robot whose bumper touched something from
-Δt_d,max before its first flag on (a contact breaks the premises, and the flags it causes
-say nothing of the actuators) is excluded only if a teammate still flags it T_s + Δt_d,max
-after its last contact (``postpone_on_contact``): a contact is a new start for the residuals
-it disturbed, which eq. 46 covers from the thresholds' settle time T_s on.
+T_s + Δt_d,max before its first flag on (a contact breaks the premises, and the flags it
+causes say nothing of the actuators) is excluded only if a teammate still flags it T_s +
+Δt_d,max after its last contact (``postpone_on_contact``): a contact is a new start for the
+residuals it disturbed, which eq. 46 covers from the thresholds' settle time T_s on (with
+T_s beyond the run, no exclusion of a robot that touched something is due within it).
 :class:`Recovery` keeps that bookkeeping and says what is due; :class:`~.team.Team` owns
 the vectors that an exclusion resizes and applies it (the observers, thresholds and
 decisions drop the robot, the formation is re-planned).
@@ -65,7 +66,8 @@ class Recovery:
                 t_r = t + self.dt_d_max  # t_r = min ⁱt_d + Δt_d,max
                 self.first_detection[robot] = t
                 self.pending[robot] = t_r
-                self.since[robot] = t - self.dt_d_max  # a contact this early may explain it
+                # a contact up to T_s + Δt_d,max earlier may explain it (a new start)
+                self.since[robot] = t - self.settle - self.dt_d_max
                 events.append(
                     {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
                 )
