@@ -349,6 +349,11 @@ def summarize(
     healthy_flags = [d for d in summary["detections"] if _healthy_at(events, d["robot"], d["t"])]
     summary["healthy_flags"] = len(healthy_flags)
     summary["healthy_flags_premises_held"] = sum(1 for d in healthy_flags if not d["premises"])
+    by_premise: dict[str, int] = {}  # each flag counted once under every premise it violated
+    for d in healthy_flags:
+        for p in d["premises"]:
+            by_premise[p] = by_premise.get(p, 0) + 1
+    summary["healthy_flags_by_premise"] = dict(sorted(by_premise.items()))
     summary["healthy_exclusions"] = sum(
         1 for e in events.of_kind("exclusion") if _healthy_at(events, e["robot"], e["t"])
     )

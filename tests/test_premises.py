@@ -83,6 +83,10 @@ def test_with_contacts_every_flag_on_a_healthy_robot_is_labelled():
     assert contacts and not out["premises"]["contact"]["held"]
     assert out["healthy_flags_premises_held"] == 0
     assert all(d["premises"] for d in out["detections"])
+    # the count per premise: each flag once under every premise it came with
+    by = out["healthy_flags_by_premise"]
+    assert sum(by.values()) == sum(len(d["premises"]) for d in out["detections"])
+    assert by.get("contact", 0) > 0
 
 
 def test_a_stated_initial_error_bound_below_the_start_is_refused_naming_both_numbers():

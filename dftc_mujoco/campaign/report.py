@@ -25,6 +25,15 @@ def _rate(xs: list[bool]) -> float | None:
     return float(np.mean(xs)) if xs else None
 
 
+def _by_premise(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """Flags on healthy robots per violated premise, summed over ``rows``."""
+    total: dict[str, int] = {}
+    for r in rows:
+        for p, n in json.loads(r.get("false_flags_by_premise") or "{}").items():
+            total[p] = total.get(p, 0) + n
+    return dict(sorted(total.items()))
+
+
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """The campaign's figures of merit (all rates are fractions)."""
     ok = [r for r in rows if r.get("status") == "ok"]
@@ -76,6 +85,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "healthy_exclusions": sum(r.get("healthy_exclusions", 0) for r in ok),
         "false_flags": sum(r.get("false_flags", 0) for r in ok),
         "false_flags_premises_held": sum(r.get("false_flags_premises_held", 0) for r in ok),
+        "false_flags_by_premise": _by_premise(ok),
         "systemic_anomalies": sum(r.get("systemic_anomalies", 0) for r in ok),
         "faults": len(faults),
         "stop_faults": len(stop_faults),
@@ -143,6 +153,9 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"| healthy robots excluded (all runs) | {s['healthy_exclusions']} |",
         f"| flags on healthy robots: all / while every premise held | {s['false_flags']} / "
         f"{s['false_flags_premises_held']} |",
+        "| flags on healthy robots by the premise violated then | "
+        + (", ".join(f"{p} {n}" for p, n in s["false_flags_by_premise"].items()) or "none")
+        + " |",
         f"| systemic anomalies (more robots flagged than fdir.max_faults) | "
         f"{s['systemic_anomalies']} |",
         f"| faults in all runs: stops flagged by a teammate / excluded | "

@@ -141,6 +141,8 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[
         "dt_d_max": dt_d_max,
         "false_flags": false_flags,
         "false_flags_premises_held": summary.get("healthy_flags_premises_held", 0),
+        # per premise: the flags on healthy robots that came while it was violated
+        "false_flags_by_premise": json.dumps(summary.get("healthy_flags_by_premise", {})),
         "false_alarms": false_flags,
         "false_alarm_robots": len(
             {d["robot"] for d in summary["detections"] if d["robot"] not in faulty}
