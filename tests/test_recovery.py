@@ -190,6 +190,11 @@ def test_a_contact_postpones_the_exclusion_past_the_settle_time():
     slow.contact(1.0, [1])  # 2 s before its first flag, within T_s + Δt_d,max = 5 s
     slow.flagged(3.0, [(0, 1)])
     assert slow.due(4.0) == [1] and slow.postpone(4.0, 1)["t_r"] == pytest.approx(6.0)
+    untouched = Recovery(dt_d_max=1.0, max_faults=1)
+    untouched.settle = np.inf  # thresholds that never settle: any contact ever would count
+    untouched.contact(0.5, [2])  # another robot's contact
+    untouched.flagged(3.0, [(0, 1)])
+    assert untouched.due(4.0) == [1] and untouched.postpone(4.0, 1) is None  # never touched
     never = Recovery(dt_d_max=1.0, max_faults=1, postpone_on_contact=False)
     never.contact(3.0, [1])
     never.flagged(3.0, [(0, 1)])

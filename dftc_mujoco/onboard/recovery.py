@@ -121,9 +121,9 @@ class Recovery:
         window began (its new t_r is its last contact + T_s + Δt_d,max, and that window must
         be free of contact in turn); None when it may be excluded now."""
         since = self.since.pop(robot, np.inf)
-        last = self.last_contact.get(robot, -np.inf)
-        if not self.postpone_on_contact or last < since:
-            return None
+        last = self.last_contact.get(robot)
+        if not self.postpone_on_contact or last is None or last < since:
+            return None  # never touched anything, or not since its window began
         t_r = max(last + self.settle + self.dt_d_max, t + 1e-9)  # inf: T_s beyond the run
         self.pending[robot] = t_r
         self.first_detection[robot] = last
