@@ -384,13 +384,13 @@ class Simulation:
                 ),
             )
         need_g = model.calibration.get("compensation_G")
-        g = effective_G(s, model)
-        if s.fdir.enabled and s.fdir.compensate and need_g and np.linalg.eigvalsh(g).min() < need_g:
+        g = float(np.linalg.eigvalsh(effective_G(s, model)).min())
+        if s.fdir.enabled and s.fdir.compensate and need_g and g < need_g:
             self.events.add(
                 0.0,
                 "warning",
                 message=(
-                    f"gains.G = {np.linalg.eigvalsh(g).min():g} I is below the {model.name} "
+                    f"gains.G = {g:g} I is below the {model.name} "
                     f"model's calibrated compensation_G = {need_g:g}: its compensation loop "
                     "rings (healthy robots' phi_hat and commands swing, thresholds raise false "
                     f'alarms); set gains.G = "auto" or at least {need_g:g}'

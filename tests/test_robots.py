@@ -172,15 +172,21 @@ def test_calibrate_cli_writes_into_a_copy(tmp_path, capsys):
     assert calibrate.main(["tank"]) == 2
 
 
-def test_a_low_xi_bar_for_the_model_is_warned_about(tmp_path, capsys):
+def _run_diffdrive(tmp_path, name: str, section: str, key: str, value) -> None:
+    """A 6 s fault-free diffdrive run through the CLI with ``[section] key = value`` into
+    ``tmp_path / name`` (the run must succeed; its console output stays in capsys)."""
     d = scenario_dict()
-    d["noise"]["xi_bar"] = 0.005
+    d[section][key] = value
     d["duration"] = 6.0
     d["faults"] = []
     d["team"]["robot_model"] = "diffdrive"
-    path = tmp_path / "low.toml"
+    path = tmp_path / f"{name}.toml"
     path.write_text(_toml(d))
-    assert run.main([str(path), "--out", str(tmp_path / "o"), "--no-video", "--no-progress"]) == 0
+    assert run.main([str(path), "--out", str(tmp_path / name), "--no-video", "--no-progress"]) == 0
+
+
+def test_a_low_xi_bar_for_the_model_is_warned_about(tmp_path, capsys):
+    _run_diffdrive(tmp_path, "o", "noise", "xi_bar", 0.005)
     out = capsys.readouterr().out
     assert "WARNING: noise.xi_bar = 0.005 m/s is below the diffdrive model's measured" in out
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
@@ -193,19 +199,10 @@ def test_a_G_below_the_models_compensation_G_is_warned_about(tmp_path, capsys):
     calibrated 0.02): its compensation loop rang, healthy φ̂ reached 4.8 m/s and healthy
     robots were excluded, with no word said. Now "auto" takes the robot's value and an
     explicit one below it is warned about before the run."""
-    d = scenario_dict()
-    d["gains"]["G"] = 0.01
-    d["duration"] = 6.0
-    d["faults"] = []
-    d["team"]["robot_model"] = "diffdrive"
-    path = tmp_path / "ring.toml"
-    path.write_text(_toml(d))
-    assert run.main([str(path), "--out", str(tmp_path / "o"), "--no-video", "--no-progress"]) == 0
+    _run_diffdrive(tmp_path, "o", "gains", "G", 0.01)
     out = capsys.readouterr().out
     assert "WARNING: gains.G = 0.01 I is below the diffdrive model's calibrated" in out
-    d["gains"]["G"] = "auto"
-    path.write_text(_toml(d))
-    assert run.main([str(path), "--out", str(tmp_path / "a"), "--no-video", "--no-progress"]) == 0
+    _run_diffdrive(tmp_path, "a", "gains", "G", "auto")
     assert "gains.G" not in capsys.readouterr().out
 
 
