@@ -41,7 +41,22 @@ from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
 
 PAPER_G = 0.01  # eq. 30's G = 0.01 I, the paper's value
-TEAMMATE_MARGIN = 0.1  # [m] a teammate is avoided from its safe distance + this on
+TEAMMATE_MARGIN = 0.1  # [m] least gap between a robot's safe and activation distances
+
+
+def seamless_margin(theta: float, input_limit: float) -> float:
+    """Activation − safe distance for a robot or excluded robot seen by the range sensor.
+
+    Eq. 18 meets u_g,i at the switch (NOTES 12) only where θ (d − ‖xᵢ − x_o‖) can equal
+    r̂ᵀu_g,i, i.e. from d + ‖u‖/θ on: a robot closing in at the input range ‖u‖ ≤ √2 ×
+    ``input_limit`` (per axis) that first senses the obstacle nearer than that switches with a
+    jump of ‖u‖ − θ (activation − d), and a queue of robots behind each other turns such
+    jumps into a limit cycle whose compensation rings (battery run 1735: 0.5 m/s jumps at
+    10 Hz, a healthy robot excluded). At least :data:`TEAMMATE_MARGIN`.
+    """
+    if not np.isfinite(input_limit) or theta <= 0:
+        return TEAMMATE_MARGIN
+    return max(TEAMMATE_MARGIN, float(np.sqrt(2.0) * input_limit / theta))
 
 
 def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
@@ -120,6 +135,8 @@ def team_config(
         hull = reach if robot is not None else 0.1  # without a model: the built-in disk's
         auto = 2 * hull + CLEARANCE  # two hulls apart by the clearance
         mate_safe = auto if sup.teammate_distance == "auto" else float(sup.teammate_distance)
+    applied = input_limit(s, robot, command_limit)
+    seamless = seamless_margin(s.gains.theta, applied)
     return TeamConfig(
         graph=s.team.graph,
         kc=s.gains.kc,
@@ -145,10 +162,10 @@ def team_config(
         ),
         replan_time=f.replan_time,
         excluded_safe=excluded_safe,
-        excluded_activation=max(f.excluded_activation_distance, excluded_safe + 0.1),
+        excluded_activation=max(f.excluded_activation_distance, excluded_safe + seamless),
         phi_low_pass=f.phi_low_pass,
         command_limit=command_limit,
-        input_limit=input_limit(s, robot, command_limit),
+        input_limit=applied,
         fdir=f.enabled,
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
@@ -156,7 +173,7 @@ def team_config(
         accel=drive_accel(s, robot),
         max_faults=max_faults(s),
         teammate_safe=mate_safe,
-        teammate_activation=mate_safe + TEAMMATE_MARGIN if mate_safe > 0 else 0.0,
+        teammate_activation=mate_safe + seamless if mate_safe > 0 else 0.0,
         self_exclusion=f.self_exclusion,
         postpone_on_contact=f.postpone_on_contact,
         excluded_relay=f.excluded_relay,

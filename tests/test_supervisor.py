@@ -64,3 +64,72 @@ def test_no_contact_between_teammates_in_paper_case(model):
     assert not [e for e in r.events.of_kind("premise_violated") if e["premise"] == "contact"]
     assert [e["robot"] for e in out["exclusions"]] == [1]
     assert not [e for e in out["events"] if e["kind"] == "exclusion_postponed"]
+
+
+def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
+    """Eq. 18 equals u_g,i at the switch only if the teammate is sensed from d + ‖u‖/θ on
+    (NOTES 12). A disk closing in on a standing teammate at its whole input range: with the
+    activation distance the run derives (``loop.seamless_margin``) its command changes per
+    period by no more than eq. 18's own deceleration θ‖u‖Δt (2.4 cm/s); with the former fixed 0.1 m margin it jumped by about 0.5 m/s."""
+    from dftc_mujoco import loop
+    from dftc_mujoco.sim import robots
+
+    s = load_scenario("paper_case")
+    disk = robots.load(robots.resolve("disk", "test"))
+    cfg = loop.team_config(s, disk, 0.8)
+    speed = np.sqrt(2.0) * cfg.input_limit  # the fastest a robot can close in
+    none = np.zeros((0, 2))
+
+    def largest_jump(activation: float) -> float:
+        active = np.full(2, -1, dtype=np.intp)
+        u, du = np.empty((2, 2)), np.empty((2, 2))
+        x = np.array([[-1.5, 0.0], [0.0, 0.0]])
+        u_g = np.array([[speed, 0.0], [0.0, 0.0]])
+        previous, jump = speed, 0.0
+        for _ in range(400):
+            supervise(
+                x,
+                u_g,
+                none,
+                np.zeros(0),
+                np.zeros(0),
+                cfg.theta,
+                0.01,
+                active,
+                u,
+                du,
+                x,
+                cfg.teammate_safe,
+                activation,
+            )
+            jump = max(jump, abs(u[0, 0] - previous))
+            previous = u[0, 0]
+            x[0] += u[0] * cfg.dt
+        assert np.linalg.norm(x[1] - x[0]) > cfg.teammate_safe - 1e-3  # held apart either way
+        return jump
+
+    assert cfg.teammate_activation - cfg.teammate_safe == pytest.approx(speed / cfg.theta)
+    assert cfg.excluded_activation - cfg.excluded_safe >= speed / cfg.theta - 1e-12
+    smooth = cfg.theta * speed * cfg.dt  # eq. 18's own deceleration per period
+    assert largest_jump(cfg.teammate_activation) < smooth + 0.005
+    assert largest_jump(cfg.teammate_safe + loop.TEAMMATE_MARGIN) > 0.3
+
+
+def test_a_queue_of_robots_does_not_ring_into_a_healthy_exclusion():
+    """Run 1735 of the no-false-exclusion battery (16 disks, drive rule, 0.6 m/s, start on a
+    6 m circle, robot 8 stops at 16.9 s). Robots re-forming behind each other sensed their
+    teammates only 0.1 m beyond the safe distance: each switch was a 0.5 m/s jump, the queue
+    ran a 10 Hz limit cycle, robot 1's compensation rang into saturation and robot 1, healthy,
+    was excluded at 31.06 s. With the activation distance from the input range only robot 8
+    is excluded."""
+    from pathlib import Path
+
+    from dftc_mujoco import scenario
+    from dftc_mujoco.campaign import spec as spec_mod
+
+    sp = spec_mod.load(Path(__file__).parent / "data" / "battery_v2.toml")
+    d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 1735))
+    assert d["team"]["robots"] == 16 and d["faults"][0]["robot"] == 8
+    d["duration"] = 32.0
+    summary = simulate(scenario.from_dict(d)).summary
+    assert [e["robot"] for e in summary["exclusions"]] == [8]
