@@ -202,8 +202,11 @@ def test_a_contact_postpones_the_exclusion_past_the_settle_time():
 
 
 def test_the_fault_estimator_holds_while_its_robot_touches_something():
-    """A push is no actuator fault: with the bumper on, ∫e and the applied compensation
-    stay where they were (φ̂ is still computed, for the logs)."""
+    """A push is no actuator fault. A standing robot is pushed 1 cm in 0.5 s and stays there.
+    With the bumper on during the push, its estimator's state is held (e keeps its value, z
+    follows the measurement, ∫e, φ̂ and the compensation stay), so when the contact ends
+    nothing is released: the applied compensation stays below 1 mm/s. Holding only ∫e and
+    the compensation (the first version) released 1 m/s at once (battery run 871)."""
     from dftc_mujoco.onboard.fault_estimator import estimate_faults
 
     K, g_inv = 3.0 * np.eye(2), np.eye(2) / 0.01
@@ -211,8 +214,10 @@ def test_the_fault_estimator_holds_while_its_robot_touches_something():
     for hold in (False, True):
         z, int_e = np.zeros((1, 2)), np.zeros((1, 2))
         phi, applied, u_bar = np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2))
-        for _ in range(50):  # pushed 1 cm away from where the robot believes it is
-            x_m = np.array([[0.01, 0.0]])
+        during, after = [], []
+        for k in range(100):
+            pushing = k < 50
+            x_m = np.array([[0.01 * min(k + 1, 50) / 50, 0.0]])
             estimate_faults(
                 x_m,
                 np.zeros((1, 2)),
@@ -225,19 +230,22 @@ def test_the_fault_estimator_holds_while_its_robot_touches_something():
                 0.01,
                 np.inf,
                 1.0,
-                np.array([hold]),
+                np.array([hold and pushing]),
                 u_bar,
             )
-        out[hold] = (int_e.copy(), applied.copy(), phi.copy())
-    assert np.abs(out[False][1]).max() > 0.1  # the push winds the compensation up
-    assert not out[True][0].any() and not out[True][1].any()  # held
-    assert np.abs(out[True][2]).max() > 0  # φ̂ is still estimated
+            (during if pushing else after).append(np.abs(applied).max())
+        out[hold] = (max(during), max(after), int_e.copy())
+    assert out[False][0] > 0.1  # unheld, the push winds the compensation up
+    assert out[True][0] == 0.0 and out[True][1] < 1e-3  # held, and nothing released
+    assert not out[True][2].any()
 
 
 def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
-    """Run 281 of the no-false-exclusion battery: 16 disks from random starts cross at
-    0.3 m/s under the drive rule, and robots 7 and 8 jam against teammates. Without the
-    postponement both were excluded at 12.9 s (healthy); with it, neither."""
+    """Run 281 of the no-false-exclusion battery: 16 hexbots from random starts cross at
+    0.6 m/s under the drive rule, and robots 7 and 8 jam against teammates. With neither
+    contact rule both were excluded at 12.9 s (healthy); with the postponement alone they
+    were flagged and kept. Now that the fault estimator holds its whole state while a bumper
+    touches (and 0.5 s after), nobody is even flagged, with or without the postponement."""
     from pathlib import Path
 
     from dftc_mujoco import scenario
@@ -246,14 +254,10 @@ def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
     sp = spec_mod.load(Path(__file__).parent / "data" / "battery_v1.toml")
     d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 281))
     assert d["team"]["robots"] == 16 and d.get("faults", []) == []
-    out = {}
     for postpone in (True, False):
         d.setdefault("fdir", {})["postpone_on_contact"] = postpone
-        out[postpone] = simulate(scenario.from_dict(d)).summary
-    assert sorted(e["robot"] for e in out[False]["exclusions"]) == [7, 8]
-    assert out[True]["exclusions"] == []
-    later = [e for e in out[True]["events"] if e["kind"] == "exclusion_postponed"]
-    assert {e["robot"] for e in later} >= {7} and all(e["reason"] == "contact" for e in later)
+        summary = simulate(scenario.from_dict(d)).summary
+        assert summary["exclusions"] == [] and summary["detections"] == []
 
 
 def test_an_excluded_robot_that_relays_keeps_the_survivors_connected():

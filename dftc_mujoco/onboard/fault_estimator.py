@@ -29,19 +29,29 @@ def estimate_faults(
     Conditional-integration anti-windup: when ū is within ANTI_WINDUP_BAND (5 cm/s) of the
     per-axis range ``limit``, the step of ∫e is skipped for a robot it would
     drive further out of range. ``alpha`` < 1 low-pass filters the applied φ̂. A robot whose
-    bumper touches something (``hold``) holds ∫e and its compensation: a push or a blocked
-    wheel is no actuator fault, and integrating it winds φ̂ up (10 m/s measured in a crowd).
+    bumper touches something (``hold``) holds its whole state: e keeps its last value (z
+    follows the measurement), ∫e, φ̂ and the compensation stay. A push or a blocked wheel is
+    no actuator fault: integrated, it wound φ̂ up to 10 m/s in a crowd, and a held ∫e with
+    a free e still released 7 m/s of compensation at once when the contact ended (battery
+    run 871: a healthy slow base rang for 14 s and was excluded).
     """
+    det = g_inv[0, 0] * g_inv[1, 1] - g_inv[0, 1] * g_inv[1, 0]
     for i in range(x_m.shape[0]):
-        e0 = x_m[i, 0] - z[i, 0]
-        e1 = x_m[i, 1] - z[i, 1]
         k0 = K[0, 0] * int_e[i, 0] + K[0, 1] * int_e[i, 1]
         k1 = K[1, 0] * int_e[i, 0] + K[1, 1] * int_e[i, 1]
+        if hold[i]:  # contact: e = G φ̂ − K∫e keeps its last value, z follows the measurement
+            e0 = (g_inv[1, 1] * phi_hat[i, 0] - g_inv[0, 1] * phi_hat[i, 1]) / det - k0
+            e1 = (g_inv[0, 0] * phi_hat[i, 1] - g_inv[1, 0] * phi_hat[i, 0]) / det - k1
+            z[i, 0] = x_m[i, 0] - e0
+            z[i, 1] = x_m[i, 1] - e1
+        else:
+            e0 = x_m[i, 0] - z[i, 0]
+            e1 = x_m[i, 1] - z[i, 1]
         p0 = g_inv[0, 0] * (e0 + k0) + g_inv[0, 1] * (e1 + k1)  # eq. 31
         p1 = g_inv[1, 0] * (e0 + k0) + g_inv[1, 1] * (e1 + k1)
         phi_hat[i, 0] = p0
         phi_hat[i, 1] = p1
-        if hold[i]:  # contact: φ̂ is logged, nothing of it is integrated or applied
+        if hold[i]:  # contact: φ̂ is held, nothing of it is integrated or applied
             pass
         elif alpha == 1.0:
             applied[i, 0] = p0

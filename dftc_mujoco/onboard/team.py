@@ -54,6 +54,12 @@ PAPER_BLOCKS: dict[str, type[Block]] = {
 }
 # the blocks the compiled period contains (thresholds enter it as an array)
 _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision")
+#: [s] a robot's fault estimator holds from its bumper's first touch until the bumper stayed
+#: off this long: a robot jammed against a teammate touches on and off, and each free period
+#: wound φ̂ up again (battery run 871: 5.7 m/s of compensation released at the jam's end)
+HOLD_AFTER_CONTACT = 0.5
+#: [s] a held robot with a lagged drive measures its own velocity over this window
+VELOCITY_WINDOW = 0.1
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 
 
@@ -126,7 +132,13 @@ class Team:
         step_params = inspect.signature(self.supervisor.step).parameters
         self._supervisor_sees_mates = "teammates" in step_params
         self._estimator_holds = "hold" in inspect.signature(self.estimator.step).parameters
-        self._touch = np.zeros(n, bool)  # each robot's bumper, the last period
+        self._touch = np.zeros(n, bool)  # each robot's bumper, held HOLD_AFTER_CONTACT s
+        self._untouched = np.full(n, np.inf)  # periods each robot's bumper has been off
+        # a lagged drive's velocity is the robot's: a jam stops it while the model runs on,
+        # so a held robot re-reads v̂ from its own measurements over the last VELOCITY_WINDOW
+        self._window = max(1, round(VELOCITY_WINDOW / config.dt))
+        self._x_past = np.zeros((self._window, n, 2))
+        self._k = 0
         self._resize()
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
@@ -230,7 +242,17 @@ class Team:
         None: no sensor reading); ``touching`` (N,): each robot's bumper (None: no bumpers).
         """
         if touching is not None:
-            np.copyto(self._touch, touching)
+            # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
+            self._untouched += 1.0
+            self._untouched[touching] = 0.0
+            np.less(self._untouched * self.config.dt, HOLD_AFTER_CONTACT, out=self._touch)
+            if self._lag_a > 0.0:
+                slot = self._k % self._window
+                if self._k >= self._window and self._touch.any():
+                    seen = (x_m - self._x_past[slot]) / (self._window * self.config.dt)
+                    self.v_hat[self._touch] = seen[self._touch]
+                self._x_past[slot] = x_m
+                self._k += 1
             if touching.any():
                 self.recovery.contact(t, np.flatnonzero(touching & self.active))
         if self.recovery.pending:
