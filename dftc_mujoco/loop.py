@@ -596,7 +596,11 @@ class Simulation:
                     t = k * dt
                     if t >= faults.due:
                         for f in faults.apply(t):
-                            events.add(t, "fault", robot=f.robot + 1, fault=f.kind)
+                            # the speed it was told last: a stop's size at onset (eq. 46)
+                            told = float(np.hypot(*team.command[f.robot]))
+                            events.add(
+                                t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
+                            )
                             monitor.watched[f.robot] = False  # the fault is to be detected
                             if t < self.settle_time:  # outside eq. 46's domain
                                 events.add(

@@ -491,3 +491,24 @@ def test_a_drawn_two_stops_fault_gives_two_sequential_stops_and_a_line_graph(tmp
         assert sorted(s.team.graph.edges) == sorted(
             [(k, k + 1) for k in range(5)] + [(k + 1, k) for k in range(5)]
         )
+
+
+def test_a_stop_is_in_eq46s_domain_only_where_eq46_promises_something():
+    """Eq. 46's promise (every teammate flags a constant fault at least the reference within
+    Δt_d,max, from T_s on) is counted only for stops it covers. paper_case's stop of robot 1
+    at 41.8 s (told 0.1 m/s, the reference): under l1 eq. 46 predicts 0.79 s and it is in
+    the domain (kept: all three teammates within it); under paper eq. 46 predicts nothing
+    (Δt_d,max falls back to 5 s) and it is not; and cut at 42 s, Δt_d,max ends after the
+    run, so it cannot be observed."""
+    from dftc_mujoco import load_scenario, simulate
+
+    def stop(**over):
+        s = load_scenario("paper_case", {"fdir.dt_d_max": "auto", **over})
+        facts = runner.fault_facts(simulate(s).summary)
+        return next(f for f in facts if f["kind"] == "stop")
+
+    l1 = stop(**{"onboard.thresholds": "l1"})
+    assert l1["in_domain"] and l1["command"] >= 0.1
+    assert l1["detected_by"] == l1["teammates"] == 3 and l1["delay_last"] <= l1["dt_d_max"]
+    assert not stop()["in_domain"]  # the paper rule: no finite prediction
+    assert not stop(**{"onboard.thresholds": "l1", "duration": 42.0})["in_domain"]

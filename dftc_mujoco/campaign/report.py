@@ -42,14 +42,15 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     clean = [r for r in ok if _kind(r) == "none"]
     faults = [f for r in ok for f in json.loads(r.get("faults") or "[]")]
     stop_faults = [f for f in faults if f["kind"] == "stop"]
-    # eq. 46's promise: a stop after T_s, on a run whose premises held, is flagged by every
-    # teammate within Δt_d,max
+    # eq. 46's promise: a stop in its domain (runner.fault_facts: after T_s, a finite
+    # prediction, at least the reference fault at onset, observable within the run), on a
+    # run whose premises held, is flagged by every teammate within Δt_d,max
     domain = [
         f
         for r in ok
         if r.get("premises_held")
         for f in json.loads(r.get("faults") or "[]")
-        if f["kind"] == "stop" and f.get("after_settle")
+        if f.get("in_domain")
     ]
     kept = [
         f["detected_by"] >= (f.get("teammates") or 0)
@@ -162,7 +163,9 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"{_pct(s['stop_faults_detected_rate'])} / {_pct(s['stop_faults_excluded_rate'])} "
         f"of {s['stop_faults']} |",
         f"| runs in which every premise held | {s['runs_premises_held']} of {s['ok']} |",
-        f"| stops after T_s on those runs flagged by every teammate within Δt_d,max (eq. 46) | "
+        "| stops in eq. 46's domain on those runs (after T_s, a finite prediction, at least "
+        "the reference fault at onset, Δt_d,max within the run) flagged by every teammate "
+        f"within Δt_d,max | "
         f"{s['eq46_kept']} of {s['eq46_stops']} |",
         f"| largest healthy residual / threshold (margin) | {_num(s['margin_max'], 3)} |",
     ]

@@ -76,14 +76,22 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     horizon = summary.get("dt_d_max") if isinstance(summary.get("dt_d_max"), dict) else {}
     settle = horizon.get("settle_time")  # T_s (None: not within the run)
     n = int(summary.get("robots") or 0)
+    end = float(summary.get("simulated_time") or summary.get("duration") or 0.0)
     out = []
     for f in (e for e in events if e["kind"] == "fault"):
         robot, t_f = f["robot"], f["t"]
         gone_before = sum(1 for e in summary["exclusions"] if e["t"] < t_f)
         dt = horizon.get("value")
+        # eq. 46 predicted a finite delay (not the 5 s fallback) on the graph of the moment
+        promised = horizon.get("predicted_delays_max") is not None
         for e in events:  # Δt_d,max as recomputed by the exclusions before the fault
             if e["kind"] == "detection_horizon" and e["t"] < t_f:
                 dt = e["value"]
+        for later in horizon.get("after_exclusions", []):
+            if later["t"] < t_f:
+                promised = later.get("predicted_delays_max") is not None
+        told = f.get("command")  # the speed the robot was told at onset: a stop's size
+        reference = horizon.get("reference_fault")
         on = [
             d
             for d in summary["detections"]
@@ -106,6 +114,20 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
                 "teammates": max(n - gone_before - 1, 0) if n else None,
                 "after_settle": settle is not None and t_f >= settle,  # eq. 46's domain
                 "dt_d_max": dt,
+                "command": told,
+                # eq. 46's promise applies: a finite prediction, a stop at least the reference
+                # fault at onset, after T_s, and Δt_d,max ends within the run (observable)
+                "in_domain": bool(
+                    promised
+                    and settle is not None
+                    and t_f >= settle
+                    and f.get("fault") == "stop"
+                    and told is not None
+                    and reference is not None
+                    and told >= reference
+                    and dt is not None
+                    and t_f + dt <= end + 1e-9
+                ),
             }
         )
     return out
