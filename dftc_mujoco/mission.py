@@ -11,7 +11,36 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scenario import CentroidPath, Formation
+# --------------------------------------------------------------------------- the types
+
+
+@dataclass(frozen=True, eq=False)
+class CentroidPath:
+    """Piecewise-linear waypoints, rounded at the corners, travelled at ``speed``."""
+
+    waypoints: np.ndarray  # (W, 2)
+    speed: float
+    corner_radius: float = 0.3
+    ramp_time: float = 2.0
+
+
+@dataclass(frozen=True)
+class Formation:
+    """A regular polygon of side ``side`` rotated by ``rotation`` degrees."""
+
+    shape: str = "polygon"
+    side: float = 0.5
+    rotation: float = 0.0
+
+
+@dataclass(frozen=True)
+class Mission:
+    """Desired centroid path and formation; errors are averaged after ``transient`` s."""
+
+    centroid: CentroidPath
+    formation: Formation
+    transient: float = 5.0
+
 
 # --------------------------------------------------------------------------- task map
 

@@ -33,6 +33,7 @@ import numpy as np
 from .blocks import BLOCKS, check_name
 from .errors import ScenarioError
 from .graph import Graph
+from .mission import CentroidPath, Formation, Mission, formation_offsets
 from .paths import SCENARIOS
 
 __all__ = [
@@ -159,34 +160,6 @@ class Noise:
     xi_bar: float | None  # None: the robot model's measured mismatch
     xi_time_constant: float = 0.5
     at_bound: bool = False  # draw η and ξ with norms exactly at η̄ and ξ̄
-
-
-@dataclass(frozen=True, eq=False)
-class CentroidPath:
-    """Piecewise-linear waypoints, rounded at the corners, travelled at ``speed``."""
-
-    waypoints: np.ndarray  # (W, 2)
-    speed: float
-    corner_radius: float = 0.3
-    ramp_time: float = 2.0
-
-
-@dataclass(frozen=True)
-class Formation:
-    """A regular polygon of side ``side`` rotated by ``rotation`` degrees."""
-
-    shape: str = "polygon"
-    side: float = 0.5
-    rotation: float = 0.0
-
-
-@dataclass(frozen=True)
-class Mission:
-    """Desired centroid path and formation; errors are averaged after ``transient`` s."""
-
-    centroid: CentroidPath
-    formation: Formation
-    transient: float = 5.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -1182,8 +1155,6 @@ def _initial_positions(
         or not t.doc.ok("mission.centroid.waypoints", "mission.formation")
     ):
         return None
-    from .mission import formation_offsets
-
     start = np.asarray(mission.centroid.waypoints[0])
     rng = np.random.default_rng([seed, 7])
     if layout == "random":  # uniform in a square around the path's start, points apart

@@ -262,7 +262,7 @@ class RayRuns:
         """The rows of the runs ``todo``, in the order they finish."""
         import ray
 
-        from .runner import run_one
+        from .task import run_one
 
         remote = ray.remote(num_cpus=1)(run_one)
         spec_ref = ray.put(self.spec)

@@ -43,7 +43,7 @@ def serve(conn: Connection, spec: Spec, parent: int) -> None:
     # tqdm's default lock is a multiprocessing semaphore: a worker ended mid-run would
     # leave it to the resource tracker, which then warns about "leaked semaphores"
     tqdm.set_lock(threading.RLock())
-    from .runner import run_one
+    from .task import run_one
 
     while True:
         try:

@@ -42,7 +42,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     clean = [r for r in ok if _kind(r) == "none"]
     faults = [f for r in ok for f in json.loads(r.get("faults") or "[]")]
     stop_faults = [f for f in faults if f["kind"] == "stop"]
-    # eq. 46's promise: a stop in its domain (runner.fault_facts: after T_s, a finite
+    # eq. 46's promise: a stop in its domain (task.fault_facts: after T_s, a finite
     # prediction, at least the reference fault at onset, observable within the run), on a
     # run whose premises held, is flagged by every teammate within Δt_d,max
     domain = [

@@ -14,11 +14,8 @@ kept.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import time
-import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,174 +23,16 @@ from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
-from .spec import Spec, draw, scenario_for
+from .spec import Spec, draw
+from .task import fault_facts, run_one, spec_folders
+
+__all__ = ["Outcome", "Results", "fault_facts", "run", "run_one", "spec_folders"]
 
 if TYPE_CHECKING:
     from ..interrupt import Signals
     from .cluster import Connection
 
 TIMING_COLUMNS = ("wall_time",)
-
-
-def run_one(spec: Spec, params: dict[str, Any], signals: Signals | None = None) -> dict[str, Any]:
-    """Simulate one run and reduce it to a row of facts; never raises (a signal caught by
-    ``signals`` stops the simulation: the row then says "interrupted")."""
-    from ..loop import Simulation
-
-    t0 = time.perf_counter()
-    row: dict[str, Any] = dict(params)
-    try:
-        s = scenario_for(spec, params)
-        with Simulation(s, search=spec_folders(spec)) as sim:
-            with signals.stopping(sim) if signals is not None else contextlib.nullcontext():
-                result = sim.run(progress=False)
-        row.update(_facts(params, result.summary, s.fdir.dt_d_max))
-        row["status"] = result.summary["status"]
-        row["error"] = result.summary["error"]
-    except Exception as exc:  # a run that raises is recorded, not fatal
-        row["status"] = "failed"
-        row["error"] = f"{type(exc).__name__}: {exc}"
-        row["traceback"] = traceback.format_exc(limit=4)
-    row["wall_time"] = time.perf_counter() - t0
-    return row
-
-
-def spec_folders(spec: Spec) -> list[Path]:
-    """Where a campaign's user blocks are looked for: beside the spec and its base scenario."""
-    folders = []
-    for src in (spec.source, spec.base_source):
-        p = Path(src)
-        if p.is_file() and p.parent.resolve() not in folders:
-            folders.append(p.parent.resolve())
-    return folders
-
-
-def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
-    """One entry per fault the run actually had (the base scenario's, the drawn ones, any
-    number), from its own ``fault`` events: whether teammates flagged it, how many, the
-    first and last flag's delay, whether and when that robot was excluded."""
-    events = summary.get("events", [])
-    horizon = summary.get("dt_d_max") if isinstance(summary.get("dt_d_max"), dict) else {}
-    settle = horizon.get("settle_time")  # T_s (None: not within the run)
-    n = int(summary.get("robots") or 0)
-    end = float(summary.get("simulated_time") or summary.get("duration") or 0.0)
-    out = []
-    for f in (e for e in events if e["kind"] == "fault"):
-        robot, t_f = f["robot"], f["t"]
-        gone_before = sum(1 for e in summary["exclusions"] if e["t"] < t_f)
-        dt = horizon.get("value")
-        # eq. 46 predicted a finite delay (not the 5 s fallback) on the graph of the moment
-        promised = horizon.get("predicted_delays_max") is not None
-        for e in events:  # Δt_d,max as recomputed by the exclusions before the fault
-            if e["kind"] == "detection_horizon" and e["t"] < t_f:
-                dt = e["value"]
-        for later in horizon.get("after_exclusions", []):
-            if later["t"] < t_f:
-                promised = later.get("predicted_delays_max") is not None
-        told = f.get("command")  # the speed the robot was told at onset: a stop's size
-        reference = horizon.get("reference_fault")
-        on = [
-            d
-            for d in summary["detections"]
-            if d["robot"] == robot and d["by"] != robot and d["t"] >= t_f
-        ]
-        gone = next(
-            (e["t"] for e in summary["exclusions"] if e["robot"] == robot and e["t"] >= t_f), None
-        )
-        out.append(
-            {
-                "robot": robot,
-                "kind": f.get("fault"),
-                "t": t_f,
-                "detected": bool(on),
-                "detected_by": len({d["by"] for d in on}),
-                "delay_first": min(d["t"] for d in on) - t_f if on else None,
-                "delay_last": max(d["t"] for d in on) - t_f if on else None,
-                "excluded": gone is not None,
-                "exclusion_delay": None if gone is None else gone - t_f,
-                "teammates": max(n - gone_before - 1, 0) if n else None,
-                "after_settle": settle is not None and t_f >= settle,  # eq. 46's domain
-                "dt_d_max": dt,
-                "command": told,
-                # eq. 46's promise applies: a finite prediction, a stop at least the reference
-                # fault at onset, after T_s, and Δt_d,max ends within the run (observable)
-                "in_domain": bool(
-                    promised
-                    and settle is not None
-                    and t_f >= settle
-                    and f.get("fault") == "stop"
-                    and told is not None
-                    and reference is not None
-                    and told >= reference
-                    and dt is not None
-                    and t_f + dt <= end + 1e-9
-                ),
-            }
-        )
-    return out
-
-
-def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[str, Any]:
-    """A run's row: per fault (``faults``, from the run's own fault events) and per run.
-
-    The single-fault columns (``detected``, ``delay_first``, ...) describe the run's main
-    fault: the drawn one (``faulty_robot``), else its first stop, else its first fault.
-    ``false_flags`` counts flags on robots without an active fault (split by whether every
-    premise held), ``healthy_exclusions`` exclusions of such robots."""
-    faults = fault_facts(summary)
-    horizon = summary.get("dt_d_max")  # the value the run used ("auto": from the analysis)
-    if isinstance(horizon, dict) and horizon.get("value") is not None:
-        dt_d_max = float(horizon["value"])
-    drawn = p.get("faulty_robot")
-    main = next((f for f in faults if f["robot"] == drawn), None) if drawn is not None else None
-    main = main or next((f for f in faults if f["kind"] == "stop"), None)
-    main = main or (faults[0] if faults else None)
-    faulty = {f["robot"] for f in faults}
-    excluded = [e["robot"] for e in summary["exclusions"]]
-    err = summary["errors"]
-    false_flags = summary.get("healthy_flags", 0)
-    return {
-        "faults": json.dumps(faults),
-        "fault_count": len(faults),
-        "main_fault_kind": main["kind"] if main else "none",
-        "detected": bool(main and main["detected"]),
-        "detected_by": main["detected_by"] if main else 0,
-        "delay_first": main["delay_first"] if main else None,
-        "delay_last": main["delay_last"] if main else None,
-        "dt_d_max": dt_d_max,
-        "false_flags": false_flags,
-        "false_flags_premises_held": summary.get("healthy_flags_premises_held", 0),
-        # per premise: the flags on healthy robots that came while it was violated
-        "false_flags_by_premise": json.dumps(summary.get("healthy_flags_by_premise", {})),
-        "false_alarms": false_flags,
-        "false_alarm_robots": len(
-            {d["robot"] for d in summary["detections"] if d["robot"] not in faulty}
-        ),
-        "excluded": json.dumps(excluded),
-        "excluded_faulty": bool(main and main["excluded"]),
-        "exclusion_delay": main["exclusion_delay"] if main else None,
-        "healthy_exclusions": summary.get("healthy_exclusions", 0),
-        "wrong_isolation": summary.get("healthy_exclusions", 0) > 0,
-        "systemic_anomalies": summary.get("systemic_anomalies", 0),
-        # every premise of the run's rule held for the whole run (premises.PREMISES)
-        "premises_held": all(p.get("held", True) for p in summary.get("premises", {}).values()),
-        "settle_time": (horizon or {}).get("settle_time") if isinstance(horizon, dict) else None,
-        "final_centroid": err["final_centroid"],
-        "final_formation": err["final_formation"],
-        "success": bool(
-            summary["status"] == "ok"
-            and err["final_centroid"] is not None
-            and err["final_centroid"] < 0.05
-            and err["final_formation"] < 0.05
-        ),
-        "margin": summary.get("margin"),
-        "min_obstacle_clearance": summary["min_obstacle_clearance"],
-        "warnings": len(summary["warnings"]),
-        "onboard_path": summary.get("onboard", {}).get("path"),
-        "thresholds": summary.get("onboard", {}).get("blocks", {}).get("thresholds"),
-        "blocks": json.dumps(summary.get("onboard", {}).get("blocks", {}), sort_keys=True),
-        "duration": summary["duration"],
-    }
 
 
 # --------------------------------------------------------------------------- the store

@@ -23,7 +23,8 @@ import mujoco
 import numpy as np
 
 from .actuators import Actuation
-from .robots import DEFAULT_MAX_SPEED
+
+DEFAULT_MAX_SPEED = 1.0  # m/s per axis, where neither the robot file nor the actuators limit it
 
 
 class Drive:

@@ -38,7 +38,6 @@ from .actuators import ActuatorInfo
 ROBOTS = MODELS / "robots"
 ROBOT_SUFFIX = ".robot.toml"
 CONTROL_SITE = "dftc_control_point"  # the site added (in memory) at the control point
-DEFAULT_MAX_SPEED = 1.0  # m/s per axis, where neither the robot file nor the actuators limit it
 DRIVE_ROLES = {"holonomic": ("x", "y"), "diffdrive": ("left", "right")}
 HELD_ROLES = {"holonomic": ("yaw",), "diffdrive": ()}
 LEGACY_ACTUATORS = {"holonomic": ("vx", "vy"), "diffdrive": ("wheel_l", "wheel_r")}

@@ -1,0 +1,61 @@
+"""The house's structure, checked from the code's own imports (issue 21): no import circles
+in the package, no module beyond the size a reader can hold."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+PACKAGE = Path(__file__).resolve().parents[1] / "dftc_mujoco"
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """The package modules ``name`` imports anywhere in its file (top level, in functions,
+    under TYPE_CHECKING): each counts, as a reader follows it."""
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")
+                up = up[: len(up) - node.level + 1]
+                base = ".".join(up + ([base] if base else []))
+            for a in node.names:  # `from . import x` names a module where one exists
+                sub = f"{base}.{a.name}"
+                found.add(sub if sub in known else base)
+    return {m for m in found if m in known and m != name}
+
+
+def test_the_package_has_no_import_circles():
+    mods = _modules()
+    names = sorted(mods)
+    index = {m: i for i, m in enumerate(names)}
+    edges = [(index[a], index[b]) for a in names for b in _imports(a, mods[a], set(mods))]
+    # a package's __init__ that only hands names on is its face, not a room of a circle
+    edges = [(a, b) for a, b in edges if not names[b] + "." in names[a] + "."]
+    rows, cols = np.array(edges, dtype=int).T
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(names), len(names)))
+    _, label = connected_components(graph, directed=True, connection="strong")
+    circles = [
+        [names[i] for i in np.flatnonzero(label == c)]
+        for c in np.unique(label)
+        if (label == c).sum() > 1
+    ]
+    assert not circles, f"import circles: {circles}"
