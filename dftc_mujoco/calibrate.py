@@ -684,7 +684,7 @@ def drift(
         per_period = max(per_period, float(np.linalg.norm(np.diff(d, axis=0), axis=2).max()) / h)
     # the re-plan: the scenario's stops (else robot 1 stopped at 60 % of the mission), the
     # drift of every robot that never had a fault, from each exclusion on
-    stops = [
+    stops: list[dict[str, Any]] = [
         {"robot": f.robot + 1, "kind": "stop", "t": f.t} for f in s0.faults if f.kind == "stop"
     ] or [{"robot": 1, "kind": "stop", "t": round(0.6 * s0.duration, 2)}]
     replan, excluded = 0.0, 0
@@ -695,8 +695,9 @@ def drift(
             raise ScenarioError(f"{s.source}: the run for the re-plan failed: {r.error}")
         t = r.log["t"]
         gone = r.events.of_kind("exclusion")
-        healthy = sorted(set(range(r.log["x"].shape[1])) - {f["robot"] - 1 for f in stops})
-        if not gone or not healthy:
+        faulty = {int(f["robot"]) - 1 for f in stops}
+        healthy = np.array(sorted(set(range(r.log["x"].shape[1])) - faulty), dtype=int)
+        if not gone or not len(healthy):
             continue
         excluded += len(gone)
         off, _ = _offsets(r.log, h, xi_bar)

@@ -126,7 +126,7 @@ def k_nearest(positions: np.ndarray, k: int) -> Graph:
     n = len(positions)
     dist = np.linalg.norm(positions[:, None] - positions[None], axis=2)
     np.fill_diagonal(dist, np.inf)
-    pairs = set()
+    pairs: set[tuple[int, int]] = set()
     for i in range(n):
         for j in np.argsort(dist[i])[: min(k, n - 1)]:
             pairs |= {(i, int(j)), (int(j), i)}
@@ -138,8 +138,8 @@ def k_nearest(positions: np.ndarray, k: int) -> Graph:
         )
         a = labels == labels[0]
         sub = np.where(a[:, None] & ~a[None, :], dist, np.inf)
-        i, j = np.unravel_index(np.argmin(sub), sub.shape)
-        g = Graph(n, tuple(sorted(set(g.edges) | {(int(i), int(j)), (int(j), int(i))})))
+        ii, jj = np.unravel_index(np.argmin(sub), sub.shape)
+        g = Graph(n, tuple(sorted(set(g.edges) | {(int(ii), int(jj)), (int(jj), int(ii))})))
     return g
 
 

@@ -145,6 +145,6 @@ def guarded(body: Callable[[Signals], int], said: str) -> int:
                 raise
             # the signal surfaced wrapped: raised inside a ctypes call's argument conversion
             # (an EGL call while rendering) it arrives as ctypes.ArgumentError
-            exc = Interrupted(signals.caught[0])
-            print(f"interrupted by {exc.name}{said}", file=sys.stderr)
-            return exc.exit_code
+            wrapped = Interrupted(signals.caught[0])
+            print(f"interrupted by {wrapped.name}{said}", file=sys.stderr)
+            return wrapped.exit_code

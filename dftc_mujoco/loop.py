@@ -366,7 +366,9 @@ class Simulation:
             sc, s.noise, dt, self.rng, xi_bar=max(xi_bar - model.mismatch, 0.0)
         )
         self.adapter = model.adapter(sc, plant.data, dt)
-        self.faults = sim_faults.ActuatorFaults(sc.model, s.faults, self.adapter)
+        self.faults: sim_faults.ActuatorFaults = sim_faults.ActuatorFaults(
+            sc.model, s.faults, self.adapter
+        )
         n = self.n = s.team.robots
         self.steps = round(s.duration / dt)
         self.log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
@@ -487,7 +489,7 @@ class Simulation:
             geom_robot=self.bumpers.owner,
             body=sc.body,
             x0=x0,
-            z0=self.plant.data.xpos[sc.body, 2],
+            z0=self.data.xpos[sc.body, 2],
             events=self.events,
             memory=lambda: premises.memory(cfg.graph, cfg.ko),  # the start's graph
         )
@@ -568,6 +570,7 @@ class Simulation:
             self.adapter,
             self.noise,
         )
+        assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
         watch = MONITOR_ALLOWED
         data = plant.data
@@ -691,6 +694,7 @@ class Simulation:
         d["c_d"][row] = c
         lim = self.command_limit  # what the drives were asked for, within their range
         np.clip(cmd, -lim, lim, out=d["v_cmd"][row])
+        assert self.plant is not None
         self.plant.poses(out=d["pose"][row])
         self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
         log.size += 1
@@ -702,7 +706,7 @@ class Simulation:
         """The time the physics reached: a whole number of MuJoCo steps. ``data.time`` sums
         the timestep once per step and drifts from that by ~1e-9 s after 10^5 steps."""
         h = self.model.opt.timestep
-        return round(self.plant.time / h) * h
+        return 0.0 if self.plant is None else round(self.plant.time / h) * h
 
     def result(self) -> RunResult:
         """The records of the run so far (the log, the events and the summary)."""

@@ -7,7 +7,8 @@ and both J x and J⁻¹ σ are computed in O(N n) without forming J.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -168,7 +169,7 @@ def _filleted_path(waypoints: np.ndarray, corner_radius: float):
         return [("line", pts[0], pts[0])], 0.0
     seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     # Tangent length of each corner fillet, limited to half the adjacent segments.
-    segments = []
+    segments: list[tuple[Any, ...]] = []
     cursor = pts[0]
     for c in range(1, len(pts) - 1):
         a = (pts[c] - pts[c - 1]) / seg_len[c - 1]
@@ -315,6 +316,7 @@ class FormationPlan:
     target: np.ndarray  # (M, 2)
     t0: float = 0.0
     blend: float = 0.0
+    _still: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_still", np.zeros_like(self.target))  # the rate once settled

@@ -286,7 +286,8 @@ class Monitor:
         self.watched = np.ones(n, bool)
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
         self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
-        self.worst = {p: (0.0, None) for p in PREMISES}  # premise -> (value, robot 1-based)
+        # premise -> (value, robot 1-based)
+        self.worst: dict[str, tuple[float, int | None]] = {p: (0.0, None) for p in PREMISES}
         self.spans: dict[tuple[str, int | None], list[float]] = {}  # -> [t0, worst, last]
         self.count = dict.fromkeys(PREMISES, 0)
         self._index = {p: k for k, p in enumerate(PREMISES)}
@@ -306,8 +307,8 @@ class Monitor:
         phi_hat: np.ndarray,
         xpos: np.ndarray,
         xmat: np.ndarray,
-        contact_geom: np.ndarray,
-        contact_dist: np.ndarray,
+        contact_geom: np.ndarray | None,
+        contact_dist: np.ndarray | None,
         ncon: int,
     ) -> None:
         """Check one control period (after the team's step, before the physics advances):

@@ -89,7 +89,7 @@ class Log:
         self.matrix_every = matrix_every
         self.static = {**static, "matrix_every": np.array(matrix_every)}
         n_matrix = -(-n_samples // matrix_every)
-        self.data = {
+        self.data: dict[str, np.ndarray] = {
             name: np.full(
                 (n_matrix if name in MATRIX_FIELDS else n_samples, *_shape(code, n_robots)),
                 fill,
@@ -163,7 +163,7 @@ def write_text(path: Path, text: str) -> None:
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write arrays as a compressed ``.npz``, atomically."""
-    _atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+    _atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))  # type: ignore[arg-type]
 
 
 def _json_default(o: Any) -> Any:

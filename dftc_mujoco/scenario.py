@@ -26,7 +26,7 @@ import tomllib
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar
+from typing import Any, NoReturn, TypeVar, cast
 
 import numpy as np
 
@@ -996,8 +996,9 @@ def name_problem(name: str) -> str | None:
 def _document(doc: _Doc, data: Any) -> Scenario | None:
     top = _Table(doc.file, data, "", doc)
     name = top.string("name")
-    if top.ok("name") and name_problem(name):
-        top.report("name", name_problem(name))
+    problem = name_problem(name) if top.ok("name") else None
+    if problem:
+        top.report("name", problem)
     description = top.string("description", "")
     duration = top.number("duration", low=0.0)
     seed = top.integer("seed", 0, low=0)
@@ -1037,6 +1038,11 @@ def _document(doc: _Doc, data: Any) -> Scenario | None:
             )
     if doc.problems:
         return None
+    # every reader returned its value where it recorded no problem
+    assert physics is not None and team is not None and gains is not None
+    assert noise is not None and mission is not None and fdir is not None
+    assert onboard is not None and supervision is not None
+    assert obstacles is not None and faults is not None
     with _trusted():
         return Scenario(
             name,
@@ -1048,8 +1054,8 @@ def _document(doc: _Doc, data: Any) -> Scenario | None:
             gains,
             noise,
             mission,
-            obstacles,
-            faults,
+            cast(tuple[Obstacle, ...], obstacles),
+            cast(tuple[Fault, ...], faults),
             fdir,
             doc.file,
             onboard,

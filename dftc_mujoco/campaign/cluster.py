@@ -32,7 +32,7 @@ import socket
 import sys
 import tempfile
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -258,7 +258,7 @@ class RayRuns:
     stop: Callable[[], bool] = lambda: False
     cancelled: int = 0
 
-    def rows(self, todo: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    def rows(self, todo: list[dict[str, Any]]) -> Generator[dict[str, Any], None, None]:
         """The rows of the runs ``todo``, in the order they finish."""
         import ray
 

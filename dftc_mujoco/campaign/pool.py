@@ -22,7 +22,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
@@ -96,7 +96,7 @@ class Pool:
         """The worker processes' ids."""
         return [w.process.pid for w in self._procs]
 
-    def rows(self, todo: list[dict[str, Any]]) -> Iterator[dict[str, Any]]:
+    def rows(self, todo: list[dict[str, Any]]) -> Generator[dict[str, Any], None, None]:
         """The rows of the runs ``todo``, in the order they finish."""
         queue = list(todo)
         try:

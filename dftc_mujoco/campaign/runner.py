@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -51,7 +51,8 @@ class Results:
     def _read(self) -> list[dict[str, Any]]:
         if not self.jsonl.exists():
             return []
-        rows, good = [], []
+        rows: list[dict[str, Any]] = []
+        good: list[str] = []
         # bytes that are not UTF-8 (a torn write) make their line unreadable, not the file
         text = self.jsonl.read_bytes().decode("utf-8", errors="replace")
         for line in text.splitlines():
@@ -113,7 +114,7 @@ class Outcome:
 
 def _here(
     spec: Spec, todo: list[dict[str, Any]], signals: Signals | None, outcome: Outcome
-) -> Iterator[dict[str, Any]]:
+) -> Generator[dict[str, Any], None, None]:
     """One run after another in this process."""
     for i, p in enumerate(todo):
         if signals is not None and signals.signum is not None:
@@ -168,11 +169,12 @@ def run(
         if isinstance(ray_address, cluster.Connection):
             connection = ray_address  # joined by the caller (before preparing the folder)
         else:
-            connection = cluster.connect(ray_address or None, workers)
+            address = ray_address if isinstance(ray_address, str) and ray_address else None
+            connection = cluster.connect(address, workers)
         if signals is not None:
             signals.install()  # ray.init replaces the SIGTERM handler with its own
         engine = cluster.RayRuns(spec, stop)
-        rows: Iterator[dict[str, Any]] = engine.rows(todo)
+        rows: Generator[dict[str, Any], None, None] = engine.rows(todo)
         outcome.engine = f"Ray at {connection.address}"
     elif workers > 1 and len(todo) > 1:
         from .pool import Pool

@@ -71,8 +71,9 @@ def load(path: str | Path) -> Spec:
     data = scenario_mod._read(path)  # not TOML, not UTF-8, unreadable: one line
     top = _Table(str(path), data, "")
     name = top.string("name")
-    if scenario_mod.name_problem(name):
-        top.fail("name", scenario_mod.name_problem(name))
+    problem = scenario_mod.name_problem(name)
+    if problem:
+        top.fail("name", problem)
     description = top.string("description", "")
     base_name = top.string("scenario")
     candidate = path.parent / base_name
@@ -196,7 +197,8 @@ def grid_choice(vary: dict[str, Any], index: int) -> dict[str, Any]:
         return {}
     factors = [(k, vary[k]) for k in ("robots", "graph_family", "fault_kind") if k in vary]
     factors += list(vary.get("scenario_keys", {}).items())
-    out, rest = {}, index
+    out: dict[str, Any] = {}
+    rest = index
     for key, choices in factors:
         rest, digit = divmod(rest, len(choices))
         out[key] = choices[digit]

@@ -60,7 +60,8 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     number), from its own ``fault`` events: whether teammates flagged it, how many, the
     first and last flag's delay, whether and when that robot was excluded."""
     events = summary.get("events", [])
-    horizon = summary.get("dt_d_max") if isinstance(summary.get("dt_d_max"), dict) else {}
+    found = summary.get("dt_d_max")
+    horizon: dict[str, Any] = found if isinstance(found, dict) else {}
     settle = horizon.get("settle_time")  # T_s (None: not within the run)
     n = int(summary.get("robots") or 0)
     end = float(summary.get("simulated_time") or summary.get("duration") or 0.0)
@@ -120,7 +121,7 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float) -> dict[str, Any]:
+def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) -> dict[str, Any]:
     """A run's row: per fault (``faults``, from the run's own fault events) and per run.
 
     The single-fault columns (``detected``, ``delay_first``, ...) describe the run's main

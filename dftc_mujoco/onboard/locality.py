@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def demo_team(
     rng = np.random.default_rng(seed)
     offsets = polygon_offsets(n, 0.5)
     pos = np.array([[0.0, 0.6]]) if obstacles else np.zeros((0, 2))
-    settings = dict(
+    settings: dict[str, Any] = dict(
         graph=graph or ring_with_chords(n, (3,) if n > 4 else (2,)),
         kc=4.0,
         ko=6.0,

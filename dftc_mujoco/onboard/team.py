@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numba import njit
@@ -88,12 +88,13 @@ class Team:
         self.config = config
         self.n = n
         self.blocks = chosen
-        self.observer = chosen["observer"]
-        self.controller = chosen["controller"]
-        self.supervisor = chosen["supervisor"]
-        self.estimator = chosen["fault_estimator"]
-        self.thresholds = chosen["thresholds"]
-        self.decision = chosen["decision"]
+        # typed as the paper's blocks: a plug-in keeps their interface (README, "Blocks")
+        self.observer = cast(Observer, chosen["observer"])
+        self.controller = cast(Controller, chosen["controller"])
+        self.supervisor = cast(Supervisor, chosen["supervisor"])
+        self.estimator = cast(FaultEstimator, chosen["fault_estimator"])
+        self.thresholds = cast(Thresholds, chosen["thresholds"])
+        self.decision = cast(Decision, chosen["decision"])
         self.members = np.arange(n)
         self.gone = np.zeros(0, dtype=np.int64)  # robots excluded so far
         self.graph = config.graph
@@ -442,7 +443,7 @@ class Team:
             "residual": _expand(self.r_norm, mem, n, square=True),
             "threshold": _expand(self.mu, mem, n, square=True),
             "flag": _expand(flag, mem, n, square=True, fill=False),
-            "flagged": _expand((flag & others).any(axis=0), mem, n, fill=False),
+            "flagged": _expand(np.any(flag & others, axis=0), mem, n, fill=False),
             "reactive": _expand(self.reactive, mem, n, fill=False),
             "active": self.active,
         }

@@ -84,7 +84,7 @@ class Drive:
         if self._clip:
             u = np.clip(u, -self.command_limit, self.command_limit)
         driven = self.actuation.command(self.joint_velocity(u))
-        if self.held is None:
+        if self.held is None or self.hold_target is None:
             return driven  # no held joint: the driven commands are all of them
         a = driven.shape[1]
         self._ctrl[:, :a] = driven

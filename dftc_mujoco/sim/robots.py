@@ -25,7 +25,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import mujoco
 import numpy as np
@@ -361,7 +361,7 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
     """
     path = robot.path
 
-    def fail(key: str, message: str) -> None:
+    def fail(key: str, message: str) -> NoReturn:
         raise ScenarioError(f"{path}: {key}: {message}" if keys else f"{path}: {message}")
 
     spec = _read_spec(robot.mjcf, path, "mjcf" if keys else None)
@@ -732,7 +732,7 @@ def _mesh_properties(spec: mujoco.MjSpec, robot: RobotModel, density: float) -> 
         raise ScenarioError(f"{robot.path}: mesh_density is set but the robot has no mesh file")
     file = Path(meshes[0].file)
     try:
-        mesh = trimesh.load(file, force="mesh")
+        mesh: Any = trimesh.load(file, force="mesh")  # a Trimesh (force="mesh")
     except Exception as exc:  # trimesh raises many kinds
         raise ScenarioError(f"{robot.path}: cannot load mesh {file}: {exc}") from None
     if not mesh.is_watertight:

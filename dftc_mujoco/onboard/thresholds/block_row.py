@@ -320,7 +320,7 @@ def row_envelope(
     if len(ks) == 0:
         return _unbounded(n), np.full((1, n), np.inf)
     y0 = np.asarray(y0, float)
-    circulant = bool(finite.all()) and rotation_invariant(graph) and np.all(y0 == y0[0])
+    circulant = bool(finite.all()) and rotation_invariant(graph) and bool(np.all(y0 == y0[0]))
     if circulant:
         ks = ks[:1]
     sweep = _RowSweep(graph, h * ko, ks, y0[ks], noise, max_periods)

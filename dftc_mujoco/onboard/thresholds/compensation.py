@@ -70,13 +70,13 @@ def estimator_gain(
             + (f" with the drive lag of {lag:g} s" if a > 0 else "")
             + "; its compensation has no bound Φ̄ (raise gains.G)"
         )
-    total_eta = np.linalg.norm(D, 2)
+    total_eta = float(np.linalg.norm(D, 2))
     total_xi = 0.0
     xe, xx = B_eta.copy(), B_xi.copy()
     for _ in range(steps):
         he, hx = np.linalg.norm(C @ xe, 2), np.linalg.norm(C @ xx, 2)
-        total_eta += he
-        total_xi += hx
+        total_eta += float(he)
+        total_xi += float(hx)
         if max(np.abs(xe).max(), np.abs(xx).max()) < 1e-14:
             break
         xe, xx = Ad @ xe, Ad @ xx

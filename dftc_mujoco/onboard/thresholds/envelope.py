@@ -363,7 +363,7 @@ def column_envelope(
     if len(ks) == 0:
         return _unbounded(n)
     alpha = np.asarray(start.alpha, float)
-    circulant = bool(finite.all()) and rotation_invariant(graph) and np.all(alpha == alpha[0])
+    circulant = bool(finite.all()) and rotation_invariant(graph) and bool(np.all(alpha == alpha[0]))
     if circulant:
         ks = ks[:1]
     sub = Start(alpha[ks], start.gamma, start.structured)
