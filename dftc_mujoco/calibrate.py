@@ -338,7 +338,7 @@ def detectability(
     """What the recommended ξ̄ implies for the scenario's thresholds: the smallest constant
     fault they can detect, and whether faults of the mission's size are below it.
 
-    A constant fault φ on robot k moves every residual block towards φ/k_o (NOTES 8), so
+    A constant fault φ on robot k moves every residual block towards φ/k_o (docs/notes.md, 8), so
     no robot can flag it unless ‖φ‖ > k_o ⁱμ_k; eq. 46 guarantees the detection above
     twice that. The mission's largest fault is its largest bias, or for a stop the
     robot's command range (a stopped robot's command grows as the team pulls away).
@@ -365,7 +365,7 @@ def detectability(
     line = (
         f"with xi_bar = {cal.recommended_xi_bar:g} m/s, {s.name}'s thresholds "
         f"({s.onboard.thresholds}) let a robot detect a constant fault only above "
-        f"{smallest:.3g} m/s (k_o min μ, NOTES 8; eq. 46 guarantees it above twice that)"
+        f"{smallest:.3g} m/s (k_o min μ, docs/notes.md, 8; eq. 46 guarantees it above twice that)"
     )
     if smallest < largest:
         return line + f"; the mission's faults reach {largest:.3g} m/s", False

@@ -47,7 +47,7 @@ TEAMMATE_MARGIN = 0.1  # [m] least gap between a robot's safe and activation dis
 def seamless_margin(theta: float, input_limit: float) -> float:
     """Activation − safe distance for a robot or excluded robot seen by the range sensor.
 
-    Eq. 18 meets u_g,i at the switch (NOTES 12) only where θ (d − ‖xᵢ − x_o‖) can equal
+    Eq. 18 meets u_g,i at the switch (docs/notes.md, 12) only where θ (d − ‖xᵢ − x_o‖) can equal
     r̂ᵀu_g,i, i.e. from d + ‖u‖/θ on: a robot closing in at the input range ‖u‖ ≤ √2 ×
     ``input_limit`` (per axis) that first senses the obstacle nearer than that switches with a
     jump of ‖u‖ − θ (activation − d), and a queue of robots behind each other turns such

@@ -1,7 +1,7 @@
 """The global mission: desired centroid path, formation, and the task map σ = J x.
 
 σ = [σ₁; σ₂] with σ₁ the centroid (eq. 12) and σ₂ the chain of differences
-x_{k+1} − x_k (eq. 13). J is square and invertible (NOTES 11), so J† = J⁻¹,
+x_{k+1} − x_k (eq. 13). J is square and invertible (docs/notes.md, 11), so J† = J⁻¹,
 and both J x and J⁻¹ σ are computed in O(N n) without forming J.
 """
 
@@ -309,7 +309,7 @@ class FormationPlan:
     """Formation offsets moving from ``start`` to ``target`` over ``blend`` s from ``t0``.
 
     The blend is the quintic 10τ³ − 15τ⁴ + 6τ⁵: offsets, their rate and
-    acceleration are continuous, so re-planning makes no command jump (NOTES 12).
+    acceleration are continuous, so re-planning makes no command jump (docs/notes.md, 12).
     """
 
     start: np.ndarray  # (M, 2)

@@ -82,3 +82,19 @@ def test_the_package_type_checks():
         timeout=600,
     )
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_every_cited_note_is_in_the_repository():
+    """Comments cite what a reader can open: each ``docs/notes.md, n`` names a note there."""
+    import re
+
+    root = PACKAGE.parent
+    notes = (root / "docs" / "notes.md").read_text(encoding="utf-8")
+    have = {int(m) for m in re.findall(r"^(\d+)\. ", notes, flags=re.M)}
+    cited = set()
+    for path in [*PACKAGE.rglob("*.py"), *(root / "docs").glob("*.md"), root / "README.md"]:
+        text = path.read_text(encoding="utf-8")
+        assert "NOTES " not in text.replace("NOTES.md", ""), path  # the old, absent file
+        for group in re.findall(r"docs/notes\.md, ([0-9,\- ]+)", text):
+            cited |= {int(x) for x in re.findall(r"\d+", group)}
+    assert cited and cited <= have, sorted(cited - have)

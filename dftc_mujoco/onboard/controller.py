@@ -14,7 +14,7 @@ from .block import Block, TeamConfig
 
 @njit(inline="always")
 def collective_one(vd, kc, xd, xh):  # pragma: no cover - compiled
-    """One entry of ⁱû_g = ẋ_d + k_c(x_d − ⁱx̂) (eq. 15 with J square, NOTES 11)."""
+    """One entry of ⁱû_g = ẋ_d + k_c(x_d − ⁱx̂) (eq. 15 with J square, docs/notes.md, 11)."""
     return vd + kc * (xd - xh)
 
 
@@ -22,7 +22,7 @@ def collective_one(vd, kc, xd, xh):  # pragma: no cover - compiled
 def collective_input(x_hat, x_d, xd_dot, kc, out):  # pragma: no cover - compiled
     """ⁱû_g = J⁻¹[σ̇_d + k_c(σ_d − J ⁱx̂)] for every robot i (eq. 15), into ``out`` (M, M, n).
 
-    With J square and invertible (NOTES 11) this is ẋ_d + k_c(x_d − ⁱx̂), where
+    With J square and invertible (docs/notes.md, 11) this is ẋ_d + k_c(x_d − ⁱx̂), where
     x_d = J⁻¹σ_d are the desired positions (the mission, which every robot knows).
     """
     m, _, n = x_hat.shape

@@ -1,8 +1,8 @@
 """Local fault estimator and compensation (eqs. 28-31), always on, on every robot.
 
-The local observer is driven by the *nominal* input uᵢ (NOTES 2): driven by
+The local observer is driven by the *nominal* input uᵢ (docs/notes.md, 2): driven by
 the compensated ūᵢ it would integrate the fault and diverge. The estimate is
-applied at all times (NOTES 3): gated, its integral winds up. The equations
+applied at all times (docs/notes.md, 3): gated, its integral winds up. The equations
 are the compiled :func:`estimate_faults`; :class:`FaultEstimator` is the block.
 """
 

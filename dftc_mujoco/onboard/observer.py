@@ -3,7 +3,7 @@
 Every robot i keeps ⁱŷ (its estimate of the auxiliary collective variable
 y = x − ∫u, eq. 20) and ∫(ⁱû_g + Γᵢᵀ Δuᵢ); its estimate of the whole team is
 ⁱx̂ = ⁱŷ + ∫(ⁱû_g + Γᵢᵀ Δuᵢ) (eq. 21). Eq. 19 is then d/dt ⁱŷ = k_o ⁱr with
-ⁱr the residual of eq. 35 (NOTES 1). Arrays carry a leading robot axis (the
+ⁱr the residual of eq. 35 (docs/notes.md, 1). Arrays carry a leading robot axis (the
 members of the team): ``y_hat[i]`` is robot i's ⁱŷ, of shape (M, n), and is
 the message it broadcasts.
 
@@ -38,7 +38,7 @@ def advance_one(y, r, ko, dt):  # pragma: no cover - compiled
 def residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, i, row):  # pragma: no cover
     """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ); returns
     nothing. Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
-    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, NOTES 2)."""
+    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, docs/notes.md, 2)."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     for a in range(m * n):

@@ -1,4 +1,4 @@
-"""Recovery: the exclusion of a faulty robot at a common instant (eqs. 42-43, NOTES 10).
+"""Recovery: the exclusion of a faulty robot at a common instant (eqs. 42-43, docs/notes.md, 10).
 
 The first flag raised on robot k by anyone fixes its exclusion instant
 t_r = min ⁱt_d + Δt_d,max (eq. 43); at t_r robot k is excluded if some member still flags it,

@@ -35,7 +35,7 @@ def supervise(
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
     r̂ᵀu_g,i < θ(d − ‖xᵢ − x_o‖), and off when r̂ᵀu_g,i exceeds that by
-    ``release``; at the switch eq. 18 and u_g,i coincide (NOTES 12).
+    ``release``; at the switch eq. 18 and u_g,i coincide (docs/notes.md, 12).
     """
     changed = False
     for i in range(x.shape[0]):

@@ -394,7 +394,7 @@ class Team:
         if saturated:
             code |= SATURATED
         if cfg.fdir:
-            if self._estimator_holds:  # eqs. 28-31, nominal u (NOTES 2)
+            if self._estimator_holds:  # eqs. 28-31, nominal u (docs/notes.md, 2)
                 u_bar = self.estimator.step(x_m, self.u, hold=self._touch)
             else:
                 u_bar = self.estimator.step(x_m, self.u)
@@ -536,8 +536,8 @@ class Team:
             self.events.append(event)
 
     def _exclusions_due(self, t: float) -> None:
-        """At t_r, drop a robot that some teammate still flags (NOTES 10), unless a systemic
-        anomaly holds."""
+        """At t_r, drop a robot that some teammate still flags (docs/notes.md, 10), unless a
+        systemic anomaly holds."""
         for robot in self.recovery.due(t):
             p = int(np.flatnonzero(self.members == robot)[0])
             flag = np.asarray(self.flag, bool)

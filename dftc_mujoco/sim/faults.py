@@ -1,4 +1,4 @@
-"""Actuator faults injected through the actuator model (NOTES 15).
+"""Actuator faults injected through the actuator model (docs/notes.md, 15).
 
 A *bias* fault φ(t) (a planar velocity offset of the controlled point) is mapped by
 the robot's drive to joint-velocity offsets and written into the actuators' bias term

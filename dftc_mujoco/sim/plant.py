@@ -162,7 +162,7 @@ class Plant:
         return float(self.data.time)
 
     def positions(self, out: np.ndarray | None = None) -> np.ndarray:
-        """True planar positions (N, 2) from the robots' sites (world frame, NOTES 13)."""
+        """True planar positions (N, 2) from the robots' sites (world frame, docs/notes.md, 13)."""
         if out is None:
             out = np.empty((self.n, 2))
         _gather_xy(self._site_xpos, self._site, out)

@@ -1,4 +1,4 @@
-"""Scene composition with ``mujoco.MjSpec``: arena + N robots + cylinders (NOTES 17).
+"""Scene composition with ``mujoco.MjSpec``: arena + N robots + cylinders (docs/notes.md, 17).
 
 Each robot's MJCF is attached as it is (``attach_body`` with the prefix ``robotK/``):
 its compiler settings, default classes and assets come along, and the robot keeps its

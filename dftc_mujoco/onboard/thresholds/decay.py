@@ -1,8 +1,8 @@
 """κ, λ of eq. 41: the decay of the observer's error matrix for every monitored robot.
 
 :func:`decay_bound` gives κ, λ with ‖e^{−M_k t}‖ ≤ κ e^{−λ t} for one monitored robot k from
-the N×N matrix M_k = k_o(L + e_k e_kᵀ) (NOTES 5-6); :func:`decay_bounds` for every k, batched
-through the row and column sums of :mod:`.kernels` at scale. The paper's thresholds
+the N×N matrix M_k = k_o(L + e_k e_kᵀ) (docs/notes.md, 5-6); :func:`decay_bounds` for
+every k, batched through the row and column sums of :mod:`.kernels` at scale. The paper's thresholds
 (:mod:`.paper`) are built on them."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ def decay_bound(m: np.ndarray, n_lambda: int = 49) -> tuple[float, float]:
 
     Any λ below the smallest real part λ_min of M's eigenvalues is valid;
     κ(λ) = sup_t ‖exp(−M t)‖ e^{λ t}. The steady threshold grows with κ/λ, so λ
-    is picked on a grid in (0, λ_min) to minimise κ/λ (NOTES 6). The sup is
+    is picked on a grid in (0, λ_min) to minimise κ/λ (docs/notes.md, 6). The sup is
     taken on a time grid dense up to 4/λ_min and geometric up to 400/λ_min,
     refined around its peak, and multiplied by 1 + 1e-4 so that κ bounds the
     continuous sup rather than approximating it from below.
@@ -57,7 +57,7 @@ def decay_bound(m: np.ndarray, n_lambda: int = 49) -> tuple[float, float]:
 
 
 def observer_matrix(graph: Graph, ko: float, k: int) -> np.ndarray:
-    """k_o (L + e_k e_kᵀ): ‖exp(−k_o L̃_k t)‖ reduces to this N×N matrix (NOTES 5)."""
+    """k_o (L + e_k e_kᵀ): ‖exp(−k_o L̃_k t)‖ reduces to this N×N matrix (docs/notes.md, 5)."""
     m = graph.laplacian()
     m[k, k] += 1.0
     return ko * m

@@ -1,6 +1,6 @@
 """Vector recursions on the observer matrices, batched over the monitored robots.
 
-Every monitored robot k has its own matrix M_k = k_o(L + e_k e_kᵀ) (NOTES 5). The
+Every monitored robot k has its own matrix M_k = k_o(L + e_k e_kᵀ) (docs/notes.md, 5). The
 threshold rules (``docs/thresholds.md``) and the fast κ, λ of eq. 41 need only
 vectors pushed through B_k = I − β(L + e_k e_kᵀ), never B_k's powers:
 

@@ -2,7 +2,8 @@
 
 :class:`Thresholds` is the thresholds block (the plug-in point of every rule: the other
 rules subclass it) and :func:`eq40` its compiled evaluation, with κ, λ from
-:mod:`.decay`. It restarts at each exclusion from a bound valid at that instant (NOTES 7)."""
+:mod:`.decay`. It restarts at each exclusion from a bound valid at that instant
+(docs/notes.md, 7)."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ class Thresholds(Block):
     """The paper's adaptive thresholds ⁱμ_k(t) (eqs. 40-41) for every robot i and robot k.
 
     Restarted at each exclusion from a bound valid at that instant, with κ, λ
-    of the new graph (NOTES 7). Override :meth:`mu` (and :meth:`restart`) to try
+    of the new graph (docs/notes.md, 7). Override :meth:`mu` (and :meth:`restart`) to try
     another rule; row i may use only what robot i knows: the graph, the gains,
     the noise bounds and the time.
     """
@@ -101,7 +102,7 @@ class Thresholds(Block):
         return th
 
     def restart(self, graph: Graph, y0: np.ndarray, t0: float) -> None:
-        """Start anew at ``t0`` on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]`` (NOTES 7)."""
+        """Start anew at ``t0`` on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]`` (docs/notes.md, 7)."""
         self.graph, self.y0, self.t0 = graph, y0, t0
         self.kappa, self.lam = decay_bounds(graph, self.ko)
         n = graph.n
