@@ -61,15 +61,43 @@ def test_the_package_has_no_import_circles():
     assert not circles, f"import circles: {circles}"
 
 
+def test_the_onboard_algorithms_stand_on_the_graph_and_the_mission_alone():
+    """The layer order: the onboard blocks import, from this package, only the graph, the
+    mission and the errors, and never MuJoCo (or the scenario parser, the physics, ...)."""
+    mods = _modules()
+    allowed = {"dftc_mujoco.graph", "dftc_mujoco.mission", "dftc_mujoco.errors"}
+    for name, path in mods.items():
+        if not name.startswith("dftc_mujoco.onboard"):
+            continue
+        outside = {
+            m for m in _imports(name, path, set(mods)) if not m.startswith("dftc_mujoco.onboard")
+        }
+        assert outside <= allowed, (name, sorted(outside - allowed))
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        names = {
+            a.name.split(".")[0]
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Import)
+            for a in n.names
+        }
+        names |= {
+            (n.module or "").split(".")[0]
+            for n in ast.walk(tree)
+            if isinstance(n, ast.ImportFrom) and not n.level
+        }
+        assert "mujoco" not in names, name
+
+
 def test_the_package_type_checks():
     """mypy (configured in pyproject.toml, installed by the dev extra) finds nothing."""
     import shutil
     import subprocess
     import sys
 
-    if shutil.which("mypy") is None and subprocess.run(
-        [sys.executable, "-c", "import mypy"], capture_output=True
-    ).returncode:
+    if (
+        shutil.which("mypy") is None
+        and subprocess.run([sys.executable, "-c", "import mypy"], capture_output=True).returncode
+    ):
         import pytest
 
         pytest.skip("mypy is not installed (pip install -e '.[dev]')")

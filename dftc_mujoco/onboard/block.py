@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..graph import Graph
-from ..scenario import Formation
+from ..mission import Formation
 
 
 @dataclass(frozen=True)

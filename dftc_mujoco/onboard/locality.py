@@ -21,8 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..graph import Graph, ring_with_chords
-from ..mission import polygon_offsets
-from ..scenario import Formation
+from ..mission import Formation, polygon_offsets
 from .block import Block, TeamConfig
 from .team import Team
 

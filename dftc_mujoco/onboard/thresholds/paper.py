@@ -76,7 +76,7 @@ class Thresholds(Block):
         period ``dt``, fault-estimator gains K, G as scalars times I; no compensation, so
         ē is the rule's own ``drift_bound``)."""
         from ...mission import polygon_offsets
-        from ...scenario import Formation
+        from ...mission import Formation
 
         config = TeamConfig(
             graph=graph,
