@@ -41,9 +41,7 @@ import dataclasses
 import itertools
 import math
 import os
-import stat
 import sys
-import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from .atomic import write_text
 from .errors import ScenarioError
 
 PAPER_XI_BAR = 0.005
@@ -743,22 +742,6 @@ def write(path: Path, cal: Calibration) -> None:
         _write_mjcf(path, {"mismatch": cal.smooth_max, "xi_bar": cal.recommended_xi_bar})
 
 
-def _atomic(path: Path, text: str) -> None:
-    """Replace ``path`` with ``text`` in one step, keeping the file's permissions."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if path.exists():  # mkstemp makes the file private (0600)
-            os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _calibration_header(path: Path, lines: list[str]) -> int | None:
     """The line of the robot file's ``[calibration]`` header (None: no calibration yet);
     a calibration written otherwise (inline or dotted keys) cannot be replaced line-wise."""
@@ -796,7 +779,7 @@ def _write_robot_file(path: Path, values: dict[str, float]) -> None:
         new = lines[:start] + table + ([""] if end < len(lines) else []) + lines[end:]
     text = "\n".join(new) + "\n"
     tomllib.loads(text)  # never write a file that does not read back
-    _atomic(path, text)
+    write_text(path, text)
 
 
 def _write_mjcf(path: Path, values: dict[str, float]) -> None:
@@ -813,7 +796,7 @@ def _write_mjcf(path: Path, values: dict[str, float]) -> None:
         else:
             spec.add_numeric(name=name, data=[float(value)])
     text = spec.to_xml()
-    _atomic(path, text)
+    write_text(path, text)
 
 
 def report(cal: Calibration) -> str:

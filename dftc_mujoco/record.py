@@ -7,13 +7,15 @@ Both files are written atomically (a temporary file in the same folder, then
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .atomic import atomic_write, write_text
+
+__all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
 # name -> (shape after the time axis, in units of N; dtype; fill). The N × N fields are
 # float32 (7 significant digits): at N = 100, 60 s at 50 Hz they take 480 MB, not 960.
@@ -132,38 +134,15 @@ class Events:
         return sorted(self.items, key=lambda e: e["t"])
 
 
-def _atomic_write(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual file mode
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_json(path: Path, obj: Any) -> None:
     """Write ``obj`` as indented JSON, atomically."""
     text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
-    _atomic_write(path, lambda fh: fh.write(text.encode()))
-
-
-def write_text(path: Path, text: str) -> None:
-    """Write ``text`` (UTF-8), atomically."""
-    _atomic_write(path, lambda fh: fh.write(text.encode()))
+    atomic_write(path, lambda fh: fh.write(text.encode()))
 
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write arrays as a compressed ``.npz``, atomically."""
-    _atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))  # type: ignore[arg-type]
+    atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))  # type: ignore[arg-type]
 
 
 def _json_default(o: Any) -> Any:

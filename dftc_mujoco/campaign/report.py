@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-import os
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_write, write_text
 from ..render.figures import new_figure
 
 
@@ -221,9 +221,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
     lines += _rule_table(ok)
     lines += _scale_table(ok, figs)
     path = out / "report.md"
-    tmp = out / ".report.md.tmp"
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    write_text(path, "\n".join(lines) + "\n")
     return path
 
 
@@ -311,7 +309,5 @@ def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
 
 
 def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.png")
     fig.tight_layout()
-    fig.savefig(tmp, dpi=100)
-    os.replace(tmp, path)
+    atomic_write(path, lambda fh: fig.savefig(fh, dpi=100, format="png"))

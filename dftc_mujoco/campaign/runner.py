@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
+from ..atomic import atomic_write, write_text
 from .spec import Spec, draw
 from .task import fault_facts, run_one, spec_folders
 
@@ -68,9 +69,7 @@ class Results:
             good.append(line)
         cleaned = "".join(g + "\n" for g in good)
         if cleaned != text:  # drop torn or duplicate lines before appending more
-            tmp = self.jsonl.with_suffix(".jsonl.tmp")
-            tmp.write_text(cleaned)
-            os.replace(tmp, self.jsonl)
+            write_text(self.jsonl, cleaned)
         return rows
 
     def done(self) -> set[int]:
@@ -92,9 +91,7 @@ class Results:
         rows = sorted(self.rows, key=lambda r: r["run"])
         keys = sorted({k for r in rows for k in r})
         table = pa.table({k: [r.get(k) for r in rows] for k in keys})
-        tmp = self.parquet.with_suffix(".parquet.tmp")
-        pq.write_table(table, tmp)
-        os.replace(tmp, self.parquet)
+        atomic_write(self.parquet, lambda fh: pq.write_table(table, fh))
 
 
 # --------------------------------------------------------------------------- engines

@@ -10,7 +10,7 @@ inputs and fault estimates.
 
 from __future__ import annotations
 
-import os
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from ..atomic import atomic_write
 from ..record import matrix_rows
 
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
@@ -281,11 +282,6 @@ def draw_all(log: dict[str, np.ndarray], summary: dict[str, Any], folder: Path) 
     for name in FIGURES:
         fig = DRAW[name](log, summary)
         path = folder / f"{name}.png"
-        tmp = folder / f".{name}.{os.getpid()}.tmp.png"  # private to this process
-        try:
-            fig.savefig(tmp, dpi=110)
-            tmp.replace(path)
-        finally:
-            tmp.unlink(missing_ok=True)
+        atomic_write(path, partial(fig.savefig, dpi=110, format="png"))
         written.append(path)
     return written

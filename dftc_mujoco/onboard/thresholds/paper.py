@@ -75,8 +75,7 @@ class Thresholds(Block):
         """The rule on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team (control
         period ``dt``, fault-estimator gains K, G as scalars times I; no compensation, so
         ē is the rule's own ``drift_bound``)."""
-        from ...mission import polygon_offsets
-        from ...mission import Formation
+        from ...mission import Formation, polygon_offsets
 
         config = TeamConfig(
             graph=graph,
