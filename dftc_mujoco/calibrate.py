@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import write_text
-from .errors import ScenarioError
+from .errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, ScenarioError
 
 PAPER_XI_BAR = 0.005
 CONTROL_PERIOD = 0.01
@@ -928,11 +928,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"written to {path}")
     except ScenarioError as exc:
         cli.print_error(exc)
-        return 2
+        return EXIT_INPUT
     except OSError as exc:
         print(f"error: cannot write the calibration: {exc}", file=sys.stderr)
-        return 5
-    return 0
+        return EXIT_OUTPUT
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from .errors import exit_interrupted
+
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -41,7 +43,7 @@ class Interrupted(BaseException):
     @property
     def exit_code(self) -> int:
         """128 + the signal number: 130 for SIGINT, 143 for SIGTERM."""
-        return 128 + self.signum
+        return exit_interrupted(self.signum)
 
 
 class Signals:

@@ -27,14 +27,10 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from .errors import DftcError
+from .errors import OutputError
 
 RUN_FILES = ("summary.json", "log.npz", "scenario.toml")
 OWNER = ".owner"  # inside a private folder: "<pid> <process start time>"
-
-
-class OutputError(DftcError):
-    """The output folder cannot be used (exists, locked, not writable, no space)."""
 
 
 def os_problem(exc: OSError, what: str, where: Path | str | None = None) -> OutputError:

@@ -17,10 +17,9 @@ import sys
 from pathlib import Path
 
 from . import cli, interrupt, output
-from .errors import ScenarioError
-from .output import OutputError
+from .errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_RENDER, OutputError, ScenarioError
 from .render import gl
-from .run import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_RENDER, add_video_options, setup_video
+from .run import add_video_options, setup_video
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,7 +27,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import cli, interrupt
-from .errors import ScenarioError
+from .errors import (
+    EXIT_INPUT,
+    EXIT_OK,
+    EXIT_OUTPUT,
+    EXIT_PHYSICS,
+    EXIT_RENDER,
+    ScenarioError,
+    exit_interrupted,
+)
 from .interrupt import Interrupted, Signals
 from .output import OutputError, free_space_check, os_problem, run_folder
 from .render import gl
@@ -35,8 +43,6 @@ from .results import split_text
 
 if TYPE_CHECKING:
     from .results import RunResult
-
-EXIT_OK, EXIT_INPUT, EXIT_PHYSICS, EXIT_RENDER, EXIT_OUTPUT = 0, 2, 3, 4, 5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -357,7 +363,7 @@ def _finish(result, work: Path, out: Path, signals: Signals, options, progress: 
             f"t = {result.summary['simulated_time']:.2f} s are in {out} (no figures or video)",
             file=sys.stderr,
         )
-        return 128 + signals.signum  # 130 for SIGINT, 143 for SIGTERM
+        return exit_interrupted(signals.signum)
     code = EXIT_OK
     if not result.ok:
         print(f"error: {result.error}", file=sys.stderr)

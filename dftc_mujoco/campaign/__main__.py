@@ -22,11 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import cli, interrupt, output
-from ..errors import ScenarioError
+from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
 from ..interrupt import Interrupted, Signals
-from ..output import OutputError
-
-EXIT_OK, EXIT_INPUT, EXIT_OUTPUT = 0, 2, 5
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,9 +64,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(args: argparse.Namespace, signals: Signals) -> int:
+    from ..errors import ClusterError
     from . import folder, report, runner
     from . import spec as spec_mod
-    from .cluster import ClusterError
 
     engine: Any = False
     try:

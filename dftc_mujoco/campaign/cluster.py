@@ -36,10 +36,9 @@ from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import DftcError
+from ..errors import EXIT_CLUSTER, ClusterError
 from .spec import Spec
 
-EXIT_CLUSTER = 5  # the cluster cannot be used: an environment problem, like a full disk
 REACH_TIMEOUT = 5.0  # s for the plain TCP check of an address
 CONNECT_DEADLINE = 25.0  # s from the start of connecting to giving up
 POLL = 0.25  # s between two looks at the stop request while waiting for rows
@@ -50,10 +49,6 @@ AUTH_HINT = (
     "token as RAY_AUTH_TOKEN, in the file named by RAY_AUTH_TOKEN_PATH or in "
     "~/.ray/auth_token (`ray get-auth-token` on the head node prints it)"
 )
-
-
-class ClusterError(DftcError):
-    """Ray is missing, or the cluster cannot be reached or joined."""
 
 
 @dataclass

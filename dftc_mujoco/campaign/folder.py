@@ -29,7 +29,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..output import OutputError, os_problem
+from ..errors import OutputError
+from ..output import os_problem
 from ..record import write_text
 from .spec import Spec, draw, scenario_dict
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import sys
 
-from ..errors import DftcError
+from ..errors import RenderError
 
 BACKENDS = ("egl", "osmesa", "glfw")
 DEFAULT = "egl"
@@ -24,10 +24,6 @@ HINTS = {
     "glfw": "GLFW needs a display (X11 or Wayland, DISPLAY set); on a headless machine "
     "use --gl egl or --gl osmesa",
 }
-
-
-class RenderError(DftcError):
-    """No offscreen OpenGL context can be created (or rendering failed)."""
 
 
 def select(backend: str | None) -> str:

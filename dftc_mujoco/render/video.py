@@ -21,11 +21,11 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from ..errors import RenderError
 from ..scenario import Scenario
 from ..sim import robots as robot_models
 from ..sim import scene as scene_mod
 from . import gl
-from .gl import RenderError
 from .options import VideoOptions, frame_times
 
 HEALTHY = (0.20, 0.45, 0.85, 1.0)
