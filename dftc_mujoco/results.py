@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .errors import ScenarioError, SimulationError
+from .events import split_text
 from .record import LOG_FIELDS, Events, matrix_rows, write_json, write_npz, write_text
 
 if TYPE_CHECKING:
@@ -103,32 +104,6 @@ def open_run(folder: str | Path) -> RunResult:
     events = Events([dict(e) for e in summary.get("events", [])])
     error = SimulationError(summary["error"]) if summary.get("status") == "failed" else None
     return RunResult(scenario, log, events, summary, error)
-
-
-def split_text(e: dict[str, Any]) -> str:
-    """One line for a ``graph_not_strongly_connected`` event: who is left, in which groups,
-    and which estimates lost their bound."""
-    groups = e.get("components") or [e["robots"]]
-    text = (
-        f"after an exclusion the graph of robots {', '.join(str(r) for r in e['robots'])} "
-        "is not strongly connected"
-    )
-    if len(groups) > 1:
-        parts = []
-        for g, lost in zip(groups, e.get("unheard", []), strict=False):
-            if lost:
-                parts.append(f"robots {_span(g)} hear nothing from robots {_span(lost)}")
-        text += f" ({len(groups)} groups; " + "; ".join(parts) + ")"
-    return text + (
-        ": those estimates, and the residuals and thresholds built on them, have no bound "
-        "(fdir.excluded_relay = true keeps an excluded robot relaying)"
-    )
-
-
-def _span(robots: list[int]) -> str:
-    """Robots as a short list (at most 8 named)."""
-    head = ", ".join(str(r) for r in robots[:8])
-    return head + (f" and {len(robots) - 8} more" if len(robots) > 8 else "")
 
 
 def _one_line(exc: BaseException) -> str:

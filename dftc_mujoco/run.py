@@ -36,10 +36,10 @@ from .errors import (
     ScenarioError,
     exit_interrupted,
 )
+from .events import describe
 from .interrupt import Interrupted, Signals
 from .output import OutputError, free_space_check, os_problem, run_folder
 from .render import gl
-from .results import split_text
 
 if TYPE_CHECKING:
     from .results import RunResult
@@ -143,75 +143,6 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def _fmt_event(e: dict) -> str:
-    k = e["kind"]
-    r = e.get("robot", 0)
-    if k == "fault":
-        return f"fault: {e['fault']} on robot {r}"
-    if k == "reactive_on":
-        return f"robot {r} switches to obstacle avoidance ({e.get('obstacle', '?')})"
-    if k == "reactive_off":
-        return f"robot {r} back to the global mission"
-    if k == "detection":
-        held = e.get("premises")
-        why = f" — while its premises were violated: {', '.join(held)}" if held else ""
-        return f"robot {e['by']} flags robot {r}{why}"
-    if k == "premise_violated":
-        who = f"robot {r}" if r else "the team"
-        return (
-            f"premise '{e['premise']}' violated by {who} until {e['until']:.2f} s "
-            f"(worst {e['value']:.4g} against {e['bound']:.4g})"
-        )
-    if k == "exclusion_scheduled":
-        return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
-    if k == "exclusion":
-        by = ", ".join(str(b) for b in e["flagged_by"])
-        return f"robot {r} excluded from the team (still flagged by {by})"
-    if k == "exclusion_cancelled":
-        why = {
-            "systemic_anomaly": "a systemic anomaly holds (more robots flagged than faults)",
-            "flagged_only_by_itself": "only its own flag is up (exclusion needs teammates)",
-        }.get(e.get("reason", "").replace(" ", "_"), "nobody flags it any more")
-        return f"robot {r} kept at t_r: {why}"
-    if k == "exclusion_postponed":
-        when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
-        return (
-            f"robot {r}'s exclusion postponed to {when}: its bumper touched something at "
-            f"{e['last_contact']:.2f} s, and a contact, not a fault, may explain its flags"
-        )
-    if k == "systemic_anomaly":
-        who = ", ".join(str(b) for b in e["robots"])
-        return (
-            f"SYSTEMIC ANOMALY: robots {who} flagged at once ({e['excluded']} excluded before), "
-            f"more than the {e['max_faults']} faulty robot(s) fdir.max_faults admits; nobody is "
-            "excluded until every flag is down"
-            + (f" — premises violated: {', '.join(e['premises'])}" if e.get("premises") else "")
-        )
-    if k == "detection_not_guaranteed":
-        until = e["until"]
-        when = f"{until:.2f} s" if until is not None else "after the end of the run"
-        return (
-            f"robot {r}'s fault comes before the thresholds settle: its detection within "
-            f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
-        )
-    if k == "systemic_anomaly_over":
-        return "systemic anomaly over: no robot is flagged by a teammate any more"
-    if k == "detection_horizon":
-        return (
-            f"Δt_d,max recomputed on the reduced graph (eq. 46): {e['value']:.2f} s "
-            f"(was {e['before']:.2f} s)"
-        )
-    if k == "graph_not_strongly_connected":
-        return "WARNING: " + split_text(e)
-    if k == "warning":
-        return f"WARNING: {e['message']}"
-    if k == "mission_ended":
-        return f"MISSION ENDED: {e['reason']}"
-    if k == "simulation_error":
-        return f"SIMULATION ERROR: {e['message']}"
-    return f"{k} {e}"
-
-
 def report(result: RunResult, out: Path) -> str:
     """The human-readable table printed at the end of a run."""
     s = result.summary
@@ -223,7 +154,7 @@ def report(result: RunResult, out: Path) -> str:
         "   t [s]  event",
     ]
     for e in result.events.ordered():
-        lines.append(f"{e['t']:8.2f}  {_fmt_event(e)}")
+        lines.append(f"{e['t']:8.2f}  {describe(e)}")
     err = s["errors"]
 
     def m(v: float | None) -> str:

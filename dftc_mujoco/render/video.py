@@ -22,6 +22,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from ..errors import RenderError
+from ..events import describe
 from ..scenario import Scenario
 from ..sim import robots as robot_models
 from ..sim import scene as scene_mod
@@ -335,14 +336,22 @@ def _bias_start(summary: dict[str, Any], n: int) -> np.ndarray:
 
 
 def _overlay_events(summary: dict[str, Any]) -> list[tuple[float, str]]:
-    """Fault injections, each robot's first detection, and exclusions, in time order."""
-    ev = [(f["t"], f"fault: {f['kind']} on robot {f['robot']}") for f in summary.get("faults", [])]
+    """Fault injections, each robot's first detection, and exclusions, in time order, in the
+    words of :func:`dftc_mujoco.events.describe`."""
+    ev = [
+        (f["t"], describe({"kind": "fault", "robot": f["robot"], "fault": f["kind"]}))
+        for f in summary.get("faults", [])
+    ]
     seen: set[int] = set()
     for d in sorted(summary.get("detections", []), key=lambda d: d["t"]):
         if d["robot"] not in seen:
             seen.add(d["robot"])
-            ev.append((d["t"], f"robot {d['by']} flags robot {d['robot']} (first detection)"))
-    ev += [(e["t"], f"robot {e['robot']} excluded") for e in summary.get("exclusions", [])]
+            flag = {"kind": "detection", "by": d["by"], "robot": d["robot"]}
+            ev.append((d["t"], describe(flag) + " (first detection)"))
+    ev += [
+        (e["t"], describe({"kind": "exclusion", "flagged_by": [], **e}))
+        for e in summary.get("exclusions", [])
+    ]
     return sorted(ev)
 
 

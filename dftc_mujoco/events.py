@@ -1,0 +1,130 @@
+"""The run's events: every kind with the facts it carries, and the one line that says each.
+
+An event is a plain dict (JSON in ``summary.json``) with ``t`` [s], ``kind`` and the fields
+:data:`KINDS` lists for that kind; robots are numbered from 1. :func:`describe` is the only
+place an event is put into words: the console's event table, the warnings of a summary and
+the video's captions read it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+#: kind -> the fields an event of that kind carries besides ``t`` and ``kind``
+KINDS: dict[str, tuple[str, ...]] = {
+    "fault": ("robot", "fault", "command"),
+    "reactive_on": ("robot", "obstacle"),
+    "reactive_off": ("robot",),
+    "detection": ("by", "robot", "premises"),
+    "premise_violated": ("premise", "robot", "value", "bound", "until"),
+    "exclusion_scheduled": ("robot", "t_r"),
+    "exclusion": ("robot", "flagged_by", "detected_by"),
+    "exclusion_cancelled": ("robot", "reason"),
+    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r"),
+    "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
+    "systemic_anomaly_over": (),
+    "detection_not_guaranteed": ("robot", "until"),
+    "detection_horizon": ("value", "before"),
+    "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
+    "warning": ("message",),
+    "mission_ended": ("reason",),
+    "simulation_error": ("message",),
+}
+
+
+def describe(e: Mapping[str, Any]) -> str:
+    """The one line that says what event ``e`` means (the console table, summaries and the
+    video captions all use it)."""
+    k = e["kind"]
+    r = e.get("robot", 0)
+    if k == "fault":
+        return f"fault: {e['fault']} on robot {r}"
+    if k == "reactive_on":
+        return f"robot {r} switches to obstacle avoidance ({e.get('obstacle', '?')})"
+    if k == "reactive_off":
+        return f"robot {r} back to the global mission"
+    if k == "detection":
+        held = e.get("premises")
+        why = f" — while its premises were violated: {', '.join(held)}" if held else ""
+        return f"robot {e['by']} flags robot {r}{why}"
+    if k == "premise_violated":
+        who = f"robot {r}" if r else "the team"
+        return (
+            f"premise '{e['premise']}' violated by {who} until {e['until']:.2f} s "
+            f"(worst {e['value']:.4g} against {e['bound']:.4g})"
+        )
+    if k == "exclusion_scheduled":
+        return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
+    if k == "exclusion":
+        by = ", ".join(str(b) for b in e.get("flagged_by") or [])
+        return f"robot {r} excluded from the team" + (f" (still flagged by {by})" if by else "")
+    if k == "exclusion_cancelled":
+        why = {
+            "systemic_anomaly": "a systemic anomaly holds (more robots flagged than faults)",
+            "flagged_only_by_itself": "only its own flag is up (exclusion needs teammates)",
+        }.get(e.get("reason", "").replace(" ", "_"), "nobody flags it any more")
+        return f"robot {r} kept at t_r: {why}"
+    if k == "exclusion_postponed":
+        when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
+        return (
+            f"robot {r}'s exclusion postponed to {when}: its bumper touched something at "
+            f"{e['last_contact']:.2f} s, and a contact, not a fault, may explain its flags"
+        )
+    if k == "systemic_anomaly":
+        who = ", ".join(str(b) for b in e["robots"])
+        return (
+            f"SYSTEMIC ANOMALY: robots {who} flagged at once ({e['excluded']} excluded before), "
+            f"more than the {e['max_faults']} faulty robot(s) fdir.max_faults admits; nobody is "
+            "excluded until every flag is down"
+            + (f" — premises violated: {', '.join(e['premises'])}" if e.get("premises") else "")
+        )
+    if k == "detection_not_guaranteed":
+        until = e["until"]
+        when = f"{until:.2f} s" if until is not None else "after the end of the run"
+        return (
+            f"robot {r}'s fault comes before the thresholds settle: its detection within "
+            f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
+        )
+    if k == "systemic_anomaly_over":
+        return "systemic anomaly over: no robot is flagged by a teammate any more"
+    if k == "detection_horizon":
+        return (
+            f"Δt_d,max recomputed on the reduced graph (eq. 46): {e['value']:.2f} s "
+            f"(was {e['before']:.2f} s)"
+        )
+    if k == "graph_not_strongly_connected":
+        return "WARNING: " + split_text(e)
+    if k == "warning":
+        return f"WARNING: {e['message']}"
+    if k == "mission_ended":
+        return f"MISSION ENDED: {e['reason']}"
+    if k == "simulation_error":
+        return f"SIMULATION ERROR: {e['message']}"
+    return f"{k} {dict(e)}"
+
+
+def split_text(e: Mapping[str, Any]) -> str:
+    """One line for a ``graph_not_strongly_connected`` event: who is left, in which groups,
+    and which estimates lost their bound."""
+    groups = e.get("components") or [e["robots"]]
+    text = (
+        f"after an exclusion the graph of robots {', '.join(str(r) for r in e['robots'])} "
+        "is not strongly connected"
+    )
+    if len(groups) > 1:
+        parts = []
+        for g, lost in zip(groups, e.get("unheard", []), strict=False):
+            if lost:
+                parts.append(f"robots {_span(g)} hear nothing from robots {_span(lost)}")
+        text += f" ({len(groups)} groups; " + "; ".join(parts) + ")"
+    return text + (
+        ": those estimates, and the residuals and thresholds built on them, have no bound "
+        "(fdir.excluded_relay = true keeps an excluded robot relaying)"
+    )
+
+
+def _span(robots: list[int]) -> str:
+    """Robots as a short list (at most 8 named)."""
+    head = ", ".join(str(r) for r in robots[:8])
+    return head + (f" and {len(robots) - 8} more" if len(robots) > 8 else "")

@@ -1,0 +1,45 @@
+"""Events: every kind a run emits is listed in ``events.KINDS`` with its fields, and
+``events.describe`` puts each into one line of words (the console, the summary's warnings
+and the video captions use it)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dftc_mujoco import events, load_scenario, simulate
+
+DATA = Path(__file__).parent / "data"
+
+
+def _check(items):
+    for e in items:
+        kind = e["kind"]
+        assert kind in events.KINDS, kind
+        assert set(e) - {"t", "kind"} <= set(events.KINDS[kind]), (kind, sorted(e))
+        line = events.describe(e)
+        assert "\n" not in line and not line.startswith(f"{kind} {{"), line
+
+
+def test_every_event_of_paper_case_is_a_known_kind_in_one_line():
+    _check(json.loads((DATA / "paper_case_events.json").read_text()))
+
+
+def test_the_recovery_events_are_known_kinds_in_one_line():
+    """A line whose middle robot stops and is excluded without a relay: exclusion, split,
+    horizon and scheduling events all have their words."""
+    line = [[1, 2], [2, 1], [2, 3], [3, 2], [3, 4], [4, 3]]
+    s = load_scenario(
+        "paper_case",
+        {
+            "team.graph": line,
+            "faults": [{"robot": 2, "kind": "stop", "t": 30.0}],
+            "fdir.dt_d_max": "auto",
+            "onboard.thresholds": "l1",
+            "duration": 40.0,
+        },
+    )
+    items = simulate(s).events.items
+    kinds = {e["kind"] for e in items}
+    assert {"exclusion", "graph_not_strongly_connected", "detection_horizon"} <= kinds
+    _check(items)
