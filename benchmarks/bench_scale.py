@@ -1,6 +1,7 @@
-"""Scale benchmark: N = 4, 16, 64, 100 on the same kind of scene.
+"""Scale benchmark: N = 4, 16, 64, 100 (up to 1000) on the same kind of scene.
 
     python benchmarks/bench_scale.py [--n 4 16 64 100] [--duration 20]
+    python benchmarks/bench_scale.py --n 1000 --duration 30 --repeat 1
 
 For each N, in a fresh process (so peak memory is that run's own): a grid
 formation of 0.5 m spacing, a ring with chords 2 and 5, no cylinders, a stop
@@ -8,8 +9,10 @@ fault at half time. Reports the κ/λ computation (part of the onboard
 set-up), the whole set-up of a Simulation, µs per control period of the
 closed loop and of bare ``mj_step`` replaying the run's own commands (median
 of ``--repeat``, numba's cache loaded before timing: see ``replay.py``), their
-ratio, the real-time factor of the loop alone and with set-up and post-run
-derivation, and the peak resident memory of the process.
+ratio, the real-time factor of the loop alone and with the cold set-up (the first
+Simulation of the fresh process: κ/λ, numba's cache) and post-run derivation, the peak
+resident memory, the wall time of the whole process (imports included) and whether the
+replay ended in the closed loop's final state bit for bit (the exact floor).
 """
 
 from __future__ import annotations
@@ -63,7 +66,9 @@ def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dic
         "loop_us": r["loop_us"],
         "ratio": r["ratio"],
         "rtf": duration / loop_s,
-        "rtf_with_setup": duration / (loop_s + r["setup_s"] + r["derive_s"]),
+        "rtf_with_setup": duration / (loop_s + r["cold_setup_s"] + r["derive_s"]),
+        "cold_setup_s": r["cold_setup_s"],
+        "exact": r["exact"],
         "setup_s": r["setup_s"],
         "derive_s": r["derive_s"],
         "path": r["path"],
@@ -91,10 +96,11 @@ def main() -> None:
         f"log at {args.log_rate:g} Hz"
     )
     print(
-        f"{'N':>4} {'κ/λ':>8} {'setup':>8} {'bare':>10} {'loop':>10} "
-        f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8}"
+        f"{'N':>4} {'κ/λ':>8} {'setup':>8} {'cold':>8} {'bare':>10} {'loop':>10} "
+        f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8} {'process':>8} exact"
     )
     for n in args.n:
+        t0 = time.perf_counter()
         out = subprocess.run(
             [
                 sys.executable,
@@ -112,12 +118,14 @@ def main() -> None:
             text=True,
             check=True,
         )
+        whole = time.perf_counter() - t0  # the whole child process, imports included
         r = json.loads(out.stdout.strip().splitlines()[-1])
         print(
             f"{r['n']:>4} {r['kappa_lambda_s']:>7.2f}s "
-            f"{r['setup_s']:>7.2f}s {r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
+            f"{r['setup_s']:>7.2f}s {r['cold_setup_s']:>7.2f}s "
+            f"{r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
             f"{r['ratio']:>6.2f} {r['rtf']:>6.1f}x {r['rtf_with_setup']:>9.1f}x "
-            f"{r['peak_mb']:>6.0f}MB"
+            f"{r['peak_mb']:>6.0f}MB {whole:>7.1f}s {'yes' if r['exact'] else 'NO'}"
         )
 
 

@@ -50,7 +50,8 @@ def main() -> None:
     )
     print(f"  loop  {r['loop_us']:7.1f} us  {r['loop_best_us']:7.1f} us per control period")
     print(
-        f"  bare  {r['bare_us']:7.1f} us  {r['bare_best_us']:7.1f} us (mj_step replaying the run)"
+        f"  bare  {r['bare_us']:7.1f} us  {r['bare_best_us']:7.1f} us (mj_step replaying the run"
+        f"{', its final state bit-identical' if r['exact'] else ', NOT the same final state'})"
     )
     print(f"  ratio {r['ratio']:7.2f}")
     print(
