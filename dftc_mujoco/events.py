@@ -21,7 +21,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "exclusion_scheduled": ("robot", "t_r"),
     "exclusion": ("robot", "flagged_by", "detected_by"),
     "exclusion_cancelled": ("robot", "reason"),
-    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r"),
+    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was"),
     "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
     "systemic_anomaly_over": (),
     "detection_not_guaranteed": ("robot", "until"),
@@ -67,6 +67,12 @@ def describe(e: Mapping[str, Any]) -> str:
         return f"robot {r} kept at t_r: {why}"
     if k == "exclusion_postponed":
         when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
+        if e.get("reason") == "decaying":
+            return (
+                f"robot {r}'s exclusion postponed to {when}: its teammates' largest residual/"
+                f"threshold fell from {e['was']:.3g} to {e['ratio']:.3g} since then, the trace "
+                f"of its contact at {e['last_contact']:.2f} s decaying, not a fault's signature"
+            )
         return (
             f"robot {r}'s exclusion postponed to {when}: its bumper touched something at "
             f"{e['last_contact']:.2f} s, and a contact, not a fault, may explain its flags"

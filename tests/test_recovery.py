@@ -318,3 +318,50 @@ def test_a_fault_when_the_thresholds_never_settle_in_the_run_is_written_and_said
     assert "guaranteed (eq. 46) only for faults from after the end of the run" in (
         capsys.readouterr().out
     )
+
+
+def test_a_contacts_decaying_trace_is_waited_out_and_a_faults_signature_is_not():
+    """At a postponed t_r with no new contact, a robot whose teammates' largest
+    residual/threshold fell since the postponement (3.85 → 2.77: a push's trace forgotten by
+    the observers) waits until that decay brings it under 1; one whose ratio held (a fault's
+    signature) is excluded."""
+    from dftc_mujoco.onboard.recovery import Recovery
+
+    for ratio_then, ratio_now, waits in ((3.85, 2.77, True), (3.0, 3.1, False)):
+        rec = Recovery(dt_d_max=0.88, max_faults=7)
+        rec.settle = 30.0
+        rec.flagged(23.0, [(4, 14)])
+        rec.contact(26.29, [14])
+        first = rec.due(23.88)
+        assert first == [14] and rec.postpone(23.88, 14, ratio_then)["reason"] == "contact"
+        assert rec.due(56.0) == [] and rec.due(57.2) == [14]
+        later = rec.postpone(57.2, 14, ratio_now)
+        if waits:
+            assert later["reason"] == "decaying" and later["t_r"] > 57.2 + 0.88
+            assert later["t_r"] == pytest.approx(
+                57.2 + np.log(2.77) / (np.log(3.85 / 2.77) / (57.2 - 23.88)) + 0.88
+            )
+        else:
+            assert later is None
+
+
+def test_a_healthy_robot_pushed_on_a_thinned_graph_is_not_excluded():
+    """Run 1380 of the no-false-exclusion battery (16 hexbots, 3-nearest graph, drive rule,
+    0.6 m/s): robot 3's bias is excluded at 19.9 s; robots 15 and 16 then push each other
+    until 26.3 s. The push moved their y_m for good, and on the graph left without robot 3
+    the observers forget it with a time constant near 10 s, longer than T_s: their teammates
+    still flagged them 32 s after the contact and both, healthy, were excluded at 58.78 s.
+    Now their decaying trace is waited out: robot 3 alone is excluded."""
+    from pathlib import Path
+
+    from dftc_mujoco import scenario
+    from dftc_mujoco.campaign import spec as spec_mod
+
+    sp = spec_mod.load(Path(__file__).parent / "data" / "battery_v2.toml")
+    d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 1380))
+    assert d["team"]["robots"] == 16 and d["faults"][0]["robot"] == 3
+    summary = simulate(scenario.from_dict(d)).summary
+    assert [e["robot"] for e in summary["exclusions"]] == [3]
+    waited = [e for e in summary["events"] if e.get("reason") == "decaying"]
+    assert {e["robot"] for e in waited} == {15, 16}
+    assert all(e["ratio"] < 0.9 * e["was"] for e in waited)

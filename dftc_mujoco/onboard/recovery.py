@@ -27,6 +27,10 @@ from typing import Any
 
 import numpy as np
 
+#: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
+#: at the last postponement for the flags to count as a contact's decaying trace
+DECAYING = 0.9
+
 
 class Recovery:
     """Which robots are to be excluded when, from the flags the team raises."""
@@ -49,6 +53,9 @@ class Recovery:
         self.first_detection: dict[int, float] = {}  # robot -> earliest flag by anyone
         self.pending: dict[int, float] = {}  # robot -> exclusion instant t_r (eq. 43)
         self.detected: set[tuple[int, int]] = set()  # (by, robot) pairs already reported
+        # robot -> (t, its largest residual/threshold among teammates) when a contact last
+        # postponed it: a contact's transient decays, a fault's signature does not
+        self.ratio_at: dict[int, tuple[float, float]] = {}
 
     def flagged(self, t: float, pairs: Iterable[tuple[int, int]]) -> list[dict[str, Any]]:
         """Robot ``by`` raised a flag on ``robot`` at ``t`` for each pair: a ``detection``
@@ -116,14 +123,20 @@ class Recovery:
         for robot in robots:
             self.last_contact[int(robot)] = t
 
-    def postpone(self, t: float, robot: int) -> dict[str, Any] | None:
+    def postpone(self, t: float, robot: int, ratio: float = np.nan) -> dict[str, Any] | None:
         """At t_r: an ``exclusion_postponed`` event when ``robot`` touched something since its
         window began (its new t_r is its last contact + T_s + Δt_d,max, and that window must
-        be free of contact in turn); None when it may be excluded now."""
+        be free of contact in turn), or when the flags a contact raised are still decaying
+        (:meth:`transient`); None when it may be excluded now. ``ratio``: the largest
+        ‖ⁱr_k‖ / ⁱμ_k among its teammates now."""
         since = self.since.pop(robot, np.inf)
         last = self.last_contact.get(robot)
-        if not self.postpone_on_contact or last is None or last < since:
-            return None  # never touched anything, or not since its window began
+        if not self.postpone_on_contact or last is None:
+            return None  # never touched anything
+        if last < since:  # no contact since its window began: is a contact's trace decaying?
+            self.since[robot] = since
+            return self.transient(t, robot, ratio)
+        self.ratio_at[robot] = (t, ratio)
         t_r = max(last + self.settle + self.dt_d_max, t + 1e-9)  # inf: T_s beyond the run
         self.pending[robot] = t_r
         self.first_detection[robot] = last
@@ -135,6 +148,37 @@ class Recovery:
             "reason": "contact",
             "last_contact": last,
             "t_r": t_r if np.isfinite(t_r) else None,  # None: not within the run
+        }
+
+    def transient(self, t: float, robot: int, ratio: float) -> dict[str, Any] | None:
+        """A robot a contact postponed is still flagged at its new t_r: if its largest
+        residual/threshold among teammates fell by at least :data:`DECAYING` since then, the
+        flags are the contact's trace decaying through the observers (a push moves y_m,k for
+        good, and the consensus observer forgets it at its own rate, slower than T_s on a
+        graph that an exclusion thinned): the exclusion waits until that decay, extrapolated,
+        brings the ratio under 1, + Δt_d,max (``reason = "decaying"``). A fault's signature
+        does not decay (a stop's residual grows to φ/k_o and stays), so a robot whose ratio
+        holds or grows is excluded. None: exclude now."""
+        before = self.ratio_at.get(robot)
+        if before is None or not (np.isfinite(ratio) and ratio > 0.0):
+            return None
+        t0, r0 = before
+        if not (t > t0 and np.isfinite(r0) and ratio < DECAYING * r0):
+            return None
+        rate = np.log(r0 / ratio) / (t - t0)  # 1/s, the trace's decay rate so far
+        t_r = float(t + max(np.log(ratio), 0.0) / rate + self.dt_d_max)
+        self.pending[robot] = t_r
+        self.first_detection[robot] = t
+        self.ratio_at[robot] = (t, ratio)
+        return {
+            "t": t,
+            "kind": "exclusion_postponed",
+            "robot": robot + 1,
+            "reason": "decaying",
+            "last_contact": self.last_contact[robot],
+            "t_r": t_r,
+            "ratio": round(float(ratio), 4),
+            "was": round(float(r0), 4),
         }
 
     def detectors(self, robot: int) -> list[int]:
@@ -153,6 +197,7 @@ class Recovery:
         }
         self.detected = {(b, k) for b, k in self.detected if k != robot}
         self.since.pop(robot, None)
+        self.ratio_at.pop(robot, None)
         return event
 
     def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:

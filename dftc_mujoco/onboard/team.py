@@ -550,7 +550,7 @@ class Team:
                 reason = "flagged only by itself" if flaggers else "not flagged"
                 self.events.append(self.recovery.cancel(t, robot, reason))
                 continue
-            later = self.recovery.postpone(t, robot)
+            later = self.recovery.postpone(t, robot, self._worst_ratio(p))
             if later is not None:  # a contact may explain the flags: wait Δt_d,max past it
                 self.events.append(later)
                 continue
@@ -569,6 +569,17 @@ class Team:
                 return
             if not self.graph.is_strongly_connected():
                 self.events.append(self._split(t))
+
+    def _worst_ratio(self, p: int) -> float:
+        """The largest ‖ⁱr_k‖ / ⁱμ_k among robot k's teammates (k at member position ``p``):
+        what each teammate knows of k, gathered as its flags are."""
+        r = np.asarray(self.r_norm, float)[:, p]
+        mu = np.asarray(self.mu, float)[:, p]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(mu > 0, r / mu, np.inf)
+        ratio[p] = 0.0  # its own judgement is not a teammate's
+        ratio = ratio[np.isfinite(ratio)]
+        return float(ratio.max()) if len(ratio) else float("nan")
 
     def _split(self, t: float) -> dict[str, Any]:
         """The ``graph_not_strongly_connected`` event: the members' strongly connected
