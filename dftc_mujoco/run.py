@@ -261,7 +261,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             with Simulation(s) as sim, signals.stopping(sim):
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
                 if args.viewer:
-                    from .render.viewer import ViewerUnavailable, watch
+                    from .viewer import ViewerUnavailable, watch
 
                     try:
                         watch(sim)

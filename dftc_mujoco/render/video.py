@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from ..display import STATES, robot_state
 from ..errors import RenderError
 from ..events import describe
 from ..scenario import Scenario
@@ -29,16 +30,6 @@ from ..sim import scene as scene_mod
 from . import gl
 from .options import VideoOptions, frame_times
 
-HEALTHY = (0.20, 0.45, 0.85, 1.0)
-COMPENSATING = (0.95, 0.60, 0.10, 1.0)
-FLAGGED = (0.85, 0.15, 0.15, 1.0)
-EXCLUDED = (0.45, 0.45, 0.45, 1.0)
-STATES = (
-    ("healthy", HEALTHY),
-    ("compensating", COMPENSATING),
-    ("flagged", FLAGGED),
-    ("excluded", EXCLUDED),
-)
 AVOIDING = (0.1, 0.75, 0.3, 0.55)
 GHOST_ALPHA = 0.28
 SAFE = (0.35, 0.35, 0.4, 0.9)
@@ -158,17 +149,11 @@ class FrameRenderer:
         """Each robot's state at ``t``: healthy, compensating, flagged or excluded."""
         j, a = self._index(t)
         k = j + 1 if a >= 1.0 else j
-        out = []
-        for i in range(self.n):
-            if not self.log["active"][k, i]:
-                out.append("excluded")
-            elif self.log["flagged"][k, i]:
-                out.append("flagged")
-            elif t >= self._bias_from[i]:
-                out.append("compensating")
-            else:
-                out.append("healthy")
-        return out
+        active, flagged = self.log["active"][k], self.log["flagged"][k]
+        return [
+            robot_state(bool(active[i]), bool(flagged[i]), t >= self._bias_from[i])
+            for i in range(self.n)
+        ]
 
     # ------------------------------------------------------------------ drawing
 

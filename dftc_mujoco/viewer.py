@@ -2,8 +2,10 @@
 
 The viewer needs a display (X11 or Wayland; under CI, Xvfb). Markers drawn in
 the viewer's user scene: each robot's desired slot (a flat disc) and a sphere
-above each robot coloured by its state (green healthy, amber compensating a
-fault estimate, red flagged by a teammate, grey excluded).
+above each robot coloured by its state, as in the video (``display.py``: blue healthy,
+amber compensating a fault estimate, red flagged by a teammate, grey excluded). It steps a
+:class:`~dftc_mujoco.loop.Simulation`, so it lives beside the loop, not in ``render/``
+(which reads records only).
 """
 
 from __future__ import annotations
@@ -15,14 +17,11 @@ import time
 import mujoco
 import numpy as np
 
-from ..loop import Simulation
+from .display import COLOURS, robot_state
+from .loop import Simulation
 
-COLOURS = {
-    "healthy": (0.2, 0.75, 0.3, 1.0),
-    "compensating": (0.95, 0.65, 0.1, 1.0),
-    "flagged": (0.9, 0.15, 0.15, 1.0),
-    "excluded": (0.5, 0.5, 0.5, 1.0),
-}
+#: [m/s] a robot compensates a fault estimate (amber) while ‖φ̂‖ exceeds this
+COMPENSATING = 0.05
 
 
 class ViewerUnavailable(RuntimeError):
@@ -51,14 +50,11 @@ def draw_overlays(scn, snap, x_d: np.ndarray) -> None:
     """State spheres and desired slots of a :class:`~dftc_mujoco.loop.Snapshot` into ``scn``."""
     scn.ngeom = 0
     for i, p in enumerate(snap.x):
-        if not snap.active[i]:
-            state = "excluded"
-        elif snap.flagged[i]:
-            state = "flagged"
-        elif np.linalg.norm(snap.phi_hat[i]) > 0.05:
-            state = "compensating"
-        else:
-            state = "healthy"
+        state = robot_state(
+            bool(snap.active[i]),
+            bool(snap.flagged[i]),
+            bool(np.linalg.norm(snap.phi_hat[i]) > COMPENSATING),
+        )
         _marker(scn, (p[0], p[1], 0.32), (0.035, 0, 0), COLOURS[state])
     for p in x_d:
         if np.all(np.isfinite(p)):
