@@ -622,23 +622,39 @@ def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     return inside
 
 
+def owners(model: mujoco.MjModel, roots: np.ndarray) -> np.ndarray:
+    """(nbody,) the index into ``roots`` of the root whose subtree holds each body, -1 for
+    none (bodies are numbered depth first: a parent comes before its children)."""
+    owner = np.full(model.nbody, -1, dtype=np.int64)
+    owner[np.asarray(roots, dtype=np.int64)] = np.arange(len(roots))
+    parent = model.body_parentid
+    for b in range(1, model.nbody):  # one pass over the bodies, not one per root
+        if owner[b] < 0:
+            owner[b] = owner[parent[b]]
+    return owner
+
+
+def actuator_bodies(model: mujoco.MjModel) -> np.ndarray:
+    """(nu,) the body each actuator acts on (its joint's, site's or body's), -1 for a
+    tendon actuator."""
+    trn = model.actuator_trntype
+    target = model.actuator_trnid[:, 0]
+    out = np.full(model.nu, -1, dtype=np.int64)
+    joint = (trn == mujoco.mjtTrn.mjTRN_JOINT) | (trn == mujoco.mjtTrn.mjTRN_JOINTINPARENT)
+    out[joint] = model.jnt_bodyid[target[joint]]
+    site = trn == mujoco.mjtTrn.mjTRN_SITE
+    out[site] = model.site_bodyid[target[site]]
+    body = trn == mujoco.mjtTrn.mjTRN_BODY
+    out[body] = target[body]
+    return out
+
+
 def attached_actuators(model: mujoco.MjModel, body: int) -> np.ndarray:
     """The actuators that come along when body ``body`` is attached (its subtree's joints,
     sites and bodies are their targets), in model order; tendon actuators are not."""
+    on = actuator_bodies(model)
     inside = subtree(model, body)
-    target_body = {
-        int(mujoco.mjtTrn.mjTRN_JOINT): model.jnt_bodyid,
-        int(mujoco.mjtTrn.mjTRN_JOINTINPARENT): model.jnt_bodyid,
-        int(mujoco.mjtTrn.mjTRN_SITE): model.site_bodyid,
-        int(mujoco.mjtTrn.mjTRN_BODY): np.arange(model.nbody),
-    }
-    out = [
-        a
-        for a in range(model.nu)
-        if (ids := target_body.get(int(model.actuator_trntype[a]))) is not None
-        and inside[ids[model.actuator_trnid[a, 0]]]
-    ]
-    return np.array(out, dtype=int)
+    return np.flatnonzero((on >= 0) & inside[np.maximum(on, 0)])
 
 
 def qpos_addresses(model: mujoco.MjModel, joints: np.ndarray) -> np.ndarray:

@@ -34,10 +34,10 @@ from .robots import (
     CONTROL_SITE,
     OPTION_NAMES,
     RobotModel,
-    attached_actuators,
+    actuator_bodies,
     option_value,
+    owners,
     qpos_addresses,
-    subtree,
 )
 
 # Collision bits of the arena, above the 16 bits the robots' own models use
@@ -162,8 +162,15 @@ def _initial_state(
     qpos = model.qpos0.copy()
     ctrl = np.zeros(model.nu)
     key_q, key_c = np.asarray(robot.init_qpos), np.asarray(robot.init_ctrl)
-    for i, b in enumerate(body):
-        joints = np.flatnonzero(subtree(model, int(b))[model.jnt_bodyid])
+    # which robot each body, joint and actuator belongs to: one pass, not one per robot
+    owner = owners(model, body)
+    joint_owner = owner[model.jnt_bodyid]
+    on = actuator_bodies(model)
+    actuator_owner = np.where(on >= 0, owner[np.maximum(on, 0)], -1)
+    by_joint = _group(joint_owner, len(body))
+    by_actuator = _group(actuator_owner, len(body))
+    for i in range(len(body)):
+        joints = by_joint[i]
         adr = qpos_addresses(model, joints)
         if len(adr) != len(key_q):
             raise ValueError(f"robot {i + 1}: {len(adr)} joint coordinates, expected {len(key_q)}")
@@ -175,11 +182,18 @@ def _initial_state(
                 # robots 8 m up); only the other joints come from the keyframe
                 a = model.jnt_qposadr[j]
                 qpos[a : a + 7] = model.qpos0[a : a + 7]
-        acts = attached_actuators(model, int(b))
+        acts = by_actuator[i]
         if len(acts) != len(key_c):
             raise ValueError(f"robot {i + 1}: {len(acts)} actuators, expected {len(key_c)}")
         ctrl[acts] = key_c
     return qpos, ctrl
+
+
+def _group(owner: np.ndarray, n: int) -> list[np.ndarray]:
+    """For each of ``n`` owners, the indices it owns, in order (-1: nobody's)."""
+    order = np.argsort(owner, kind="stable")
+    bounds = np.searchsorted(owner[order], np.arange(n + 1))
+    return [order[bounds[i] : bounds[i + 1]] for i in range(n)]
 
 
 def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
