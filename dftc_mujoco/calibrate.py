@@ -343,8 +343,8 @@ def detectability(
     robot's command range (a stopped robot's command grows as the team pulls away).
     Returns (the line to print, whether it is a warning).
     """
+    from .assembly import team_config
     from .blocks import create
-    from .loop import team_config
     from .scenario import load_scenario
     from .sim import robots
 
@@ -421,7 +421,7 @@ def compensation(
     robot models its drive as the team will (``onboard/applied.py``): the estimator is
     driven by the modelled velocity, the drive by the command.
     """
-    from .loop import PAPER_G
+    from .assembly import PAPER_G
     from .onboard.thresholds import estimator_gain
     from .scenario import load_scenario
     from .sim import robots, scene

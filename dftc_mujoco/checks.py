@@ -125,7 +125,7 @@ def preflight(
     command range is ``command_limit`` per axis; ``safe`` and ``activation`` are the
     cylinders' distances after they were raised for the robot's footprint; ``path`` (T, 2)
     the desired centroid every ``path_dt`` seconds; ``input_limit`` the applied input's
-    range per axis (``loop.input_limit``)."""
+    range per axis (``assembly.input_limit``)."""
     out = Findings()
     src = s.source
     reach = robot.footprint_radius

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from dftc_mujoco import assembly, load_scenario, loop, simulate
 from dftc_mujoco import calibrate as cal_mod
-from dftc_mujoco import load_scenario, loop, simulate
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard import team as team_mod
 from dftc_mujoco.onboard.applied import lag_coefficients, lag_input
@@ -233,7 +233,7 @@ def test_a_jammed_slow_robot_reads_its_drive_state_from_its_own_motion():
     0.8 m/s here, and by 4 m/s within 0.3 s of the hold's end in battery run 1078, where the
     healthy robot was excluded."""
     s = load_scenario("paper_case", slow_case(faults=[], obstacles=[]))
-    cfg = loop.team_config(s, robots.load(SLOWBASE), 0.8)
+    cfg = assembly.team_config(s, robots.load(SLOWBASE), 0.8)
     assert cfg.lag > 2.0
     x = np.array(s.team.initial_positions, float)
     team = team_mod.Team(cfg, x.copy(), np.zeros(2))

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from dftc_mujoco import calibrate, checks, loop, run, scenario
+from dftc_mujoco import assembly, calibrate, checks, loop, run, scenario
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
@@ -505,7 +505,7 @@ def test_a_big_footprint_raises_the_activation_distance_with_the_safe_distance()
     """Bug 3: d was raised for the footprint but the activation distance was not."""
     holo = robots.get(str(HOLOBASE))
     s = scenario.load("paper_case")
-    cfg = loop.team_config(s, holo)
+    cfg = assembly.team_config(s, holo)
     d = 0.12 + holo.footprint_radius + checks.CLEARANCE
     np.testing.assert_allclose(cfg.obstacle_safe, d)
     np.testing.assert_allclose(cfg.obstacle_activation - cfg.obstacle_safe, 0.45 - 0.37)

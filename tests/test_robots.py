@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from dftc_mujoco import calibrate, loop, run, scenario
+from dftc_mujoco import assembly, calibrate, loop, run, scenario
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.paths import MODELS
 from dftc_mujoco.sim import faults as sim_faults
@@ -89,8 +89,8 @@ def test_mesh_robot_mass_inertia_and_footprint_come_from_the_mesh():
     d["obstacles"] = [
         {"position": [1, 1], "radius": 0.2, "safe_distance": 0.25, "activation_distance": 0.4}
     ]
-    cfg = loop.team_config(make(d), hexbot)
-    assert cfg.obstacle_safe[0] == pytest.approx(0.2 + hexbot.footprint_radius + loop.CLEARANCE)
+    cfg = assembly.team_config(make(d), hexbot)
+    assert cfg.obstacle_safe[0] == pytest.approx(0.2 + hexbot.footprint_radius + assembly.CLEARANCE)
 
 
 def test_diffdrive_moves_only_through_wheel_contact():
@@ -234,7 +234,7 @@ def test_paper_case_outcome_with_every_robot_model(model, G):
     (``gains.G = "auto"``; the paper's 0.01 makes the diffdrive's compensation loop ring)."""
     assert robots.get(model).calibration["compensation_G"] == G
     s = scenario.load_scenario("paper_case", {"team.robot_model": model})
-    assert s.gains.G is None and (loop.effective_G(s, robots.get(model)) == G * np.eye(2)).all()
+    assert s.gains.G is None and (assembly.effective_G(s, robots.get(model)) == G * np.eye(2)).all()
     r = loop.simulate(s)
     out = r.summary
     assert out["status"] == "ok" and out["warnings"] == []

@@ -70,15 +70,15 @@ def test_no_contact_between_teammates_in_paper_case(model):
 def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
     """Eq. 18 equals u_g,i at the switch only if the teammate is sensed from d + ‖u‖/θ on
     (NOTES 12). A disk closing in on a standing teammate at its whole input range: with the
-    activation distance the run derives (``loop.seamless_margin``) its command changes per
+    activation distance the run derives (``assembly.seamless_margin``) its command changes per
     period by no more than eq. 18's own deceleration θ‖u‖Δt (2.4 cm/s); with the former
     fixed 0.1 m margin it jumped by about 0.5 m/s."""
-    from dftc_mujoco import loop
+    from dftc_mujoco import assembly
     from dftc_mujoco.sim import robots
 
     s = load_scenario("paper_case")
     disk = robots.load(robots.resolve("disk", "test"))
-    cfg = loop.team_config(s, disk, 0.8)
+    cfg = assembly.team_config(s, disk, 0.8)
     speed = np.sqrt(2.0) * cfg.input_limit  # the fastest a robot can close in
     none = np.zeros((0, 2))
 
@@ -114,7 +114,7 @@ def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
     assert cfg.excluded_activation - cfg.excluded_safe >= speed / cfg.theta - 1e-12
     smooth = cfg.theta * speed * cfg.dt  # eq. 18's own deceleration per period
     assert largest_jump(cfg.teammate_activation) < smooth + 0.005
-    assert largest_jump(cfg.teammate_safe + loop.TEAMMATE_MARGIN) > 0.3
+    assert largest_jump(cfg.teammate_safe + assembly.TEAMMATE_MARGIN) > 0.3
 
 
 def test_a_queue_of_robots_does_not_ring_into_a_healthy_exclusion():

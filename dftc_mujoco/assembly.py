@@ -1,0 +1,232 @@
+"""Assembly: a scenario and a robot model turned into the team's configuration and blocks.
+
+What every robot is given before the run (``TeamConfig``): the gains, the noise bounds the
+robot model's calibration implies, the drive's applied range, acceleration and lag, the
+distances at which cylinders, excluded robots and teammates are avoided, the fault
+hypothesis; and the six onboard blocks, the scenario's or the caller's. The loop
+(:mod:`dftc_mujoco.loop`) asks this module and nothing else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import blocks as blocks_mod
+from .checks import CLEARANCE
+from .errors import ScenarioError
+from .onboard.block import Block
+from .onboard.team import TeamConfig
+from .onboard.thresholds import estimator_gain
+from .scenario import Scenario
+from .sim import robots
+
+PAPER_G = 0.01  # eq. 30's G = 0.01 I, the paper's value
+TEAMMATE_MARGIN = 0.1  # [m] least gap between a robot's safe and activation distances
+
+
+def seamless_margin(theta: float, input_limit: float) -> float:
+    """Activation − safe distance for a robot or excluded robot seen by the range sensor.
+
+    Eq. 18 meets u_g,i at the switch (docs/notes.md, 12) only where θ (d − ‖xᵢ − x_o‖) can equal
+    r̂ᵀu_g,i, i.e. from d + ‖u‖/θ on: a robot closing in at the input range ‖u‖ ≤ √2 ×
+    ``input_limit`` (per axis) that first senses the obstacle nearer than that switches with a
+    jump of ‖u‖ − θ (activation − d), and a queue of robots behind each other turns such
+    jumps into a limit cycle whose compensation rings (battery run 1735: 0.5 m/s jumps at
+    10 Hz, a healthy robot excluded). At least :data:`TEAMMATE_MARGIN`.
+    """
+    if not np.isfinite(input_limit) or theta <= 0:
+        return TEAMMATE_MARGIN
+    return max(TEAMMATE_MARGIN, float(np.sqrt(2.0) * input_limit / theta))
+
+
+def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """ξ̄ of the run: the scenario's if it sets one, else the robot model's measured one."""
+    if s.noise.xi_bar is not None:
+        return s.noise.xi_bar
+    return robot.xi_bar if robot is not None else 0.0
+
+
+def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:
+    """G of eq. 30 for the run: the scenario's, or with ``gains.G = "auto"`` the robot model's
+    calibrated ``compensation_G`` (the smallest G x I whose compensation loop does not ring
+    on it, ``python -m dftc_mujoco.calibrate``), the paper's 0.01 I without one."""
+    if s.gains.G is not None:
+        return np.asarray(s.gains.G, float)
+    g = robot.calibration.get("compensation_G") if robot is not None else None
+    return float(g or PAPER_G) * np.eye(2)
+
+
+def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: float) -> float:
+    """Per-axis range of the applied nominal input (``onboard/applied.py``).
+
+    The command range less the compensation's headroom: a healthy robot's ‖φ̂‖ stays
+    within Φ̄ (the fault estimator's ℓ1 gain from η̄ and ξ̄), so ū = u − φ̂ stays within the
+    range the drive delivers; at least half the range is kept for the mission.
+    ``fdir.input = "nominal"`` returns inf (no saturation).
+    """
+    if s.fdir.input == "nominal" or not np.isfinite(command_limit):
+        return np.inf
+    headroom = 0.0
+    if s.fdir.enabled and s.fdir.compensate:
+        try:
+            headroom = estimator_gain(
+                np.asarray(s.gains.K),
+                effective_G(s, robot),
+                s.physics.control_period,
+                s.noise.eta_bar,
+                effective_xi_bar(s, robot),
+                lag=drive_lag(s, robot),
+            )
+        except ScenarioError:  # an unstable estimator loop is refused elsewhere
+            headroom = 0.0
+    return max(command_limit - headroom, 0.5 * command_limit)
+
+
+def team_config(
+    s: Scenario,
+    robot: robots.RobotModel | None = None,
+    command_limit: float = np.inf,
+    initial_error_bound: float | None = None,
+) -> TeamConfig:
+    """The onboard configuration a scenario gives every robot of model ``robot``.
+
+    A robot too big for a safe distance d (cylinder radius + its footprint +
+    2 cm > d) gets the larger value, so no hull ever reaches a cylinder or an
+    excluded robot, and its activation distance is raised by as much (the
+    scenario's margin between the two is kept). ``command_limit`` is the per-axis
+    planar command range; ``initial_error_bound`` ε̄ as derived for the run
+    (:func:`dftc_mujoco.premises.initial_error_bound`; default: the scenario's, 1 m
+    where it says "auto").
+    """
+    obs = s.obstacles
+    f = s.fdir
+    reach = robot.footprint_radius if robot is not None else 0.0
+    safe = np.array([max(o.safe_distance, o.radius + reach + CLEARANCE) for o in obs])
+    activation = np.array(
+        [
+            o.activation_distance + max(d - o.safe_distance, 0.0)
+            for o, d in zip(obs, safe, strict=True)
+        ]
+    )
+    excluded_safe = max(f.excluded_safe_distance, 2 * reach + CLEARANCE)
+    sup = s.supervisor
+    mate_safe = 0.0
+    if sup.avoid_teammates:
+        hull = reach if robot is not None else 0.1  # without a model: the built-in disk's
+        auto = 2 * hull + CLEARANCE  # two hulls apart by the clearance
+        mate_safe = auto if sup.teammate_distance == "auto" else float(sup.teammate_distance)
+    applied = input_limit(s, robot, command_limit)
+    seamless = seamless_margin(s.gains.theta, applied)
+    return TeamConfig(
+        graph=s.team.graph,
+        kc=s.gains.kc,
+        ko=s.gains.ko,
+        K=np.asarray(s.gains.K),
+        G=effective_G(s, robot),
+        theta=s.gains.theta,
+        dt=s.physics.control_period,
+        eta_bar=s.noise.eta_bar,
+        xi_bar=effective_xi_bar(s, robot),
+        formation=s.mission.formation,
+        obstacle_position=np.array([o.position for o in obs]).reshape(-1, 2),
+        obstacle_safe=safe,
+        obstacle_activation=activation,
+        detection_window=f.detection_window,
+        dt_d_max=f.dt_d_max,
+        isolation=f.isolation,
+        reference_fault=f.reference_fault or s.mission.centroid.speed,
+        initial_error_bound=(
+            initial_error_bound
+            if initial_error_bound is not None
+            else (1.0 if f.initial_error_bound == "auto" else float(f.initial_error_bound))
+        ),
+        replan_time=f.replan_time,
+        excluded_safe=excluded_safe,
+        excluded_activation=max(f.excluded_activation_distance, excluded_safe + seamless),
+        phi_low_pass=f.phi_low_pass,
+        command_limit=command_limit,
+        input_limit=applied,
+        fdir=f.enabled,
+        compensate=f.compensate,
+        drift_bound=robot.drift_bound if robot is not None else 0.0,
+        lag=drive_lag(s, robot),
+        accel=drive_accel(s, robot),
+        max_faults=max_faults(s),
+        teammate_safe=mate_safe,
+        teammate_activation=mate_safe + seamless if mate_safe > 0 else 0.0,
+        self_exclusion=f.self_exclusion,
+        postpone_on_contact=f.postpone_on_contact,
+        excluded_relay=f.excluded_relay,
+    )
+
+
+def max_faults(s: Scenario) -> int:
+    """The fault hypothesis: the scenario's ``fdir.max_faults``, or ⌊(N − 1)/2⌋ ("auto", at
+    least 1): more robots flagged at once than that is a systemic anomaly, not faults."""
+    if s.fdir.max_faults != "auto":
+        return int(s.fdir.max_faults)
+    return max(1, (s.team.graph.n - 1) // 2)
+
+
+def drive_accel(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """a_max each robot holds its nominal input's change to: the scenario's
+    ``fdir.drive_accel`` (0: none), or the robot file's calibrated one ("robot")."""
+    if s.fdir.drive_accel != "robot":
+        return float(s.fdir.drive_accel) or np.inf
+    return robot.accel if robot is not None else np.inf
+
+
+def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """τ of the drive lag the robots model: the scenario's ``fdir.drive_lag``, or the robot
+    file's calibrated one ("robot"; 0 for a robot without one)."""
+    if s.fdir.drive_lag != "robot":
+        return float(s.fdir.drive_lag)
+    return robot.lag if robot is not None else 0.0
+
+
+def block_names(s: Scenario, given: Mapping[str, Any] | None) -> dict[str, str]:
+    """The name of each block a run uses: the scenario's, or for a given instance its
+    built-in name (``"paper"``, ...) when it is one, else ``module:Class``."""
+    names = {k: getattr(s.onboard, k) for k in blocks_mod.BLOCKS}
+    for k, b in (given or {}).items():
+        cls = type(b)
+        builtin = [n for n in blocks_mod.BUILTIN[k] if blocks_mod.load_class(k, n) is cls]
+        names[k] = builtin[0] if builtin else f"{cls.__module__}:{cls.__qualname__}"
+    return names
+
+
+def make_blocks(
+    s: Scenario, given: Mapping[str, Block] | None = None, search: Sequence[Path] = ()
+) -> dict[str, Block]:
+    """Instances of the six blocks: ``given`` ones as they are, the rest from the scenario.
+
+    A block named ``module:Class`` is imported from sys.path, else from the
+    scenario file's folder, else from the folders ``search``.
+    """
+    given = dict(given or {})
+    unknown = sorted(set(given) - set(blocks_mod.BLOCKS))
+    if unknown:
+        raise ScenarioError(
+            f"blocks: unknown block {unknown[0]!r}; expected one of {', '.join(blocks_mod.BLOCKS)}"
+        )
+    out: dict[str, Block] = {}
+    for k in blocks_mod.BLOCKS:
+        if k in given:
+            out[k] = given[k]
+            continue
+        name = getattr(s.onboard, k)
+        out[k] = blocks_mod.create(
+            k,
+            name,
+            s.onboard.params.get(k, {}),
+            search=[d for d in (s.directory, *search) if d is not None],
+            where=f"{s.source}: onboard.{k}",
+        )
+    return out
+
+
+#: False skips the run-time premise checks (benchmarks/bench_premises.py measures their cost)
