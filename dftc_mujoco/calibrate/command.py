@@ -1,0 +1,112 @@
+"""``python -m dftc_mujoco.calibrate MODEL`` (and ``dftc-calibrate``): the command line."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+
+from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, ScenarioError
+from .compensation import acceleration, acceleration_report, compensation, compensation_report
+from .drift import REPLAN_WINDOW, drift
+from .files import check_writable, write
+from .mismatch import detectability, measure, report
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    from .. import cli
+    from ..run import parse_overrides
+    from ..sim import robots
+
+    p = cli.parser(
+        "dftc_mujoco.calibrate", "dftc-calibrate", "Measure a robot model's mismatch from ẋ = u."
+    )
+    p.add_argument(
+        "model",
+        help=f"a built-in model ({', '.join(robots.available())}), a robot file "
+        "(NAME.robot.toml) or an MJCF path",
+    )
+    p.add_argument(
+        "--write",
+        action="store_true",
+        help="store the results in the robot file's [calibration] table",
+    )
+    p.add_argument(
+        "--scenario",
+        default="paper_case",
+        help="the mission for the detectability warning and the drift (default paper_case)",
+    )
+    cli.add_set_option(p, "that scenario (as with run)")
+    p.add_argument(
+        "--runs", type=int, default=3, help="fault-free runs of the scenario for the drift"
+    )
+    args = p.parse_args(argv)
+    try:
+        overrides = parse_overrides(args.overrides)  # bad input fails before measuring
+        from ..scenario import load_scenario
+
+        load_scenario(args.scenario, overrides)
+        path = robots.resolve(args.model, where="MODEL") if args.write else None
+        if path is not None:
+            check_writable(path)
+        cal = measure(args.model)
+        print(report(cal))
+        line, warn = detectability(cal, args.scenario, args.model, overrides)
+        print(f"WARNING: {line}" if warn else line)
+        if cal.lag > 0:  # the missions below run the drive model the robot will run
+            overrides.setdefault("fdir.drive_lag", cal.lag)
+        loop_results = compensation(args.model, args.scenario, overrides=overrides, lag=cal.lag)
+        line, warn = compensation_report(loop_results)
+        print(f"WARNING: {line}" if warn else line)
+        if loop_results[0].rings and "gains.G" not in overrides:
+            overrides["gains.G"] = loop_results[-1].G
+        overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
+        cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
+        jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag)
+        line, warn = acceleration_report(jumps)
+        print(f"WARNING: {line}" if warn else line)
+        if not jumps[-1][1].runs_away:
+            cal = dataclasses.replace(cal, accel=jumps[-1][0])
+        if path is not None:  # the drift runs then see the robot's new mismatch
+            write(path, cal)
+        try:
+            d = drift(args.model, args.scenario, overrides, max(1, args.runs))
+        except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is
+            d = None
+            first = str(exc).splitlines()[0]
+            print(
+                f"WARNING: the drift was not measured: {args.scenario} cannot run with this "
+                f"robot ({first}); give the scenario keys it needs with --set"
+            )
+        if d is not None:
+            print(
+                f"drift in {d.scenario} ({d.runs} fault-free runs, noise at its bounds, "
+                f"{', '.join(f'{k} = {v}' for k, v in overrides.items()) or 'as it is'}): "
+                f"per period up to {d.period_max:.3g} m/s; split for xi_bar = {d.xi_bar:g} m/s, "
+                f"a bounded offset of {d.drift_bound * 1000:.2f} mm from {d.settle:g} s on "
+                f"({d.startup * 1000:.2f} mm with the start-up)"
+            )
+            if d.replan is not None:
+                print(
+                    f"re-plan transient: {d.excluded} exclusions in {d.replan_runs} runs with a "
+                    f"stop; the healthy robots' offset within {REPLAN_WINDOW:g} s of each "
+                    f"exclusion reached {d.replan * 1000:.2f} mm (avoidance switches are in "
+                    "every run above)"
+                )
+            else:
+                print(
+                    "WARNING: re-plan transient not measured: no exclusion happened in the "
+                    "runs with a stop"
+                )
+        cal = dataclasses.replace(cal, drift=d)
+        if path is not None:
+            write(path, cal)
+            robots.load(path)  # it must still load
+            print(f"written to {path}")
+    except ScenarioError as exc:
+        cli.print_error(exc)
+        return EXIT_INPUT
+    except OSError as exc:
+        print(f"error: cannot write the calibration: {exc}", file=sys.stderr)
+        return EXIT_OUTPUT
+    return EXIT_OK
