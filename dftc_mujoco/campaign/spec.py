@@ -42,7 +42,7 @@ import numpy as np
 
 from .. import scenario as scenario_mod
 from ..errors import ScenarioError
-from ..scenario import _describe, _Table
+from ..tomlcheck import Table, describe, read_toml
 
 FAULT_KINDS = ("stop", "bias", "none", "two_stops")
 FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
@@ -68,8 +68,8 @@ def load(path: str | Path) -> Spec:
     path = Path(path)
     if not path.is_file():
         raise ScenarioError(f"{path}: no such campaign spec")
-    data = scenario_mod._read(path)  # not TOML, not UTF-8, unreadable: one line
-    top = _Table(str(path), data, "")
+    data = read_toml(path)  # not TOML, not UTF-8, unreadable: one line
+    top = Table(str(path), data, "")
     name = top.string("name")
     problem = scenario_mod.name_problem(name)
     if problem:
@@ -79,14 +79,14 @@ def load(path: str | Path) -> Spec:
     candidate = path.parent / base_name
     base_path = candidate if candidate.suffix == ".toml" and candidate.is_file() else None
     base_file = scenario_mod.resolve(base_path or base_name)
-    base = scenario_mod._read(base_file)  # not TOML, not UTF-8, unreadable: one line
+    base = read_toml(base_file)  # not TOML, not UTF-8, unreadable: one line
     # the base scenario must be valid on its own: its errors name its file, not a run
     scenario_mod.from_dict(copy.deepcopy(base), source=f"{base_file} (base scenario of {path})")
     runs = top.integer("runs", low=1)
     seed = top.integer("seed", 0, low=0)
     overrides = top.raw("set", {})
     if not isinstance(overrides, dict):
-        top.fail("set", f"expected a table of scenario keys, got {_describe(overrides)}")
+        top.fail("set", f"expected a table of scenario keys, got {describe(overrides)}")
     vary = _vary(top.table("vary", {}))
     top.finish()
     _check_faulty_robots(path, vary, base)
@@ -132,7 +132,7 @@ def _check_choices(spec: Spec) -> None:
             scenario_mod.from_dict(d, source=label)
 
 
-def _vary(t: _Table) -> dict[str, Any]:
+def _vary(t: Table) -> dict[str, Any]:
     v: dict[str, Any] = {"seed": t.boolean("seed", True)}
     v["design"] = t.string("design", "random", choices=("random", "grid"))
     dotted: dict[str, list[Any]] = {}
@@ -142,7 +142,7 @@ def _vary(t: _Table) -> dict[str, Any]:
             if not isinstance(choices, list) or not choices:
                 t.fail(
                     f'"{key}"',
-                    f"expected a non-empty list of choices, got {_describe(choices)}",
+                    f"expected a non-empty list of choices, got {describe(choices)}",
                 )
             dotted[key] = choices
     for key, allowed in (("fault_kind", FAULT_KINDS), ("graph_family", FAMILIES)):
@@ -152,7 +152,7 @@ def _vary(t: _Table) -> dict[str, Any]:
     if robot != "any" and not (
         isinstance(robot, list) and robot and all(isinstance(r, int) and r >= 1 for r in robot)
     ):
-        t.fail("faulty_robot", f'expected "any" or a list of robot numbers, got {_describe(robot)}')
+        t.fail("faulty_robot", f'expected "any" or a list of robot numbers, got {describe(robot)}')
     v["faulty_robot"] = robot
     for key in ("fault_time", "bias_magnitude", "eta_bar", "xi_bar"):
         if key in t.data:
@@ -167,7 +167,7 @@ def _vary(t: _Table) -> dict[str, Any]:
             or not ns
             or any(not isinstance(n, int) or isinstance(n, bool) or n < 3 for n in ns)
         ):
-            t.fail("robots", f"expected a list of team sizes >= 3, got {_describe(ns)}")
+            t.fail("robots", f"expected a list of team sizes >= 3, got {describe(ns)}")
         v["robots"] = ns
     g = t.table("graph", {})
     v["graph"] = {
@@ -182,11 +182,11 @@ def _vary(t: _Table) -> dict[str, Any]:
     return v
 
 
-def _choices(t: _Table, key: str, allowed: tuple[str, ...]) -> list[str]:
+def _choices(t: Table, key: str, allowed: tuple[str, ...]) -> list[str]:
     """A non-empty list whose items are all in ``allowed``."""
     value = t.raw(key)
     if not isinstance(value, list) or not value or any(v not in allowed for v in value):
-        t.fail(key, f"expected a list of {', '.join(allowed)}, got {_describe(value)}")
+        t.fail(key, f"expected a list of {', '.join(allowed)}, got {describe(value)}")
     return value
 
 

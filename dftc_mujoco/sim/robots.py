@@ -184,7 +184,7 @@ def load(path: Path) -> RobotModel:
 
 
 def _load_robot_file(path: Path) -> RobotModel:
-    from ..scenario import _Doc, _Table
+    from ..tomlcheck import Doc, Table
 
     try:
         with open(path, "rb") as fh:
@@ -195,8 +195,8 @@ def _load_robot_file(path: Path) -> RobotModel:
         raise ScenarioError(f"{path}: not valid TOML: the file is not UTF-8 text") from None
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
-    doc = _Doc(str(path), data)
-    t = _Table(str(path), data, "", doc)
+    doc = Doc(str(path), data)
+    t = Table(str(path), data, "", doc)
     mjcf_name = t.string("mjcf")
     base = t.string("base")
     cp = t.array("control_point", (2,), default=[0.0, 0.0])

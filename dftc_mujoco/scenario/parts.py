@@ -1,0 +1,194 @@
+"""The parts of a scenario: one frozen dataclass per table of the file (the mission's own types
+live in :mod:`dftc_mujoco.mission`)."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..graph import Graph
+from ..tomlcheck import _ro
+
+
+class _ReadOnlyMap(Mapping[str, Any]):
+    """A read-only (and picklable) mapping."""
+
+    __slots__ = ("_data",)
+
+    def __init__(self, data: Mapping[str, Any] | None = None):
+        self._data = dict(data or {})
+
+    def __getitem__(self, key: str) -> Any:
+        return self._data[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return repr(self._data)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_ReadOnlyMap, (self._data,))
+
+    def __hash__(self) -> int:  # equal mappings have equal keys (values may be lists)
+        return hash(frozenset(self._data))
+
+
+@dataclass(frozen=True)
+class Physics:
+    """Integration settings: MuJoCo timestep, control period and log rate."""
+
+    timestep: float = 0.002
+    control_period: float = 0.01
+    log_rate: float = 50.0
+    robot_contacts: bool = True
+    # rate of the N × N fields (estimates, residuals, thresholds) [Hz], or "auto": the
+    # log rate while they fit in MATRIX_LOG_BUDGET bytes, less for large teams
+    matrix_log_rate: float | str = "auto"
+
+    @property
+    def substeps(self) -> int:
+        """MuJoCo steps per control period."""
+        return round(self.control_period / self.timestep)
+
+
+@dataclass(frozen=True, eq=False)
+class Team:
+    """The robots, their model, initial positions and communication graph."""
+
+    robots: int
+    robot_model: str
+    initial_positions: np.ndarray  # (N, 2)
+    graph: Graph
+    graph_family: str = "explicit"  # or ring_chords, random, knn when generated
+
+
+@dataclass(frozen=True, eq=False)
+class Gains:
+    """Controller, observer, fault-estimator and avoidance gains (eqs. 15, 19, 29, 30, 18)."""
+
+    kc: float
+    ko: float
+    K: np.ndarray  # (2, 2), symmetric positive definite
+    G: np.ndarray | None  # (2, 2), symmetric positive definite; None ("auto"): the robot's
+    theta: float
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Bounds of measurement noise (eq. 4) and disturbance (eq. 2)."""
+
+    eta_bar: float
+    xi_bar: float | None  # None: the robot model's measured mismatch
+    xi_time_constant: float = 0.5
+    at_bound: bool = False  # draw η and ξ with norms exactly at η̄ and ξ̄
+
+
+@dataclass(frozen=True, eq=False)
+class Obstacle:
+    """A vertical cylinder; ``safe_distance`` is d of eq. 17 (robot centre to cylinder axis)."""
+
+    position: np.ndarray  # (2,)
+    radius: float
+    safe_distance: float
+    activation_distance: float
+    height: float = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class Fault:
+    """An actuator fault on ``robot`` (0-based) starting at ``t``.
+
+    ``value`` and ``time_constant`` describe a bias; a stop fault keeps them at
+    zero (a file may give them for a stop fault only as zeros).
+    """
+
+    robot: int
+    kind: str  # "bias" or "stop"
+    t: float
+    value: np.ndarray = field(default_factory=lambda: _ro([0.0, 0.0]))
+    time_constant: float = 0.0
+
+
+@dataclass(frozen=True)
+class Fdir:
+    """Fault detection, isolation and recovery settings (eqs. 39-43).
+
+    ``enabled = false`` runs the nominal DFTC only (no compensation, no
+    decisions), to compare against.
+    """
+
+    detection_window: float = 0.2
+    dt_d_max: float | str = 5.0  # Δt_d,max [s], or "auto": from the analysis (eq. 46)
+    # ε̄ [m], or "auto": derived from the start positions and the planned slots (premises.py)
+    initial_error_bound: float | str = "auto"
+    replan_time: float = 4.0
+    excluded_safe_distance: float = 0.35
+    excluded_activation_distance: float = 0.45
+    phi_low_pass: float = 0.0
+    enabled: bool = True
+    compensate: bool = True  # false: φ̂ is estimated and logged but not applied
+    isolation: str = "pairwise"  # "exclusive": eq. 39's 2nd clause now; "exclusive_history": ever
+    reference_fault: float = 0.0  # [m/s] the fault Δt_d,max = "auto" is sized for (0: path speed)
+    # the input that enters y_m, Δu and the fault estimator: "applied" (the nominal input
+    # after the robot's own command limits, Remark 4.1) or "nominal" (as computed, eq. 8)
+    input: str = "applied"
+    # τ [s] of the first-order drive lag each robot models (onboard/applied.py), or "robot":
+    # the robot file's calibrated [calibration] lag (0 when it has none: ẋ = u)
+    drive_lag: float | str = "robot"
+    # a_max [m/s²] each robot holds its nominal input's change to (onboard/applied.py), or
+    # "robot": the robot file's calibrated [calibration] accel (none when it has none); 0: none
+    drive_accel: float | str = "robot"
+    # how many robots may be faulty at once, or "auto": ⌊(N − 1)/2⌋ (onboard/recovery.py)
+    max_faults: int | str = "auto"
+    self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
+    postpone_on_contact: bool = True  # a bumper contact postpones the exclusion instant t_r
+    excluded_relay: bool = False  # an excluded robot keeps relaying its neighbours' messages
+
+
+@dataclass(frozen=True)
+class Supervision:
+    """The supervisor's reactive behaviours beside the cylinders (the ``[supervisor]`` table).
+
+    ``avoid_teammates``: each robot avoids the teammates its range sensor sees, in the null
+    space like an obstacle (eqs. 17-18), so the residuals are unaffected; false keeps the
+    paper's exact behaviour. ``teammate_distance``: the safe distance between two robots'
+    control points [m], or "auto": twice the robot's footprint plus 2 cm.
+    """
+
+    avoid_teammates: bool = True
+    teammate_distance: float | str = "auto"
+
+
+@dataclass(frozen=True)
+class Onboard:
+    """The onboard blocks of the paper's Fig. 1 (the ``[onboard]`` table).
+
+    Each block is ``"paper"`` (the built-in implementation) or an import path
+    ``"module:Class"`` (see :mod:`dftc_mujoco.blocks`). ``params`` maps a block
+    name to the keyword arguments its class is created with
+    (``[onboard.params.<block>]``); both levels are read-only.
+    """
+
+    observer: str = "paper"
+    controller: str = "paper"
+    supervisor: str = "paper"
+    fault_estimator: str = "paper"
+    thresholds: str = "paper"
+    decision: str = "paper"
+    params: Mapping[str, Mapping[str, Any]] = field(default_factory=_ReadOnlyMap)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.params, Mapping):  # anything else is reported by validation
+            frozen = {
+                block: _ReadOnlyMap(copy.deepcopy(dict(kw))) if isinstance(kw, Mapping) else kw
+                for block, kw in self.params.items()
+            }
+            object.__setattr__(self, "params", _ReadOnlyMap(frozen))

@@ -1,0 +1,569 @@
+"""Reading a scenario document: one reader per table, each checking its keys (types, ranges,
+what they must agree with) into the scenario's parts."""
+
+from __future__ import annotations
+
+import datetime
+import keyword
+import math
+import re
+from typing import Any, cast
+
+import numpy as np
+
+from ..blocks import BLOCKS, check_name
+from ..graph import Graph
+from ..mission import CentroidPath, Formation, Mission, formation_offsets
+from ..tomlcheck import N_DIM, Doc, Table, describe
+from .parts import (
+    Fault,
+    Fdir,
+    Gains,
+    Noise,
+    Obstacle,
+    Onboard,
+    Physics,
+    Supervision,
+    Team,
+    _ro,
+)
+
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name an output folder (it becomes ``renders/<name>``), or None."""
+    if NAME_PATTERN.match(name) and ".." not in name:
+        return None
+    return (
+        "expected a plain name (letters, digits, '_', '-', '.'; no path separators or '..', "
+        f"at most 100 characters): it names the output folder renders/<name>, got {name!r}"
+    )
+
+
+def document(doc: Doc, data: Any) -> dict[str, Any] | None:
+    """Every table of a scenario document read and checked: the Scenario's fields, or None
+    when a problem was recorded (``doc`` holds them)."""
+    top = Table(doc.file, data, "", doc)
+    name = top.string("name")
+    problem = name_problem(name) if top.ok("name") else None
+    if problem:
+        top.report("name", problem)
+    description = top.string("description", "")
+    duration = top.number("duration", low=0.0)
+    seed = top.integer("seed", 0, low=0)
+    known_duration = duration if top.ok("duration") else None
+
+    physics = doc.guard(lambda: _physics(top.table("physics", {})))
+    mission = doc.guard(lambda: _mission(top.table("mission"), known_duration))
+    team = doc.guard(lambda: _team(top.table("team"), mission, seed))
+    gains = doc.guard(lambda: _gains(top.table("gains")))
+    noise = doc.guard(lambda: _noise(top.table("noise")))
+    obstacles = doc.guard(lambda: tuple(doc.guard(_obstacle, t) for t in top.tables("obstacles")))
+    robots = team.robots if team is not None and doc.ok("team.robots") else None
+    faults = doc.guard(
+        lambda: tuple(doc.guard(_fault, t, robots, known_duration) for t in top.tables("faults"))
+    )
+    fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
+    onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
+    supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
+    top.finish()
+    # Forward Euler on d/dt ŷ = k_o r is stable when every eigenvalue z of
+    # k_o (L + Πₖ) satisfies |1 − dt z| < 1; Gershgorin's discs guarantee it
+    # when k_o dt (2 d_max + 1) < 2.
+    if (
+        gains is not None
+        and physics is not None
+        and team is not None
+        and team.graph is not None
+        and doc.ok("gains.ko", "physics.control_period")
+    ):
+        step_gain = gains.ko * physics.control_period * (2 * team.graph.in_degree().max() + 1)
+        if step_gain >= 2:
+            doc.record(
+                "gains.ko",
+                "the observer update is unstable at this control period: "
+                f"ko * control_period * (2 * max in-degree + 1) = {step_gain:g}, expected < 2; "
+                "lower ko or physics.control_period",
+            )
+    if doc.problems:
+        return None
+    # every reader returned its value where it recorded no problem
+    assert physics is not None and team is not None and gains is not None
+    assert noise is not None and mission is not None and fdir is not None
+    assert onboard is not None and supervision is not None
+    assert obstacles is not None and faults is not None
+    return {
+        "name": name,
+        "description": description,
+        "duration": duration,
+        "seed": seed,
+        "physics": physics,
+        "team": team,
+        "gains": gains,
+        "noise": noise,
+        "mission": mission,
+        "obstacles": cast(tuple[Obstacle, ...], obstacles),
+        "faults": cast(tuple[Fault, ...], faults),
+        "fdir": fdir,
+        "source": doc.file,
+        "onboard": onboard,
+        "supervisor": supervision,
+    }
+
+
+def _supervision(t: Table) -> Supervision:
+    distance = _number_or_word(t, "teammate_distance", "auto", "a distance in m")
+    s = Supervision(t.boolean("avoid_teammates", True), distance)
+    t.finish()
+    return s
+
+
+def _physics(t: Table) -> Physics:
+    timestep = t.number("timestep", 0.002, low=0.0, high=0.1)
+    period = t.number("control_period", 0.01, low=0.0, high=1.0)
+    ratio = period / timestep
+    if t.ok("timestep", "control_period") and (
+        ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6
+    ):
+        t.report(
+            "control_period",
+            f"expected a whole multiple of timestep = {timestep:g}, got {period:g}",
+        )
+    log_rate = t.number("log_rate", 50.0, low=0.0)
+    if t.ok("log_rate", "control_period") and log_rate > 1.0 / period + 1e-9:
+        t.report(
+            "log_rate", f"expected at most the control rate {1.0 / period:g} Hz, got {log_rate:g}"
+        )
+    contacts = t.boolean("robot_contacts", True)
+    raw = t.data.get("matrix_log_rate", "auto")
+    matrix_rate: float | str = "auto"
+    if isinstance(raw, str):
+        t.raw("matrix_log_rate", "auto")
+        if raw != "auto":
+            t.report("matrix_log_rate", f'expected a rate in Hz or "auto", got {raw!r}')
+    else:
+        matrix_rate = t.number("matrix_log_rate", 50.0, low=0.0)
+        if t.ok("matrix_log_rate", "log_rate") and matrix_rate > log_rate + 1e-9:
+            t.report(
+                "matrix_log_rate",
+                f"expected at most log_rate = {log_rate:g} Hz, got {matrix_rate:g}",
+            )
+    t.finish()
+    return Physics(timestep, period, log_rate, contacts, matrix_rate)
+
+
+_FAMILIES = ("explicit", "ring_chords", "random", "knn", "line")
+
+
+def _team(t: Table, mission: Mission | None, seed: int) -> Team:
+    """The team; its graph is None when a problem (recorded) left it unknown."""
+    assert t.doc is not None
+    n = t.integer("robots", low=2)
+    known_n = n if t.ok("robots") else None
+    model = t.string("robot_model", "disk")
+    x0 = t.doc.guard(_initial_positions, t, known_n, mission, seed)
+    graph, family = t.doc.guard(_graph, t, known_n, x0, seed) or (None, None)
+    if "graph_family" in t.data:
+        given = t.string("graph_family", choices=_FAMILIES)
+        if family not in (None, "explicit") and t.ok("graph_family") and given != family:
+            t.report(
+                "graph_family",
+                f"expected {family!r} (the family of team.graph) or no graph_family, got {given!r}",
+            )
+        family = given
+    t.finish()
+    if x0 is None:
+        x0 = _ro(np.zeros((max(n, 1), N_DIM)))
+    return Team(n, model, x0, graph, family or "explicit")  # type: ignore[arg-type]
+
+
+def _initial_positions(
+    t: Table, n: int | None, mission: Mission | None, seed: int
+) -> np.ndarray | None:
+    """A list of N [x, y], or a generated layout: {layout = "formation", jitter = m} (the
+    planned slots at t = 0), {layout = "random", spread = m, spacing = m} (uniform in a square
+    of half-width ``spread`` around the path's start, points ``spacing`` apart) or
+    {layout = "circle", radius = m} (on a circle around the start, in a shuffled order;
+    radius 0: the formation's)."""
+    assert t.doc is not None
+    raw = t.raw("initial_positions")
+    if not isinstance(raw, dict):
+        pairs = f"a list of {n} [x, y] pairs (team.robots = {n})" if n else "a list of [x, y] pairs"
+        x0 = t.array(
+            "initial_positions",
+            (n, N_DIM),
+            what=f'{pairs}, or a table {{layout = "formation" | "random" | "circle", ...}}',
+        )
+        return x0 if t.ok("initial_positions") else None
+    lay = t.table("initial_positions")
+    layout = lay.string("layout", choices=("formation", "random", "circle"))
+    jitter = lay.number("jitter", 0.0, low=0.0, strict_low=False)
+    spread = lay.number("spread", 5.0, low=0.0)  # random: half-width of the square [m]
+    spacing = lay.number("spacing", 0.5, low=0.0, strict_low=False)  # random: least gap [m]
+    radius = lay.number("radius", 0.0, low=0.0, strict_low=False)  # circle: 0 = formation's
+    lay.finish()
+    if (
+        n is None
+        or mission is None
+        or not lay.ok("layout", "jitter", "spread", "spacing", "radius")
+        or not t.doc.ok("mission.centroid.waypoints", "mission.formation")
+    ):
+        return None
+    start = np.asarray(mission.centroid.waypoints[0])
+    rng = np.random.default_rng([seed, 7])
+    if layout == "random":  # uniform in a square around the path's start, points apart
+        pts: list[np.ndarray] = []
+        for _ in range(2000 * n):
+            p = start + rng.uniform(-spread, spread, 2)
+            if all(np.hypot(*(p - q)) >= spacing for q in pts):
+                pts.append(p)
+                if len(pts) == n:
+                    return _ro(np.array(pts))
+        t.report(
+            "initial_positions",
+            f"cannot place {n} robots {spacing:g} m apart within ±{spread:g} m: raise spread "
+            "or lower spacing",
+        )
+        return None
+    offsets = formation_offsets(mission.formation, n)
+    if layout == "circle":  # on a circle around the start, in a shuffled order: each robot
+        # starts up to a diameter away from its own slot
+        r = radius or float(np.linalg.norm(offsets, axis=1).max())
+        ang = 2 * np.pi * rng.permutation(n) / n
+        return _ro(start + r * np.c_[np.cos(ang), np.sin(ang)])
+    pts_ = start + offsets + rng.uniform(-jitter, jitter, (n, 2))
+    return _ro(pts_)
+
+
+def _graph(
+    t: Table, n: int | None, x0: np.ndarray | None, seed: int
+) -> tuple[Graph | None, str | None]:
+    """The team's graph and its family ("explicit" for an edge list)."""
+    raw = t.raw("graph")
+    if isinstance(raw, dict):
+        graph, family = _generated_graph(t.table("graph"), n, x0, seed)
+    else:
+        graph, family = _edge_list(t, raw, n), "explicit"
+    if graph is not None and not graph.is_strongly_connected():
+        t.report(
+            "graph",
+            "expected a strongly connected graph (a directed path from every "
+            "robot to every other); the observer cannot converge otherwise",
+        )
+    return graph, family
+
+
+def _generated_graph(
+    g: Table, n: int | None, x0: np.ndarray | None, seed: int
+) -> tuple[Graph | None, str | None]:
+    """{family = "ring_chords", chords = [...]}, {family = "random", in_degree = d},
+    {family = "knn", k = k} or {family = "line"} (i ⇄ i + 1: every inner robot a cut)."""
+    from ..graph import k_nearest, line_with_back_links, random_strongly_connected, ring_with_chords
+
+    family = g.string("family", choices=("ring_chords", "random", "knn", "line"))
+    if not g.ok("family"):
+        return None, None
+    graph: Graph | None = None
+    if family == "ring_chords":
+        chords = g.raw("chords", [])
+        top = n - 1 if n is not None else math.inf
+        if not isinstance(chords, list) or not all(
+            isinstance(c, int) and not isinstance(c, bool) and 1 <= c <= top for c in chords
+        ):
+            high = n - 1 if n is not None else "N - 1"
+            g.report("chords", f"expected a list of integers 1..{high}, got {describe(chords)}")
+        elif n is not None:
+            graph = ring_with_chords(n, tuple(chords))
+    elif family == "random":
+        d = g.integer("in_degree", low=1)
+        if n is not None and g.ok("in_degree"):
+            graph = random_strongly_connected(n, d, np.random.default_rng([seed, 11]))
+    elif family == "line":
+        if n is not None:
+            graph = line_with_back_links(n)
+    else:
+        k = g.integer("k", low=1)
+        if x0 is not None and g.ok("k"):
+            graph = k_nearest(np.asarray(x0), k)
+    g.finish()
+    return graph, family
+
+
+def _edge_list(t: Table, raw_edges: Any, n: int | None) -> Graph | None:
+    if not isinstance(raw_edges, list) or not raw_edges:
+        t.fail(
+            "graph",
+            f"expected a non-empty list of [from, to] robot pairs or a table "
+            f"{{family = ...}}, got {describe(raw_edges)}",
+        )
+    edges: list[tuple[int, int]] = []
+    seen: set[tuple[int, int]] = set()
+    bad = False
+    for k, e in enumerate(raw_edges):
+        key = f"graph[{k + 1}]"
+        if (
+            not isinstance(e, list)
+            or len(e) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in e)
+        ):
+            t.report(key, f"expected a [from, to] pair of robot numbers, got {describe(e)}")
+            bad = True
+            continue
+        a, b = e
+        out = [v for v in (a, b) if not 1 <= v <= (n if n is not None else math.inf)]
+        if out:
+            t.report(key, f"robot {out[0]} out of range: robots are numbered 1..{n}")
+        elif a == b:
+            t.report(key, f"edge [{a}, {b}] goes from a robot to itself")
+        elif (a - 1, b - 1) in seen:
+            t.report(key, f"edge [{a}, {b}] appears twice")
+        else:
+            seen.add((a - 1, b - 1))
+            edges.append((a - 1, b - 1))
+            continue
+        bad = True
+    if bad or n is None:
+        return None
+    return Graph(n, tuple(edges))
+
+
+def _gains(t: Table) -> Gains:
+    g = Gains(
+        kc=t.number("kc", low=0.0),
+        ko=t.number("ko", low=0.0),
+        K=t.gain_matrix("K"),
+        G=None if t.raw("G", None) == "auto" else t.gain_matrix("G", auto=True),
+        theta=t.number("theta", 2.0, low=0.0),
+    )
+    t.finish()
+    return g
+
+
+def _noise(t: Table) -> Noise:
+    n = Noise(
+        eta_bar=t.number("eta_bar", low=0.0, strict_low=False),
+        xi_bar=None
+        if t.raw("xi_bar", None) is None
+        else t.number("xi_bar", low=0.0, strict_low=False),
+        xi_time_constant=t.number("xi_time_constant", 0.5, low=0.0),
+        at_bound=t.boolean("at_bound", False),
+    )
+    t.finish()
+    return n
+
+
+def _centroid(t: Table) -> CentroidPath:
+    c = t.table("centroid")
+    path = CentroidPath(
+        waypoints=c.array("waypoints", (None, N_DIM), what="a list of [x, y] waypoints"),
+        speed=c.number("speed", low=0.0),
+        corner_radius=c.number("corner_radius", 0.3, low=0.0, strict_low=False),
+        ramp_time=c.number("ramp_time", 2.0, low=0.0),
+    )
+    c.finish()
+    return path
+
+
+def _formation(t: Table) -> Formation:
+    f = t.table("formation")
+    formation = Formation(
+        shape=f.string("shape", "polygon", choices=("polygon", "grid", "line")),
+        side=f.number("side", low=0.0),
+        rotation=f.number("rotation", 0.0),
+    )
+    f.finish()
+    return formation
+
+
+def _mission(t: Table, duration: float | None) -> Mission:
+    assert t.doc is not None
+    path = t.doc.guard(_centroid, t)
+    formation = t.doc.guard(_formation, t)
+    default = min(5.0, duration / 2) if duration is not None else 5.0
+    transient = t.number("transient", default, low=0.0, strict_low=False)
+    if duration is not None and t.ok("transient") and transient >= duration:
+        t.report("transient", f"expected less than duration = {duration:g}, got {transient:g}")
+    t.finish()
+    return Mission(path, formation, transient)  # type: ignore[arg-type]
+
+
+def _obstacle(t: Table) -> Obstacle:
+    pos = t.array("position", (N_DIM,), what="an [x, y] pair")
+    radius = t.number("radius", low=0.0)
+    safe = t.number("safe_distance", low=0.0)
+    if t.ok("radius", "safe_distance") and safe <= radius:
+        t.report(
+            "safe_distance",
+            f"expected more than radius = {radius:g} (it is measured from "
+            f"the cylinder's axis to the robot's centre), got {safe:g}",
+        )
+    act = t.number("activation_distance", safe + 0.1, low=0.0)
+    if t.ok("safe_distance", "activation_distance") and act < safe:
+        t.report("activation_distance", f"expected at least safe_distance = {safe:g}, got {act:g}")
+    height = t.number("height", 0.3, low=0.0)
+    t.finish()
+    return Obstacle(pos, radius, safe, act, height)
+
+
+def _fault(t: Table, n: int | None, duration: float | None) -> Fault:
+    robot = t.integer("robot")
+    if n is not None and t.ok("robot") and not 1 <= robot <= n:
+        t.report("robot", f"robot {robot} out of range: robots are numbered 1..{n}")
+    kind = t.string("kind", choices=("bias", "stop"))
+    at = t.number("t", low=0.0, strict_low=False)
+    if duration is not None and t.ok("t") and at >= duration:
+        t.report("t", f"fault at {at:g} s is after the end of the run (duration = {duration:g} s)")
+    if not t.ok("kind"):
+        t.used.update(t.data)  # which keys belong here depends on the kind
+        return Fault(robot - 1, kind, at)
+    if kind == "bias":
+        value = t.array("value", (N_DIM,), what="an [x, y] pair in m/s")
+        tau = t.number("time_constant", 0.0, low=0.0, strict_low=False)
+        fault = Fault(robot - 1, kind, at, value, tau)
+    else:  # a stop fault has no bias; zeros are accepted (Scenario.to_dict writes them)
+        value = t.array("value", (N_DIM,), [0.0, 0.0], what="an [x, y] pair")
+        if t.ok("value") and np.any(value != 0):
+            t.report(
+                "value", f"expected [0.0, 0.0] or no value for a stop fault, got {value.tolist()}"
+            )
+        tau = t.number("time_constant", 0.0, low=0.0, strict_low=False)
+        if t.ok("time_constant") and tau != 0:
+            t.report(
+                "time_constant", f"expected 0 or no time_constant for a stop fault, got {tau:g}"
+            )
+        fault = Fault(robot - 1, kind, at)
+    t.finish()
+    return fault
+
+
+def _fdir(t: Table) -> Fdir:
+    safe = t.number("excluded_safe_distance", 0.35, low=0.0)
+    f = Fdir(
+        detection_window=t.number("detection_window", 0.2, low=0.0, strict_low=False),
+        dt_d_max=_dt_d_max(t),
+        initial_error_bound=_initial_error_bound(t),
+        replan_time=t.number("replan_time", 4.0, low=0.0, strict_low=False),
+        excluded_safe_distance=safe,
+        excluded_activation_distance=t.number(
+            "excluded_activation_distance",
+            safe + 0.1,
+            low=safe if t.ok("excluded_safe_distance") else 0.0,
+            strict_low=False,
+        ),
+        phi_low_pass=t.number("phi_low_pass", 0.0, low=0.0, strict_low=False),
+        enabled=t.boolean("enabled", True),
+        compensate=t.boolean("compensate", True),
+        isolation=t.string(
+            "isolation", "pairwise", choices=("pairwise", "exclusive", "exclusive_history")
+        ),
+        reference_fault=t.number("reference_fault", 0.0, low=0.0, strict_low=False),
+        input=t.string("input", "applied", choices=("applied", "nominal")),
+        drive_lag=_drive_lag(t),
+        drive_accel=_number_or_word(
+            t, "drive_accel", "robot", "an acceleration in m/s²", strict_low=False
+        ),
+        max_faults=_max_faults(t),
+        self_exclusion=t.boolean("self_exclusion", False),
+        postpone_on_contact=t.boolean("postpone_on_contact", True),
+        excluded_relay=t.boolean("excluded_relay", False),
+    )
+    t.finish()
+    return f
+
+
+def _max_faults(t: Table) -> int | str:
+    """How many robots may be faulty at once: a whole number ≥ 1, or "auto"."""
+    raw = t.data.get("max_faults", "auto")
+    t.raw("max_faults", "auto")
+    if raw == "auto":
+        return "auto"
+    if isinstance(raw, bool) or not isinstance(raw, int) or raw < 1:
+        t.report("max_faults", f'expected a whole number of robots ≥ 1 or "auto", got {raw!r}')
+        return "auto"
+    return raw
+
+
+def _number_or_word(
+    t: Table,
+    name: str,
+    word: str,
+    what: str,
+    absent: float | None = None,
+    low: float = 0.0,
+    strict_low: bool = True,
+) -> float | str:
+    """Key ``name``: a number (at least ``low``), or the keyword ``word``; absent, ``absent``
+    (``word`` when None). A string other than ``word`` says it expected ``what``."""
+    raw = t.data.get(name, word if absent is None else absent)
+    if isinstance(raw, str):
+        t.raw(name, word)
+        if raw != word:
+            t.report(name, f'expected {what} or "{word}", got {raw!r}')
+        return word
+    return t.number(name, 0.0 if absent is None else absent, low=low, strict_low=strict_low)
+
+
+def _drive_lag(t: Table) -> float | str:
+    """τ of the modelled drive lag in seconds, or "robot" (the robot file's calibration)."""
+    return _number_or_word(t, "drive_lag", "robot", "a time constant in s", strict_low=False)
+
+
+def _initial_error_bound(t: Table) -> float | str:
+    """ε̄ in metres, or "auto" (derived per run from the start positions and the slots)."""
+    return _number_or_word(t, "initial_error_bound", "auto", "a distance in m", strict_low=False)
+
+
+def _dt_d_max(t: Table) -> float | str:
+    """Δt_d,max: seconds, or "auto" (computed per run from the graph and the rule)."""
+    return _number_or_word(t, "dt_d_max", "auto", "a number of seconds", absent=5.0)
+
+
+def _onboard(t: Table) -> Onboard:
+    assert t.doc is not None
+    chosen = {}
+    for block in BLOCKS:
+        name = t.raw(block, "paper")
+        problem = check_name(block, name)
+        if problem:
+            t.report(block, problem)
+            name = "paper"
+        chosen[block] = name
+    params = t.doc.guard(_onboard_params, t) if "params" in t.data else {}
+    t.used.add("params")
+    t.finish()
+    return Onboard(**chosen, params=params or {})
+
+
+def _onboard_params(t: Table) -> dict[str, dict[str, Any]]:
+    assert t.doc is not None
+    p = t.table("params")
+    out = {}
+    for block in p.data:
+        p.used.add(block)
+        if block not in BLOCKS:
+            p.report(block, f"unknown block (blocks: {', '.join(BLOCKS)})")
+            continue
+        kwargs = t.doc.guard(_keywords, p, block)
+        if kwargs is not None:
+            out[block] = kwargs
+    return out
+
+
+def _keywords(p: Table, block: str) -> dict[str, Any]:
+    k = p.table(block)
+    for name, value in k.data.items():
+        k.used.add(name)
+        if not name.isidentifier() or keyword.iskeyword(name):
+            k.report(name, f"expected a keyword argument name, got {name!r}")
+        elif not _is_toml_value(value):
+            k.report(name, f"expected a TOML value, got {type(value).__name__} {value!r}")
+    return dict(k.data)
+
+
+def _is_toml_value(v: Any) -> bool:
+    if isinstance(v, list):
+        return all(_is_toml_value(x) for x in v)
+    if isinstance(v, dict):
+        return all(isinstance(k, str) and _is_toml_value(x) for k, x in v.items())
+    return isinstance(v, str | int | float | bool | datetime.date | datetime.time)
