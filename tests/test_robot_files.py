@@ -21,7 +21,7 @@ import pytest
 from dftc_mujoco import assembly, calibrate, checks, loop, run, scenario
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.sim import faults as sim_faults
-from dftc_mujoco.sim import robots, scene
+from dftc_mujoco.sim import robots, scene, tree
 from dftc_mujoco.sim.plant import Plant
 
 DATA = Path(__file__).parent / "data" / "robots"
@@ -225,7 +225,7 @@ def _contacts_between_robots(sc: scene.Scene, data: mujoco.MjData) -> int:
     """Contacts MuJoCo finds between geoms of two different robots."""
     owner = np.full(sc.model.nbody, -1)
     for i, b in enumerate(sc.body):
-        owner[robots.subtree(sc.model, int(b))] = i
+        owner[tree.subtree(sc.model, int(b))] = i
     pairs = [
         (owner[sc.model.geom_bodyid[c.geom1]], owner[sc.model.geom_bodyid[c.geom2]])
         for c in data.contact[: data.ncon]

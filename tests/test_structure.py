@@ -126,3 +126,9 @@ def test_every_cited_note_is_in_the_repository():
         for group in re.findall(r"docs/notes\.md, ([0-9,\- ]+)", text):
             cited |= {int(x) for x in re.findall(r"\d+", group)}
     assert cited and cited <= have, sorted(cited - have)
+
+
+def test_no_module_is_beyond_what_a_reader_holds():
+    """No module of the package is over 700 lines (the scenario hub was 1,570)."""
+    sizes = {p: len(p.read_text(encoding="utf-8").splitlines()) for p in PACKAGE.rglob("*.py")}
+    assert max(sizes.values()) <= 700, sorted(sizes.items(), key=lambda kv: -kv[1])[:3]

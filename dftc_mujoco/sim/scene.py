@@ -30,15 +30,8 @@ import numpy as np
 
 from ..paths import MODELS
 from ..scenario import Obstacle, Scenario
-from .robots import (
-    CONTROL_SITE,
-    OPTION_NAMES,
-    RobotModel,
-    actuator_bodies,
-    option_value,
-    owners,
-    qpos_addresses,
-)
+from .robots import CONTROL_SITE, OPTION_NAMES, RobotModel, option_value
+from .tree import actuator_bodies, owners, qpos_addresses
 
 # Collision bits of the arena, above the 16 bits the robots' own models use
 FLOOR, OBSTACLE, HULL, ROBOT = 1 << 16, 1 << 17, 1 << 18, 1 << 19
