@@ -135,6 +135,7 @@ class Team:
         self._estimator_holds = "hold" in inspect.signature(self.estimator.step).parameters
         self._touch = np.zeros(n, bool)  # each robot's bumper, held HOLD_AFTER_CONTACT s
         self._untouched = np.full(n, np.inf)  # periods each robot's bumper has been off
+        self._hold_periods = HOLD_AFTER_CONTACT / config.dt
         # a lagged drive's velocity is the robot's: a jam stops it while the model runs on,
         # so a held robot re-reads v̂ from its own measurements over the last VELOCITY_WINDOW
         self._window = max(1, round(VELOCITY_WINDOW / config.dt))
@@ -246,7 +247,7 @@ class Team:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
             self._untouched += 1.0
             self._untouched[touching] = 0.0
-            np.less(self._untouched * self.config.dt, HOLD_AFTER_CONTACT, out=self._touch)
+            np.less(self._untouched, self._hold_periods, out=self._touch)
             if self._lag_a > 0.0:
                 slot = self._k % self._window
                 if self._k >= self._window and self._touch.any():
