@@ -6,7 +6,7 @@ Left: the first-flag delay of the stop faults of the campaigns ``scale_sweep`` a
 ``scale_sweep_block_row`` (run them first; their rows are read from
 ``./renders/campaigns/``), median and maximum per rule and N over the graph families.
 Right: the smallest constant fault the steady thresholds let a teammate detect, k_o·μ_ik
-(NOTES 8: the residual of a constant fault φ settles at φ/k_o), for the most sensitive
+(docs/notes.md, 8: the residual of a constant fault φ settles at φ/k_o), for the most sensitive
 teammate and for every teammate, on the campaign's ring + chord 2 graphs with its gains
 and the disk's noise bounds and drift offset.
 """
