@@ -40,8 +40,8 @@ def test_kappa_lambda_against_brute_force_sup(name):
 
 def test_paper_graph_values_match_notes():
     kappa, lam = decay.decay_bounds(PAPER, 6.0)
-    assert np.all((kappa >= 1.0) & (kappa <= 1.3))  # NOTES 6: κ ≈ 1.0-1.2
-    assert np.all((lam >= 0.5) & (lam <= 1.6))  # NOTES 6: λ ≈ 0.6-1.5
+    assert np.all((kappa >= 1.0) & (kappa <= 1.3))  # docs/notes.md, 6: κ ≈ 1.0-1.2
+    assert np.all((lam >= 0.5) & (lam <= 1.6))  # docs/notes.md, 6: λ ≈ 0.6-1.5
 
 
 def test_not_strongly_connected_gives_infinite_thresholds():
@@ -117,7 +117,7 @@ def test_team_excludes_a_stopped_robot_and_forms_a_triangle():
 
 
 def test_exclusion_cancelled_when_nobody_flags_at_t_r():
-    """NOTES 10: a fault that goes away before t_r must not cost the team a robot."""
+    """docs/notes.md, 10: a fault that goes away before t_r must not cost the team a robot."""
     team, x = _team(4, dt_d_max=3.0)
     x = _integrate(team, x, 1000)
     events = []

@@ -20,10 +20,10 @@ def test_laplacian_rows_sum_to_zero_and_rank():
 
 def test_strong_connectivity_with_and_without_robot_one():
     assert PAPER.is_strongly_connected()
-    assert PAPER.without(0).is_strongly_connected()  # NOTES 9: ring + chord 4 -> 2
+    assert PAPER.without(0).is_strongly_connected()  # docs/notes.md, 9: ring + chord 4 -> 2
     ring = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0)))
     assert ring.is_strongly_connected()
-    assert not ring.without(0).is_strongly_connected()  # NOTES 9: the ring breaks
+    assert not ring.without(0).is_strongly_connected()  # docs/notes.md, 9: the ring breaks
 
 
 def test_without_renumbers():

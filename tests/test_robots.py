@@ -158,7 +158,7 @@ def test_calibration_measures_the_mismatch_stored_with_the_model(name):
     assert model.xi_bar == pytest.approx(cal.recommended_xi_bar)
     assert cal.recommended_xi_bar >= max(calibrate.PAPER_XI_BAR, cal.smooth_max)
     if name in ("disk", "hexbot"):
-        assert cal.smooth_max < 0.003  # kv / m ≈ 100 1/s: a 10 ms lag (NOTES 14)
+        assert cal.smooth_max < 0.003  # kv / m ≈ 100 1/s: a 10 ms lag (docs/notes.md, 14)
 
 
 def test_calibrate_cli_writes_into_a_copy(tmp_path, capsys):

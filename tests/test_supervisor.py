@@ -69,7 +69,7 @@ def test_no_contact_between_teammates_in_paper_case(model):
 
 def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
     """Eq. 18 equals u_g,i at the switch only if the teammate is sensed from d + ‖u‖/θ on
-    (NOTES 12). A disk closing in on a standing teammate at its whole input range: with the
+    (docs/notes.md, 12). A disk closing in on a standing teammate at its whole input range: with the
     activation distance the run derives (``assembly.seamless_margin``) its command changes per
     period by no more than eq. 18's own deceleration θ‖u‖Δt (2.4 cm/s); with the former
     fixed 0.1 m margin it jumped by about 0.5 m/s."""

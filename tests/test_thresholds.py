@@ -62,7 +62,7 @@ CASES = [
     ("block_row", True),
     ("l1", False),
     ("l1", True),
-    ("drive", True),  # (without compensation ∫e winds up: ‖φ̂‖ <= Φ̄ fails, NOTES 3)
+    ("drive", True),  # (without compensation ∫e winds up: ‖φ̂‖ <= Φ̄ fails, docs/notes.md, 3)
 ]
 
 
