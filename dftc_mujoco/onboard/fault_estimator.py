@@ -51,31 +51,28 @@ def estimate_faults(
         p1 = g_inv[1, 0] * (e0 + k0) + g_inv[1, 1] * (e1 + k1)
         phi_hat[i, 0] = p0
         phi_hat[i, 1] = p1
-        if hold[i]:  # contact: φ̂ is held, nothing of it is integrated or applied
-            pass
-        elif alpha == 1.0:
-            applied[i, 0] = p0
-            applied[i, 1] = p1
-        else:
-            applied[i, 0] += alpha * (p0 - applied[i, 0])
-            applied[i, 1] += alpha * (p1 - applied[i, 1])
-        s0, s1 = (0.0, 0.0) if hold[i] else (dt * e0, dt * e1)
-        v0 = u[i, 0] - p0
-        v1 = u[i, 1] - p1
-        if hold[i]:
-            pass
-        elif max(abs(v0), abs(v1)) > limit - ANTI_WINDUP_BAND:  # anti-windup look-ahead
-            now = max(abs(v0) - limit, 0.0) + max(abs(v1) - limit, 0.0)
-            a0 = K[0, 0] * (int_e[i, 0] + s0) + K[0, 1] * (int_e[i, 1] + s1)
-            a1 = K[1, 0] * (int_e[i, 0] + s0) + K[1, 1] * (int_e[i, 1] + s1)
-            q0 = g_inv[0, 0] * (e0 + a0) + g_inv[0, 1] * (e1 + a1)
-            q1 = g_inv[1, 0] * (e0 + a0) + g_inv[1, 1] * (e1 + a1)
-            nxt = max(abs(u[i, 0] - q0) - limit, 0.0) + max(abs(u[i, 1] - q1) - limit, 0.0)
-            if nxt > now and nxt > 0:
-                s0 = 0.0
-                s1 = 0.0
-        int_e[i, 0] += s0
-        int_e[i, 1] += s1
+        if not hold[i]:  # under contact nothing of φ̂ is integrated or applied
+            if alpha == 1.0:
+                applied[i, 0] = p0
+                applied[i, 1] = p1
+            else:
+                applied[i, 0] += alpha * (p0 - applied[i, 0])
+                applied[i, 1] += alpha * (p1 - applied[i, 1])
+            s0, s1 = dt * e0, dt * e1
+            v0 = u[i, 0] - p0
+            v1 = u[i, 1] - p1
+            if max(abs(v0), abs(v1)) > limit - ANTI_WINDUP_BAND:  # anti-windup look-ahead
+                now = max(abs(v0) - limit, 0.0) + max(abs(v1) - limit, 0.0)
+                a0 = K[0, 0] * (int_e[i, 0] + s0) + K[0, 1] * (int_e[i, 1] + s1)
+                a1 = K[1, 0] * (int_e[i, 0] + s0) + K[1, 1] * (int_e[i, 1] + s1)
+                q0 = g_inv[0, 0] * (e0 + a0) + g_inv[0, 1] * (e1 + a1)
+                q1 = g_inv[1, 0] * (e0 + a0) + g_inv[1, 1] * (e1 + a1)
+                nxt = max(abs(u[i, 0] - q0) - limit, 0.0) + max(abs(u[i, 1] - q1) - limit, 0.0)
+                if nxt > now and nxt > 0:
+                    s0 = 0.0
+                    s1 = 0.0
+            int_e[i, 0] += s0
+            int_e[i, 1] += s1
         u_bar[i, 0] = u[i, 0] - applied[i, 0]  # ūᵢ = uᵢ − φ̂ᵢ (eq. 28)
         u_bar[i, 1] = u[i, 1] - applied[i, 1]
         z[i, 0] += dt * (u[i, 0] + K[0, 0] * e0 + K[0, 1] * e1)  # eq. 29
