@@ -21,10 +21,10 @@ CYLINDER = -2  # geom owner: a cylinder obstacle
 def geom_owners(scene: Any) -> np.ndarray:
     """(ngeom,) the robot (0-based) each geom belongs to, CYLINDER or FLOOR."""
     model = scene.model
-    owner = np.full(model.ngeom, FLOOR, dtype=np.int64)
     root = model.body_rootid
-    for i, b in enumerate(scene.body):
-        owner[root[model.geom_bodyid] == root[b]] = i
+    robot_of_root = np.full(model.nbody, FLOOR, dtype=np.int64)  # one pass, not one per robot
+    robot_of_root[root[np.asarray(scene.body, dtype=np.int64)]] = np.arange(len(scene.body))
+    owner = robot_of_root[root[model.geom_bodyid]]
     owner[np.asarray(scene.obstacle_geom, dtype=np.int64)] = CYLINDER
     return owner
 
