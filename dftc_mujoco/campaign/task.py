@@ -72,12 +72,11 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
         dt = horizon.get("value")
         # eq. 46 predicted a finite delay (not the 5 s fallback) on the graph of the moment
         promised = horizon.get("predicted_delays_max") is not None
-        for e in events:  # Δt_d,max as recomputed by the exclusions before the fault
-            if e["kind"] == "detection_horizon" and e["t"] < t_f:
-                dt = e["value"]
-        for later in horizon.get("after_exclusions", []):
+        for later in horizon.get("after_exclusions", []):  # as recomputed at each exclusion
             if later["t"] < t_f:
+                dt = later["value"]
                 promised = later.get("predicted_delays_max") is not None
+        settled = settle is not None and t_f >= settle
         told = f.get("command")  # the speed the robot was told at onset: a stop's size
         reference = horizon.get("reference_fault")
         on = [
@@ -100,15 +99,14 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
                 "excluded": gone is not None,
                 "exclusion_delay": None if gone is None else gone - t_f,
                 "teammates": max(n - gone_before - 1, 0) if n else None,
-                "after_settle": settle is not None and t_f >= settle,  # eq. 46's domain
+                "after_settle": settled,  # eq. 46's domain
                 "dt_d_max": dt,
                 "command": told,
                 # eq. 46's promise applies: a finite prediction, a stop at least the reference
                 # fault at onset, after T_s, and Δt_d,max ends within the run (observable)
                 "in_domain": bool(
                     promised
-                    and settle is not None
-                    and t_f >= settle
+                    and settled
                     and f.get("fault") == "stop"
                     and told is not None
                     and reference is not None
