@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
+from .errors import DftcError
 
 
 def prog(module: str, script: str) -> str:
@@ -26,6 +27,12 @@ def print_error(exc: BaseException) -> None:
     """One ``error:`` line on stderr per problem the exception reports."""
     for line in str(exc).splitlines() or [type(exc).__name__]:
         print(f"error: {line}", file=sys.stderr)
+
+
+def fail(exc: DftcError) -> int:
+    """Print ``exc`` as :func:`print_error` does; return its exit code (``errors.py``)."""
+    print_error(exc)
+    return exc.exit_code
 
 
 def add_set_option(p: argparse.ArgumentParser, what: str) -> None:

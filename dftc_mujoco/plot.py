@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from . import cli, interrupt, output
-from .errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_RENDER, OutputError, ScenarioError
+from .errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
 from .render import gl
 from .run import add_video_options, setup_video
 
@@ -61,12 +61,8 @@ def _plot(args, signals: interrupt.Signals) -> int:
             run = open_run(args.run_dir)  # log.npz, summary.json and the scenario that ran
         log, summary = run.log, run.summary
         scenario = run.scenario if options is not None else None
-    except ScenarioError as exc:
-        cli.print_error(exc)
-        return EXIT_INPUT
-    except gl.RenderError as exc:
-        cli.print_error(exc)
-        return EXIT_RENDER
+    except (ScenarioError, gl.RenderError) as exc:
+        return cli.fail(exc)
     from .run import render_outputs
 
     try:
@@ -94,8 +90,7 @@ def _plot(args, signals: interrupt.Signals) -> int:
             finally:
                 shutil.rmtree(work, ignore_errors=True)
     except OutputError as exc:
-        cli.print_error(exc)
-        return EXIT_OUTPUT
+        return cli.fail(exc)
     except OSError as exc:
         cli.print_error(output.os_problem(exc, "drawing the figures and video", args.run_dir))
         print(f"note: the figures and video in {args.run_dir} are unchanged", file=sys.stderr)
@@ -126,8 +121,7 @@ def write_stills(
                 iio.imwrite(path, fr.frame(t))
                 print(f"still: {shown / path.name}")
     except gl.RenderError as exc:
-        cli.print_error(exc)
-        return EXIT_RENDER
+        return cli.fail(exc)
     return EXIT_OK
 
 

@@ -28,11 +28,9 @@ from typing import TYPE_CHECKING, Any
 
 from . import cli, interrupt
 from .errors import (
-    EXIT_INPUT,
     EXIT_OK,
     EXIT_OUTPUT,
     EXIT_PHYSICS,
-    EXIT_RENDER,
     ScenarioError,
     exit_interrupted,
 )
@@ -228,12 +226,8 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
     try:
         with signals.active():
             options = setup_video(args, not args.no_video)
-    except ScenarioError as exc:
-        cli.print_error(exc)
-        return EXIT_INPUT
-    except gl.RenderError as exc:
-        cli.print_error(exc)
-        return EXIT_RENDER
+    except (ScenarioError, gl.RenderError) as exc:
+        return cli.fail(exc)
 
     try:
         with signals.active():
@@ -269,12 +263,8 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
                 result = sim.run(progress=progress)
             return _finish(result, work, Path(out).absolute(), signals, options, progress)
-    except ScenarioError as exc:
-        cli.print_error(exc)
-        return EXIT_INPUT
-    except OutputError as exc:
-        cli.print_error(exc)
-        return EXIT_OUTPUT
+    except (ScenarioError, OutputError) as exc:
+        return cli.fail(exc)
     except OSError as exc:
         cli.print_error(os_problem(exc, "writing the run"))
         return EXIT_OUTPUT
@@ -354,8 +344,7 @@ def render_outputs(
     try:
         frames = write_video(out / "video.mp4", scenario, log, summary, options, progress)
     except gl.RenderError as exc:
-        cli.print_error(exc)
-        return EXIT_RENDER
+        return cli.fail(exc)
     wall = time.perf_counter() - t0
     print(
         f"video: {shown / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "

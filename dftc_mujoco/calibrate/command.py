@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 
-from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, ScenarioError
+from ..errors import EXIT_OK, EXIT_OUTPUT, ScenarioError
 from .compensation import acceleration, acceleration_report, compensation, compensation_report
 from .drift import REPLAN_WINDOW, drift
 from .files import check_writable, write
@@ -104,8 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             robots.load(path)  # it must still load
             print(f"written to {path}")
     except ScenarioError as exc:
-        cli.print_error(exc)
-        return EXIT_INPUT
+        return cli.fail(exc)
     except OSError as exc:
         print(f"error: cannot write the calibration: {exc}", file=sys.stderr)
         return EXIT_OUTPUT

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import cli, interrupt, output
-from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
+from ..errors import EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
 from ..interrupt import Interrupted, Signals
 
 
@@ -106,12 +106,8 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             )
             rows = [r for r in results.rows if r["run"] < spec.runs]
             path = report.write(rows, out, spec.name, spec.description)
-    except ScenarioError as exc:
-        cli.print_error(exc)
-        return EXIT_INPUT
-    except (OutputError, ClusterError) as exc:
-        cli.print_error(exc)
-        return EXIT_OUTPUT
+    except (ScenarioError, OutputError, ClusterError) as exc:
+        return cli.fail(exc)
     except OSError as exc:
         cli.print_error(output.os_problem(exc, "writing the campaign"))
         return EXIT_OUTPUT

@@ -14,7 +14,7 @@ import numpy as np
 from ..blocks import BLOCKS, check_name
 from ..graph import Graph
 from ..mission import CentroidPath, Formation, Mission, formation_offsets
-from ..tomlcheck import N_DIM, Doc, Table, describe
+from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
 from .parts import (
     Fault,
     Fdir,
@@ -25,7 +25,6 @@ from .parts import (
     Physics,
     Supervision,
     Team,
-    _ro,
 )
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
