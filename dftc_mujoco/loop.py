@@ -399,7 +399,7 @@ class Simulation:
                     if t >= faults.due:
                         for f in faults.apply(t):
                             # the speed it was told last: a stop's size at onset (eq. 46)
-                            told = float(np.hypot(*team.command[f.robot]))
+                            told = float(np.hypot(*team.drive.command[f.robot]))
                             events.add(
                                 t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
                             )

@@ -24,7 +24,9 @@ of eq. 28 fights as if it were a fault.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
+import numpy as np
 from numba import njit
 
 
@@ -77,3 +79,52 @@ def limit_input(u, u_g, delta_u, limit, previous, rows, step):  # pragma: no cov
             for d in range(u.shape[1]):
                 delta_u[i, d] = u[i, d] - u_g[i, d]
     return hit
+
+
+class DriveRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the drive model."""
+
+    input_limit: float  # [m/s] per axis, the range the compensation leaves free
+    accel_step: float  # [m/s] the drive's Δu per period (inf: none)
+    lag_a: float  # a, b of :func:`lag_input` (0, 0: no lag)
+    lag_b: float
+    v_hat: np.ndarray  # (N, 2) the velocity the lag delivers
+    command: np.ndarray  # (N, 2) what each robot tells its drive
+
+
+class DriveModel:
+    """Each robot's model of its own drive: its range, acceleration and lag (N robots).
+
+    ``command`` (N, 2) is what each robot last told its drive and ``v_hat`` (N, 2) the
+    velocity a first-order lag of ``lag`` [s] delivers (robots start at rest).
+    """
+
+    def __init__(self, n: int, dt: float, input_limit: float, accel: float, lag: float):
+        self.command = np.zeros((n, 2))
+        self.v_hat = np.zeros((n, 2))
+        self.input_limit = float(input_limit)
+        self.accel_step = float(accel) * dt  # the drive's Δu per period
+        self.lag_a, self.lag_b = lag_coefficients(lag, dt)
+
+    @property
+    def lagged(self) -> bool:
+        """The drive answers its command with a lag."""
+        return self.lag_a > 0.0
+
+    def limit(self, u: np.ndarray, u_g: np.ndarray, delta_u: np.ndarray, rows: np.ndarray) -> int:
+        """Saturate the members' nominal inputs in place (:func:`limit_input`)."""
+        return limit_input(u, u_g, delta_u, self.input_limit, self.command, rows, self.accel_step)
+
+    def deliver(self, u: np.ndarray) -> None:
+        """``u`` (N, 2) becomes the command; with a lag, ``u`` becomes what the drive
+        delivers over the period (:func:`lag_input`)."""
+        if self.lagged:
+            lag_input(u, self.v_hat, self.command, self.lag_a, self.lag_b)
+        else:
+            self.command[:] = u
+
+    def record(self) -> DriveRecord:
+        """The arrays and constants the compiled period uses."""
+        return DriveRecord(
+            self.input_limit, self.accel_step, self.lag_a, self.lag_b, self.v_hat, self.command
+        )

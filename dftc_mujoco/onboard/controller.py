@@ -6,6 +6,8 @@ The equations are the compiled :func:`collective_input` and :func:`own_input`;
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -41,6 +43,12 @@ def own_input(u_hat_g, out):  # pragma: no cover - compiled
             out[i, d] = u_hat_g[i, i, d]
 
 
+class ControllerRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads of the controller."""
+
+    kc: float
+
+
 class Controller(Block):
     """The paper's centroid + formation controller (eqs. 15-16) on every robot.
 
@@ -54,6 +62,10 @@ class Controller(Block):
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Read the gain k_c."""
         self.kc = config.kc
+
+    def record(self) -> ControllerRecord:
+        """The gain the compiled period uses."""
+        return ControllerRecord(self.kc)
 
     def collective_input(
         self, x_hat: np.ndarray, x_d: np.ndarray, xd_dot: np.ndarray

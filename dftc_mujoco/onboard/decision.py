@@ -7,6 +7,8 @@ The rule is the compiled :func:`decide`, which the compiled period calls too."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -57,6 +59,20 @@ def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised): 
                 if flag[i, k] and below[i, k] >= window - 1e-9:
                     flag[i, k] = False
     return count
+
+
+class DecisionRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the decision."""
+
+    mu: np.ndarray  # (M, M) this period's thresholds ⁱμ_k
+    above: np.ndarray  # (M, M) time above, below the threshold [s]
+    below: np.ndarray
+    flag: np.ndarray  # (M, M) robot i flags robot k
+    dt: float
+    window: float
+    exclusive: int  # the isolation mode (ISOLATION)
+    isolated: np.ndarray  # (M,) the robot each isolates, or -1
+    raised: np.ndarray  # (M, M) the flags raised this period
 
 
 class Decision(Block):
@@ -119,6 +135,25 @@ class Decision(Block):
             self.isolated,
             self._raised,
         )
+        return self._raised
+
+    def record(self, mu: np.ndarray) -> DecisionRecord:
+        """The state the compiled period updates, with this period's thresholds ``mu``."""
+        return DecisionRecord(
+            mu,
+            self.above,
+            self.below,
+            self.flag,
+            self.dt,
+            self.window,
+            self.exclusive,
+            self.isolated,
+            self._raised,
+        )
+
+    @property
+    def raised(self) -> np.ndarray:
+        """(M, M) the flags raised at the last update."""
         return self._raised
 
     def drop(self, p: int, graph: Graph, t: float) -> None:

@@ -8,6 +8,8 @@ are the compiled :func:`estimate_faults`; :class:`FaultEstimator` is the block.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -79,6 +81,22 @@ def estimate_faults(
         z[i, 1] += dt * (u[i, 1] + K[1, 0] * e0 + K[1, 1] * e1)
 
 
+class EstimatorRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the fault estimator."""
+
+    z: np.ndarray  # (N, 2) the local observer (eq. 29)
+    int_e: np.ndarray  # (N, 2) ∫e
+    phi_hat: np.ndarray  # (N, 2) φ̂ (eq. 31)
+    applied: np.ndarray  # (N, 2) the compensation subtracted (eq. 28)
+    K: np.ndarray
+    g_inv: np.ndarray
+    dt: float
+    limit: float  # the per-axis command range
+    alpha: float  # low-pass of the applied φ̂ (1: none)
+    hold: np.ndarray  # (N,) bool, robots whose bumpers hold the estimator
+    compensate: bool  # ū = command − φ̂ (eq. 28); False: ū = command
+
+
 class FaultEstimator(Block):
     """The paper's local fault estimator and compensation (eqs. 28-31) on every robot.
 
@@ -108,6 +126,24 @@ class FaultEstimator(Block):
         self.int_e = np.zeros_like(self.z)
         self.phi_hat = np.zeros_like(self.z)
         self.applied = np.zeros_like(self.z)
+        self.compensate = bool(config.compensate)
+
+    def record(self, hold: np.ndarray) -> EstimatorRecord:
+        """The state the compiled period updates; ``hold`` (N,): the robots whose bumpers
+        hold their estimators this period."""
+        return EstimatorRecord(
+            self.z,
+            self.int_e,
+            self.phi_hat,
+            self.applied,
+            self.K,
+            self.g_inv,
+            self.dt,
+            self.command_limit,
+            self.alpha,
+            hold,
+            self.compensate,
+        )
 
     def step(self, x_m: np.ndarray, u: np.ndarray, hold: np.ndarray | None = None) -> np.ndarray:
         """Update from own measurements ``x_m`` and nominal inputs ``u`` (N, 2); return ū (N, 2).

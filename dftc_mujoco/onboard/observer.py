@@ -15,6 +15,8 @@ functions.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -130,6 +132,20 @@ class Messages:
         return r
 
 
+class ObserverRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the observer."""
+
+    y_hat: np.ndarray  # (M, M, n) ⁱŷ, the messages
+    y_next: np.ndarray  # (M, M, n) ⁱŷ of the next period, written by the period
+    int_u_hat: np.ndarray  # (M, M, n) ∫(ⁱû_g + Γᵢᵀ Δuᵢ)
+    int_u_own: np.ndarray  # (M, n) ∫uᵢ
+    src: np.ndarray  # the edges into each robot (:class:`Messages`)
+    first_edge: np.ndarray
+    in_degree: np.ndarray
+    ko: float
+    dt: float
+
+
 class Observer(Block):
     """The paper's consensus observer (eqs. 19-21) and residual (eq. 35) on every robot.
 
@@ -163,6 +179,26 @@ class Observer(Block):
         self._x_hat = np.empty_like(self.y_hat)
         self._r = np.empty_like(self.y_hat)
         self._r_norm = np.empty((m, m))
+
+    def record(self) -> ObserverRecord:
+        """The state the compiled period advances; :meth:`advance` after it."""
+        msg = self.messages
+        return ObserverRecord(
+            self.y_hat,
+            self.y_next,
+            self.int_u_hat,
+            self.int_u_own,
+            msg.src,
+            msg.first_edge,
+            msg.in_degree,
+            self.ko,
+            self.dt,
+        )
+
+    def advance(self) -> None:
+        """ŷ of the next period (eq. 19), which the compiled period wrote into ``y_next``,
+        becomes the current one."""
+        self.y_hat, self.y_next = self.y_next, self.y_hat
 
     def drop(self, p: int, graph: Graph, t: float) -> None:
         """Robot at team position ``p`` leaves: every collective vector shrinks (§5.2.2)."""

@@ -19,94 +19,100 @@ an array), and composes the blocks' Python methods otherwise.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import numpy as np
 from numba import njit
 
-from .applied import lag_input, limit_input
-from .controller import collective_one
-from .decision import decide
-from .fault_estimator import estimate_faults
-from .observer import advance_one, estimate_one, integrate_inputs, residual_row, row_norms
-from .supervisor import supervise
+from .applied import DriveRecord, lag_input, limit_input
+from .controller import ControllerRecord, collective_one
+from .decision import DecisionRecord, decide
+from .fault_estimator import EstimatorRecord, estimate_faults
+from .observer import (
+    ObserverRecord,
+    advance_one,
+    estimate_one,
+    integrate_inputs,
+    residual_row,
+    row_norms,
+)
+from .supervisor import SupervisorRecord, Surroundings, supervise
 
 RAISED = 1  # some flag was raised (detection events to report)
 SWITCHED = 2  # some robot switched behaviour (reactive events to report)
 SATURATED = 4  # some robot's nominal input was beyond its command range (saturated)
 
 
+class PeriodInputs(NamedTuple):
+    """What a period is given: the measurements, the members and the mission."""
+
+    x_m: np.ndarray  # (N, n) each robot's own noisy position
+    rows: np.ndarray  # (M,) team row i is robot rows[i]
+    c: np.ndarray  # (n,) the desired centroid σ₁,d and its velocity
+    c_dot: np.ndarray
+    offsets: np.ndarray  # (M, n) the formation's slots and their rates
+    rates: np.ndarray
+    fdir: bool  # the fault estimator and the decision run
+
+
+class PeriodBuffers(NamedTuple):
+    """The period's outputs and scratch, allocated by the team at its size."""
+
+    x_own: np.ndarray  # (M, n) the members' own measurements
+    x_d: np.ndarray  # (M, n) the mission's desired positions and velocities (eq. 14)
+    xd_dot: np.ndarray
+    x_hat: np.ndarray  # (M, M, n) the estimates before the update (eq. 21)
+    u_g: np.ndarray  # (M, n) u_g,i (eq. 16)
+    u_mem: np.ndarray  # (M, n) uᵢ, then Δuᵢ (eqs. 8, 22)
+    du: np.ndarray
+    row: np.ndarray  # (M·n,) one robot's residual (scratch)
+    r_norm: np.ndarray  # (M, M) ‖ⁱr_k‖
+    u: np.ndarray  # (N, 2) nominal input, original robot axis
+    u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
+
+
 @njit(cache=True)
 def team_period(
-    x_m,
-    rows,
-    c,
-    c_dot,
-    offsets,
-    rates,
-    kc,
-    ko,
-    dt,
-    y_hat,
-    y_next,
-    int_u_hat,
-    int_u_own,
-    src,
-    first_edge,
-    in_degree,
-    obs,
-    safe,
-    act,
-    theta,
-    release,
-    active,
-    mates,
-    mate_safe,
-    mate_act,
-    fdir,
-    compensate,
-    input_limit,
-    accel_step,
-    lag_a,
-    lag_b,
-    v_hat,
-    command,
-    z,
-    int_e,
-    phi_hat,
-    applied,
-    K,
-    g_inv,
-    limit,
-    alpha,
-    hold,
-    mu,
-    above,
-    below,
-    flag,
-    window,
-    exclusive,
-    isolated,
-    x_own,
-    x_d,
-    xd_dot,
-    x_hat,
-    u_g,
-    u_mem,
-    du,
-    row,
-    r_norm,
-    raised,
-    u,
-    u_bar,
-):  # pragma: no cover - compiled
-    """One period for the members ``rows`` (team row i is robot ``rows[i]``); returns flags.
+    inp: PeriodInputs,
+    ob: ObserverRecord,
+    ctl: ControllerRecord,
+    sup: SupervisorRecord,
+    seen: Surroundings,
+    drive: DriveRecord,
+    est: EstimatorRecord,
+    dec: DecisionRecord,
+    out: PeriodBuffers,
+) -> int:  # pragma: no cover - compiled
+    """One period for the members ``inp.rows``; returns RAISED | SWITCHED | SATURATED bits.
 
-    ``x_m``, ``v_hat``, ``command``, ``z``, ``int_e``, ``phi_hat``, ``applied``, ``u``
-    and ``u_bar`` are on the original robot axis (N); with a drive lag (``lag_a`` > 0) ``u``
-    ends as the velocity the drive model predicts and ``command`` as what the drive is
-    told; the others on the members' axis (M). Robots
-    that are not members get u = 0 and only run their fault estimator. ŷ of the
-    next period goes to ``y_next`` (the caller swaps it with ``y_hat``); ``row``
-    (M·n,) is scratch. Returns RAISED | SWITCHED bits.
+    ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
+    ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
+    (``drive.lag_a`` > 0) ``out.u`` ends as the velocity the drive model predicts and
+    ``drive.command`` as what the drive is told; the others on the members' axis (M).
+    Robots that are not members get u = 0 and only run their fault estimator. ŷ of the
+    next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
+    x_m, rows, c, c_dot, offsets, rates = (
+        inp.x_m,
+        inp.rows,
+        inp.c,
+        inp.c_dot,
+        inp.offsets,
+        inp.rates,
+    )
+    x_own, x_d, xd_dot, x_hat = out.x_own, out.x_d, out.xd_dot, out.x_hat
+    u_g, u_mem, du, row, r_norm, u, u_bar = (
+        out.u_g,
+        out.u_mem,
+        out.du,
+        out.row,
+        out.r_norm,
+        out.u,
+        out.u_bar,
+    )
+    y_hat, y_next, int_u_hat, int_u_own = ob.y_hat, ob.y_next, ob.int_u_hat, ob.int_u_own
+    kc, ko, dt = ctl.kc, ob.ko, ob.dt
+    command = drive.command
     m, _, n = y_hat.shape
     code = 0
     for i in range(m):
@@ -126,15 +132,27 @@ def team_period(
             s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
     # eqs. 8, 18
     if supervise(
-        x_own, u_g, obs, safe, act, theta, release, active, u_mem, du, mates, mate_safe, mate_act
+        x_own,
+        u_g,
+        seen.obstacles,
+        seen.safe,
+        seen.activation,
+        sup.theta,
+        sup.release,
+        sup.active,
+        u_mem,
+        du,
+        seen.mates,
+        sup.mate_safe,
+        sup.mate_act,
     ):
         code |= SWITCHED
     # the input the robot applies (Remark 4.1): its drive's acceleration and range
-    if limit_input(u_mem, u_g, du, input_limit, command, rows, accel_step):
+    if limit_input(u_mem, u_g, du, drive.input_limit, command, rows, drive.accel_step):
         code |= SATURATED
     yn = y_next.reshape(m, m * n)
     for i in range(m):  # pass 2: every robot reads its in-neighbours' current messages
-        residual_row(y_hat, int_u_own, x_own, src, first_edge, in_degree, i, row)  # eq. 35
+        residual_row(y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, i, row)  # eq. 35
         row_norms(row, i, n, r_norm)
         for a in range(m * n):
             yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
@@ -143,8 +161,8 @@ def team_period(
     for i in range(m):
         for d in range(2):
             u[rows[i], d] = u_mem[i, d]
-    if lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
-        lag_input(u, v_hat, command, lag_a, lag_b)
+    if drive.lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
+        lag_input(u, drive.v_hat, command, drive.lag_a, drive.lag_b)
         for i in range(m):
             for d in range(2):
                 u_mem[i, d] = u[rows[i], d]
@@ -152,13 +170,37 @@ def team_period(
     else:
         command[:] = u
     integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
-    if fdir:
-        estimate_faults(x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, hold, u_bar)
+    if inp.fdir:
+        applied = est.applied
+        estimate_faults(
+            x_m,
+            u,
+            est.z,
+            est.int_e,
+            est.phi_hat,
+            applied,
+            est.K,
+            est.g_inv,
+            est.dt,
+            est.limit,
+            est.alpha,
+            est.hold,
+            u_bar,
+        )
         for r in range(u.shape[0]):
             for d in range(2):
-                u_bar[r, d] = command[r, d] - (applied[r, d] if compensate else 0.0)  # eq. 28
+                u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
         if decide(
-            r_norm, mu, above, below, flag, dt, window, exclusive, isolated, raised
+            r_norm,
+            dec.mu,
+            dec.above,
+            dec.below,
+            dec.flag,
+            dec.dt,
+            dec.window,
+            dec.exclusive,
+            dec.isolated,
+            dec.raised,
         ):  # eq. 39
             code |= RAISED
     else:

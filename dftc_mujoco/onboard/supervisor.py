@@ -13,6 +13,8 @@ block that calls it.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -89,6 +91,25 @@ def supervise(
     return changed
 
 
+class Surroundings(NamedTuple):
+    """What the robots' sensors report this period (kept by the team, read by the period)."""
+
+    obstacles: np.ndarray  # (O, n) sensed obstacle centres (cylinders, then excluded robots)
+    safe: np.ndarray  # (O,) safe distances d
+    activation: np.ndarray  # (O,) activation distances
+    mates: np.ndarray  # (M, n) where each robot's range sensor sees the members
+
+
+class SupervisorRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the supervisor."""
+
+    theta: float
+    release: float
+    active: np.ndarray  # (M,) the obstacle each robot avoids, or -1
+    mate_safe: float  # 0: teammates are not avoided this period
+    mate_act: float
+
+
 class Supervisor(Block):
     """The paper's local supervisor (eqs. 8, 17-18, 22) on every robot.
 
@@ -111,6 +132,12 @@ class Supervisor(Block):
         self.active = np.full(len(x_m0), -1, dtype=np.intp)
         self.mate_safe = float(config.teammate_safe)
         self.mate_act = float(config.teammate_activation)
+
+    def record(self, sensed: bool) -> SupervisorRecord:
+        """The state the compiled period updates; teammates are avoided only when the range
+        sensors gave a reading (``sensed``)."""
+        mate_safe = self.mate_safe if sensed else 0.0
+        return SupervisorRecord(self.theta, self.release, self.active, mate_safe, self.mate_act)
 
     def drop(self, p, graph, t) -> None:
         """Forget the excluded robot's behaviour."""

@@ -30,15 +30,15 @@ from numba import njit
 
 from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
-from .applied import lag_coefficients, lag_input, limit_input
+from .applied import DriveModel
 from .block import Block, TeamConfig
 from .controller import Controller
 from .decision import Decision
 from .fault_estimator import FaultEstimator
 from .observer import Observer
-from .period import RAISED, SATURATED, SWITCHED, team_period
+from .period import RAISED, SATURATED, SWITCHED, PeriodBuffers, PeriodInputs, team_period
 from .recovery import Recovery
-from .supervisor import Supervisor
+from .supervisor import Supervisor, Surroundings
 from .thresholds import Thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -114,11 +114,8 @@ class Team:
         self.u = np.zeros((n, 2))
         self.u_bar = np.zeros((n, 2))
         # each robot's model of its own drive (onboard/applied.py): what it commands, and the
-        # velocity v̂ a first-order lag of config.lag delivers (robots start at rest)
-        self.command = np.zeros((n, 2))
-        self.v_hat = np.zeros((n, 2))
-        self._lag_a, self._lag_b = lag_coefficients(config.lag, config.dt)
-        self._accel_step = float(config.accel) * config.dt  # the drive's Δu per period
+        # velocity v̂ a first-order lag of config.lag delivers
+        self.drive = DriveModel(n, config.dt, config.input_limit, config.accel, config.lag)
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
@@ -223,6 +220,20 @@ class Team:
         self._obs_a = np.concatenate(
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
         )
+        self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
+        self._buffers = PeriodBuffers(
+            self.x_own,
+            self.x_d,
+            self.xd_dot,
+            self.x_hat,
+            self._u_g,
+            self._u_mem,
+            self._du,
+            self._row,
+            self.r_norm,
+            self.u,
+            self.u_bar,
+        )
 
     # ------------------------------------------------------------------ one period
 
@@ -248,11 +259,11 @@ class Team:
             self._untouched += 1.0
             self._untouched[touching] = 0.0
             np.less(self._untouched, self._hold_periods, out=self._touch)
-            if self._lag_a > 0.0:
+            if self.drive.lagged:
                 slot = self._k % self._window
                 if self._k >= self._window and self._touch.any():
                     seen = (x_m - self._x_past[slot]) / (self._window * self.config.dt)
-                    self.v_hat[self._touch] = seen[self._touch]
+                    self.drive.v_hat[self._touch] = seen[self._touch]
                 self._x_past[slot] = x_m
                 self._k += 1
             if touching.any():
@@ -280,73 +291,21 @@ class Team:
         return code
 
     def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
-        cfg, ob, sup = self.config, self.observer, self.supervisor
-        est, dec = self.estimator, self.decision
-        msg = ob.messages
+        """The period as one compiled call over the blocks' state records (:mod:`.period`)."""
+        cfg = self.config
         code = team_period(
-            x_m,
-            self.members,
-            c,
-            c_dot,
-            offsets,
-            rates,
-            self.controller.kc,
-            ob.ko,
-            ob.dt,
-            ob.y_hat,
-            ob.y_next,
-            ob.int_u_hat,
-            ob.int_u_own,
-            msg.src,
-            msg.first_edge,
-            msg.in_degree,
-            self._obs_p,
-            self._obs_d,
-            self._obs_a,
-            sup.theta,
-            sup.release,
-            sup.active,
-            self._mates,
-            cfg.teammate_safe if self._sensed else 0.0,
-            cfg.teammate_activation,
-            cfg.fdir,
-            cfg.compensate,
-            cfg.input_limit,
-            self._accel_step,
-            self._lag_a,
-            self._lag_b,
-            self.v_hat,
-            self.command,
-            est.z,
-            est.int_e,
-            est.phi_hat,
-            est.applied,
-            est.K,
-            est.g_inv,
-            est.command_limit,
-            est.alpha,
-            self._touch,
-            self.mu,
-            dec.above,
-            dec.below,
-            dec.flag,
-            dec.window,
-            dec.exclusive,
-            dec.isolated,
-            self.x_own,
-            self.x_d,
-            self.xd_dot,
-            self.x_hat,
-            self._u_g,
-            self._u_mem,
-            self._du,
-            self._row,
-            self.r_norm,
-            self._raised,
-            self.u,
-            self.u_bar,
+            PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, cfg.fdir),
+            self.observer.record(),
+            self.controller.record(),
+            self.supervisor.record(self._sensed),
+            self._seen,
+            self.drive.record(),
+            self.estimator.record(self._touch),
+            self.decision.record(self.mu),
+            self._buffers,
         )
-        ob.y_hat, ob.y_next = ob.y_next, ob.y_hat  # ŷ of the next period (eq. 19)
+        self.observer.advance()  # ŷ of the next period (eq. 19)
+        self._raised = self.decision.raised
         return code
 
     def _general(self, x_m, c, c_dot, offsets, rates) -> int:
@@ -370,24 +329,14 @@ class Team:
             u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
         u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
         delta_u = np.array(delta_u, dtype=float)
-        saturated = limit_input(
-            u_mem,
-            np.ascontiguousarray(u_g, float),
-            delta_u,
-            cfg.input_limit,
-            self.command,
-            mem,
-            self._accel_step,
-        )
+        saturated = self.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem)
         if not whole:
             self.u[:] = 0.0  # an excluded robot is told to stay where it is
         self.u[mem] = u_mem
-        if self._lag_a > 0.0:  # the drive's lag: integrate what it delivers (applied.py)
-            lag_input(self.u, self.v_hat, self.command, self._lag_a, self._lag_b)
+        self.drive.deliver(self.u)  # with a lag, u becomes what the drive delivers
+        if self.drive.lagged:
             u_mem = self.u[mem]
             delta_u = u_mem - u_g
-        else:
-            self.command[:] = self.u
         r = self.observer.residual(x_own)  # eq. 35
         self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
         self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
@@ -400,16 +349,16 @@ class Team:
             else:
                 u_bar = self.estimator.step(x_m, self.u)
             if not cfg.compensate:
-                self.u_bar[:] = self.command
-            elif self._lag_a > 0.0:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
-                self.u_bar[:] = self.command - (self.u - u_bar)
+                self.u_bar[:] = self.drive.command
+            elif self.drive.lagged:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
+                self.u_bar[:] = self.drive.command - (self.u - u_bar)
             else:
                 self.u_bar[:] = u_bar
             self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)  # eq. 39
             if self._raised.any():
                 code |= RAISED
         else:
-            self.u_bar[:] = self.command
+            self.u_bar[:] = self.drive.command
         return code
 
     # ------------------------------------------------------------------ outputs
