@@ -1,9 +1,10 @@
 """The run's events: every kind with the facts it carries, and the one line that says each.
 
 An event is a plain dict (JSON in ``summary.json``) with ``t`` [s], ``kind`` and the fields
-:data:`KINDS` lists for that kind; robots are numbered from 1. :func:`describe` is the only
-place an event is put into words: the console's event table, the warnings of a summary and
-the video's captions read it.
+:data:`KINDS` lists for that kind; robots are numbered from 1. :func:`make` is the one
+constructor (it refuses a kind or a field that :data:`KINDS` does not list), and
+:func:`describe` the only place an event is put into words: the console's event table, the
+warnings of a summary and the video's captions read it.
 """
 
 from __future__ import annotations
@@ -20,17 +21,34 @@ KINDS: dict[str, tuple[str, ...]] = {
     "premise_violated": ("premise", "robot", "value", "bound", "until"),
     "exclusion_scheduled": ("robot", "t_r"),
     "exclusion": ("robot", "flagged_by", "detected_by"),
-    "exclusion_cancelled": ("robot", "reason"),
+    "exclusion_cancelled": ("robot", "detected_by", "reason"),
     "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was"),
     "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
-    "systemic_anomaly_over": (),
+    "systemic_anomaly_over": ("robots",),
     "detection_not_guaranteed": ("robot", "until"),
     "detection_horizon": ("value", "before"),
     "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
     "warning": ("message",),
-    "mission_ended": ("reason",),
+    "mission_ended": ("reason", "robots"),
     "simulation_error": ("message",),
 }
+
+
+#: an event as it is stored: ``{"t": ..., "kind": ..., **fields}``
+Event = dict[str, Any]
+
+
+def make(t: float, kind: str, **fields: Any) -> Event:
+    """The event ``kind`` at ``t`` with ``fields``, each of which :data:`KINDS` lists for it
+    (ValueError otherwise: a new kind or field is declared there first, with its words in
+    :func:`describe`)."""
+    allowed = KINDS.get(kind)
+    if allowed is None:
+        raise ValueError(f"unknown event kind {kind!r}; known: {', '.join(KINDS)}")
+    extra = set(fields) - set(allowed)
+    if extra:
+        raise ValueError(f"event {kind!r} has no field(s) {sorted(extra)}; it has {allowed}")
+    return {"t": t, "kind": kind, **fields}
 
 
 def describe(e: Mapping[str, Any]) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import atomic_write, write_text
+from .events import make
 
 __all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
@@ -125,7 +126,7 @@ class Events:
     items: list[dict[str, Any]] = field(default_factory=list)
 
     def add(self, t: float, kind: str, **info: Any) -> None:
-        self.items.append({"t": round(float(t), 6), "kind": kind, **info})
+        self.items.append(make(round(float(t), 6), kind, **info))
 
     def of_kind(self, kind: str) -> list[dict[str, Any]]:
         return [e for e in self.items if e["kind"] == kind]

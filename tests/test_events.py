@@ -43,3 +43,22 @@ def test_the_recovery_events_are_known_kinds_in_one_line():
     kinds = {e["kind"] for e in items}
     assert {"exclusion", "graph_not_strongly_connected", "detection_horizon"} <= kinds
     _check(items)
+
+
+def test_an_event_is_made_only_with_the_fields_its_kind_declares():
+    """events.make is the one constructor: a kind or a field KINDS does not list is refused
+    (the summary's readers and describe() rely on the fields)."""
+    import pytest
+
+    e = events.make(1.5, "exclusion", robot=2, flagged_by=[1], detected_by=[1, 3])
+    assert e == {
+        "t": 1.5,
+        "kind": "exclusion",
+        "robot": 2,
+        "flagged_by": [1],
+        "detected_by": [1, 3],
+    }
+    with pytest.raises(ValueError, match="unknown event kind 'exclusoin'"):
+        events.make(1.5, "exclusoin", robot=2)
+    with pytest.raises(ValueError, match="has no field"):
+        events.make(1.5, "reactive_off", robot=2, obstacle="cylinder 1")

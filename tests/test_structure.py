@@ -63,9 +63,15 @@ def test_the_package_has_no_import_circles():
 
 def test_the_onboard_algorithms_stand_on_the_graph_and_the_mission_alone():
     """The layer order: the onboard blocks import, from this package, only the graph, the
-    mission and the errors, and never MuJoCo (or the scenario parser, the physics, ...)."""
+    mission, the errors and the events, and never MuJoCo (or the scenario parser, the
+    physics, ...)."""
     mods = _modules()
-    allowed = {"dftc_mujoco.graph", "dftc_mujoco.mission", "dftc_mujoco.errors"}
+    allowed = {
+        "dftc_mujoco.graph",
+        "dftc_mujoco.mission",
+        "dftc_mujoco.errors",
+        "dftc_mujoco.events",
+    }
     for name, path in mods.items():
         if not name.startswith("dftc_mujoco.onboard"):
             continue

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from ..events import make
+
 #: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
 #: at the last postponement for the flags to count as a contact's decaying trace
 DECAYING = 0.9
@@ -66,7 +68,7 @@ class Recovery:
             if (by, robot) in self.detected:
                 continue
             self.detected.add((by, robot))
-            events.append({"t": t, "kind": "detection", "by": by + 1, "robot": robot + 1})
+            events.append(make(t, "detection", by=by + 1, robot=robot + 1))
             if not self.counts(by, robot):
                 continue  # its own flag is reported, but exclusion needs teammates
             if robot not in self.first_detection:
@@ -75,9 +77,7 @@ class Recovery:
                 self.pending[robot] = t_r
                 # a contact up to T_s + Δt_d,max earlier may explain it (a new start)
                 self.since[robot] = t - self.settle - self.dt_d_max
-                events.append(
-                    {"t": t, "kind": "exclusion_scheduled", "robot": robot + 1, "t_r": t_r}
-                )
+                events.append(make(t, "exclusion_scheduled", robot=robot + 1, t_r=t_r))
         return events
 
     def counts(self, by: int, robot: int) -> bool:
@@ -97,18 +97,18 @@ class Recovery:
             if excluded + len(flagged) <= self.max_faults:
                 return None
             self.anomaly = sorted(flagged)
-            return {
-                "t": t,
-                "kind": "systemic_anomaly",
-                "robots": [r + 1 for r in self.anomaly],
-                "max_faults": self.max_faults,
-                "excluded": excluded,
-            }
+            return make(
+                t,
+                "systemic_anomaly",
+                robots=[r + 1 for r in self.anomaly],
+                max_faults=self.max_faults,
+                excluded=excluded,
+            )
         if flagged:
             self.anomaly = sorted(set(self.anomaly) | set(flagged))
             return None
         robots, self.anomaly = self.anomaly, None
-        return {"t": t, "kind": "systemic_anomaly_over", "robots": [r + 1 for r in robots]}
+        return make(t, "systemic_anomaly_over", robots=[r + 1 for r in robots])
 
     def due(self, t: float) -> list[int]:
         """The robots whose t_r has come, earliest first; they are no longer pending."""
@@ -141,14 +141,14 @@ class Recovery:
         self.pending[robot] = t_r
         self.first_detection[robot] = last
         self.since[robot] = last + 1e-9  # only a later contact postpones it again
-        return {
-            "t": t,
-            "kind": "exclusion_postponed",
-            "robot": robot + 1,
-            "reason": "contact",
-            "last_contact": last,
-            "t_r": t_r if np.isfinite(t_r) else None,  # None: not within the run
-        }
+        return make(
+            t,
+            "exclusion_postponed",
+            robot=robot + 1,
+            reason="contact",
+            last_contact=last,
+            t_r=t_r if np.isfinite(t_r) else None,  # None: not within the run
+        )
 
     def transient(self, t: float, robot: int, ratio: float) -> dict[str, Any] | None:
         """A robot a contact postponed is still flagged at its new t_r: if its largest
@@ -170,16 +170,16 @@ class Recovery:
         self.pending[robot] = t_r
         self.first_detection[robot] = t
         self.ratio_at[robot] = (t, ratio)
-        return {
-            "t": t,
-            "kind": "exclusion_postponed",
-            "robot": robot + 1,
-            "reason": "decaying",
-            "last_contact": self.last_contact[robot],
-            "t_r": t_r,
-            "ratio": round(float(ratio), 4),
-            "was": round(float(r0), 4),
-        }
+        return make(
+            t,
+            "exclusion_postponed",
+            robot=robot + 1,
+            reason="decaying",
+            last_contact=self.last_contact[robot],
+            t_r=t_r,
+            ratio=round(float(ratio), 4),
+            was=round(float(r0), 4),
+        )
 
     def detectors(self, robot: int) -> list[int]:
         """Every robot that ever flagged ``robot`` (1-based, sorted)."""
@@ -188,13 +188,13 @@ class Recovery:
     def cancel(self, t: float, robot: int, reason: str = "not flagged") -> dict[str, Any]:
         """``robot`` stays at its t_r (no teammate flags it, or a ``systemic_anomaly`` holds),
         and its detections are forgotten."""
-        event = {
-            "t": t,
-            "kind": "exclusion_cancelled",
-            "robot": robot + 1,
-            "detected_by": self.detectors(robot),
-            "reason": reason,
-        }
+        event = make(
+            t,
+            "exclusion_cancelled",
+            robot=robot + 1,
+            detected_by=self.detectors(robot),
+            reason=reason,
+        )
         self.detected = {(b, k) for b, k in self.detected if k != robot}
         self.since.pop(robot, None)
         self.ratio_at.pop(robot, None)
@@ -202,10 +202,10 @@ class Recovery:
 
     def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:
         """The ``exclusion`` event of ``robot``, still flagged at t_r by ``flaggers``."""
-        return {
-            "t": t,
-            "kind": "exclusion",
-            "robot": robot + 1,
-            "flagged_by": flaggers,
-            "detected_by": self.detectors(robot),
-        }
+        return make(
+            t,
+            "exclusion",
+            robot=robot + 1,
+            flagged_by=flaggers,
+            detected_by=self.detectors(robot),
+        )

@@ -28,6 +28,7 @@ from typing import Any, cast
 import numpy as np
 from numba import njit
 
+from ..events import make
 from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel
@@ -454,15 +455,15 @@ class Team:
         for i in changed:
             if now[i]:
                 self.events.append(
-                    {
-                        "t": t,
-                        "kind": "reactive_on",
-                        "robot": int(i) + 1,
-                        "obstacle": _obstacle_label(int(avoiding[i]), n_cyl),
-                    }
+                    make(
+                        t,
+                        "reactive_on",
+                        robot=int(i) + 1,
+                        obstacle=_obstacle_label(int(avoiding[i]), n_cyl),
+                    )
                 )
             else:
-                self.events.append({"t": t, "kind": "reactive_off", "robot": int(i) + 1})
+                self.events.append(make(t, "reactive_off", robot=int(i) + 1))
         self._reactive = np.array(now, copy=True)
 
     def _report(self, t: float, raised: np.ndarray) -> None:
@@ -513,9 +514,7 @@ class Team:
             if last_pair:
                 left = [int(k) + 1 for k in self.members if k != robot]
                 self.ended = f"the team was reduced to robot {left[0]} alone"
-                self.events.append(
-                    {"t": t, "kind": "mission_ended", "reason": self.ended, "robots": left}
-                )
+                self.events.append(make(t, "mission_ended", reason=self.ended, robots=left))
                 return
             if not self.graph.is_strongly_connected():
                 self.events.append(self._split(t))
@@ -543,14 +542,14 @@ class Team:
         for g in groups:
             lost = np.flatnonzero(unheard[g[0]])
             cost.append([int(k) for k in ids[lost]])
-        return {
-            "t": t,
-            "kind": "graph_not_strongly_connected",
-            "robots": [int(k) for k in ids],
-            "components": [[int(k) for k in ids[g]] for g in groups],
-            "unheard": cost,  # per component: the robots whose estimates lost their bound
-            "pairs": int(unheard.sum()),
-        }
+        return make(
+            t,
+            "graph_not_strongly_connected",
+            robots=[int(k) for k in ids],
+            components=[[int(k) for k in ids[g]] for g in groups],
+            unheard=cost,  # per component: the robots whose estimates lost their bound
+            pairs=int(unheard.sum()),
+        )
 
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
@@ -571,9 +570,7 @@ class Team:
             self.dt_d_max, info = self._detection_horizon(self.graph)
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
-            self.events.append(
-                {"t": t, "kind": "detection_horizon", "value": self.dt_d_max, "before": before}
-            )
+            self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
 
 
 @njit(cache=True)
