@@ -137,6 +137,34 @@ def test_controller_eq15_through_its_public_method():
     assert np.array_equal(ctrl.own_input(u_hat), u_hat[np.arange(4), np.arange(4)])  # eq. 16
 
 
+def test_the_period_split_over_the_cores_is_the_same_computation(monkeypatch):
+    """From PARALLEL_FROM robots the compiled period's passes over the N × N state run in
+    groups of robots on all cores: the same numbers, bit for bit, as on one core, through a
+    detection."""
+    monkeypatch.setattr(team_mod, "PARALLEL_FROM", 8)
+    split, x = _team(12, obstacles=False, command_limit=1.0)
+    monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", False)
+    one, _ = _team(12, obstacles=False, command_limit=1.0)
+    assert split._row.shape[0] >= 2 and one._row.shape[0] == 1
+    rng = np.random.default_rng(3)
+    v = np.array([0.1, 0.0])
+    xs = x.copy()
+    for k in range(1500):
+        t = k * 0.01
+        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
+        split.step(t, x_m, v * t, v)
+        one.step(t, x_m, v * t, v)
+        a, b = split.outputs(), one.outputs()
+        for name in a:
+            assert np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f"), name
+        assert split.events == one.events
+        phi = np.zeros_like(xs)
+        if t > 8.0:
+            phi[1] = [1.5, 0.0]
+        xs = xs + 0.01 * (np.clip(split.u_bar, -1.0, 1.0) + phi)
+    assert split.recovery.detected == one.recovery.detected and split.recovery.detected
+
+
 @pytest.mark.parametrize(("n", "obstacles"), [(4, True), (4, False), (12, False)])
 def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monkeypatch):
     """The compiled period composes the blocks' own compiled functions: same numbers,

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..graph import Graph
 from .block import Block, TeamConfig
@@ -19,8 +19,9 @@ from .block import Block, TeamConfig
 ISOLATION = {"pairwise": 0, "exclusive": 1, "exclusive_history": 2}
 
 
-@njit(cache=True)
-def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised):  # pragma: no cover
+def _decide(
+    r_norm, mu, above, below, flag, dt, window, mode, isolated, raised, blocks
+):  # pragma: no cover - compiled
     """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
 
     Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
@@ -30,35 +31,49 @@ def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised): 
     at or below their thresholds (eq. 39's second clause, instant by instant); 2,
     exclusive with history, eq. 39 as the paper states it: also only if robot i has flagged
     no other robot since the last restart. ``isolated[i]`` (M,) is the robot robot i
-    flagged first since then (−1: none), kept for mode 2.
+    flagged first since then (−1: none), kept for mode 2. Robots are taken in ``blocks``
+    contiguous groups (each robot's row is its own decision).
     """
     count = 0
-    for i in range(r_norm.shape[0]):
-        n_over = 0
-        if mode > 0:
+    m = r_norm.shape[0]
+    for b in prange(blocks):
+        for i in range(b * m // blocks, (b + 1) * m // blocks):
+            n_over = 0
+            if mode > 0:
+                for k in range(r_norm.shape[1]):
+                    if r_norm[i, k] > mu[i, k]:
+                        n_over += 1
             for k in range(r_norm.shape[1]):
-                if r_norm[i, k] > mu[i, k]:
-                    n_over += 1
-        for k in range(r_norm.shape[1]):
-            raised[i, k] = False
-            blocked = (mode > 0 and n_over > 1) or (
-                mode == 2 and isolated[i] >= 0 and isolated[i] != k
-            )
-            if r_norm[i, k] > mu[i, k] and not blocked:
-                above[i, k] += dt
-                below[i, k] = 0.0
-                if not flag[i, k] and above[i, k] >= window - 1e-9:
-                    flag[i, k] = True
-                    raised[i, k] = True
-                    count += 1
-                    if isolated[i] < 0:
-                        isolated[i] = k
-            else:
-                above[i, k] = 0.0
-                below[i, k] += dt
-                if flag[i, k] and below[i, k] >= window - 1e-9:
-                    flag[i, k] = False
+                raised[i, k] = False
+                blocked = (mode > 0 and n_over > 1) or (
+                    mode == 2 and isolated[i] >= 0 and isolated[i] != k
+                )
+                if r_norm[i, k] > mu[i, k] and not blocked:
+                    above[i, k] += dt
+                    below[i, k] = 0.0
+                    if not flag[i, k] and above[i, k] >= window - 1e-9:
+                        flag[i, k] = True
+                        raised[i, k] = True
+                        count += 1
+                        if isolated[i] < 0:
+                            isolated[i] = k
+                else:
+                    above[i, k] = 0.0
+                    below[i, k] += dt
+                    if flag[i, k] and below[i, k] >= window - 1e-9:
+                        flag[i, k] = False
     return count
+
+
+# eq. 39 on one core, or split over the cores (the compiled period's choice, :mod:`.period`)
+decide_in_groups = njit(cache=True)(_decide)
+decide_parallel = njit(cache=True, parallel=True)(_decide)
+
+
+@njit(cache=True)
+def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised):  # pragma: no cover
+    """Eq. 39 for every robot on one core (:func:`_decide`)."""
+    return decide_in_groups(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised, 1)
 
 
 class DecisionRecord(NamedTuple):

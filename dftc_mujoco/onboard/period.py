@@ -22,11 +22,11 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
-from .decision import DecisionRecord, decide
+from .decision import DecisionRecord, decide_in_groups, decide_parallel
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
     ObserverRecord,
@@ -65,10 +65,52 @@ class PeriodBuffers(NamedTuple):
     u_g: np.ndarray  # (M, n) u_g,i (eq. 16)
     u_mem: np.ndarray  # (M, n) uᵢ, then Δuᵢ (eqs. 8, 22)
     du: np.ndarray
-    row: np.ndarray  # (M·n,) one robot's residual (scratch)
+    row: np.ndarray  # (B, M·n) one robot's residual, for each of B groups of robots (scratch)
     r_norm: np.ndarray  # (M, M) ‖ⁱr_k‖
     u: np.ndarray  # (N, 2) nominal input, original robot axis
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
+
+
+def _estimates(y, s, xh, xd, vd, u_g, kc, dt, n, blocks):  # pragma: no cover - compiled
+    """Pass 1 for every robot i, in ``blocks`` contiguous groups of rows: u_g,i (eq. 16),
+    ⁱx̂ (eq. 21) into ``xh`` and ∫ ⁱû_g (eqs. 15, 20) advanced in ``s`` (rows M × M·n)."""
+    m = y.shape[0]
+    for b in prange(blocks):
+        for i in range(b * m // blocks, (b + 1) * m // blocks):
+            for d in range(n):  # u_g,i = Γᵢ ⁱû_g (eq. 16): robot i's own block, before ∫ moves
+                a = i * n + d
+                u_g[i, d] = collective_one(vd[a], kc, xd[a], estimate_one(y[i, a], s[i, a]))
+            for a in range(m * n):
+                e = estimate_one(y[i, a], s[i, a])  # eq. 21
+                xh[i, a] = e
+                s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
+
+
+def _residuals(
+    y_hat, int_u_own, x_own, src, first_edge, in_degree, rows, r_norm, yn, ko, dt
+):  # pragma: no cover - compiled
+    """Pass 2 for every robot i, in as many contiguous groups of rows as ``rows`` (B, M·n)
+    has scratch rows: ⁱr (eq. 35), its norms, and ⁱŷ of the next period (eq. 19) into
+    ``yn``."""
+    m, _, n = y_hat.shape
+    y = y_hat.reshape(m, m * n)
+    blocks = rows.shape[0]
+    for b in prange(blocks):
+        row = rows[b]
+        for i in range(b * m // blocks, (b + 1) * m // blocks):
+            residual_row(y_hat, int_u_own, x_own, src, first_edge, in_degree, i, row)  # eq. 35
+            row_norms(row, i, n, r_norm)
+            for a in range(m * n):
+                yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
+
+
+# the passes over the team's N × N state, each on one core or split over the cores (a team
+# of PARALLEL_FROM robots or more: below it, starting the threads costs more than it saves)
+estimates = njit(cache=True)(_estimates)
+estimates_parallel = njit(cache=True, parallel=True)(_estimates)
+residuals = njit(cache=True)(_residuals)
+residuals_parallel = njit(cache=True, parallel=True)(_residuals)
+PARALLEL_FROM = 200
 
 
 @njit(cache=True)
@@ -122,14 +164,10 @@ def team_period(
             xd_dot[i, d] = c_dot[d] + rates[i, d]
     y, s = y_hat.reshape(m, m * n), int_u_hat.reshape(m, m * n)
     xh, xd, vd = x_hat.reshape(m, m * n), x_d.reshape(-1), xd_dot.reshape(-1)
-    for i in range(m):  # pass 1, robot by robot
-        for d in range(n):  # u_g,i = Γᵢ ⁱû_g (eq. 16): robot i's own block, before ∫ moves
-            a = i * n + d
-            u_g[i, d] = collective_one(vd[a], kc, xd[a], estimate_one(y[i, a], s[i, a]))
-        for a in range(m * n):
-            e = estimate_one(y[i, a], s[i, a])  # eq. 21
-            xh[i, a] = e
-            s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
+    if row.shape[0] > 1:  # pass 1, robot by robot
+        estimates_parallel(y, s, xh, xd, vd, u_g, kc, dt, n, row.shape[0])
+    else:
+        estimates(y, s, xh, xd, vd, u_g, kc, dt, n, 1)
     # eqs. 8, 18
     if supervise(
         x_own,
@@ -151,11 +189,15 @@ def team_period(
     if limit_input(u_mem, u_g, du, drive.input_limit, command, rows, drive.accel_step):
         code |= SATURATED
     yn = y_next.reshape(m, m * n)
-    for i in range(m):  # pass 2: every robot reads its in-neighbours' current messages
-        residual_row(y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, i, row)  # eq. 35
-        row_norms(row, i, n, r_norm)
-        for a in range(m * n):
-            yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
+    # pass 2: every robot reads its in-neighbours' current messages
+    if row.shape[0] > 1:
+        residuals_parallel(
+            y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, row, r_norm, yn, ko, dt
+        )
+    else:
+        residuals(
+            y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, row, r_norm, yn, ko, dt
+        )
     if m < u.shape[0]:
         u[:] = 0.0  # an excluded robot is told to stay where it is
     for i in range(m):
@@ -190,18 +232,12 @@ def team_period(
         for r in range(u.shape[0]):
             for d in range(2):
                 u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
-        if decide(
-            r_norm,
-            dec.mu,
-            dec.above,
-            dec.below,
-            dec.flag,
-            dec.dt,
-            dec.window,
-            dec.exclusive,
-            dec.isolated,
-            dec.raised,
-        ):  # eq. 39
+        args = (r_norm, dec.mu, dec.above, dec.below, dec.flag, dec.dt, dec.window)
+        if row.shape[0] > 1:
+            raised = decide_parallel(*args, dec.exclusive, dec.isolated, dec.raised, row.shape[0])
+        else:
+            raised = decide_in_groups(*args, dec.exclusive, dec.isolated, dec.raised, 1)
+        if raised:  # eq. 39
             code |= RAISED
     else:
         u_bar[:] = command

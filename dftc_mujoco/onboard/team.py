@@ -25,6 +25,7 @@ import inspect
 from collections.abc import Mapping
 from typing import Any, cast
 
+import numba
 import numpy as np
 from numba import njit
 
@@ -37,7 +38,15 @@ from .controller import Controller
 from .decision import Decision
 from .fault_estimator import FaultEstimator
 from .observer import Observer
-from .period import RAISED, SATURATED, SWITCHED, PeriodBuffers, PeriodInputs, team_period
+from .period import (
+    PARALLEL_FROM,
+    RAISED,
+    SATURATED,
+    SWITCHED,
+    PeriodBuffers,
+    PeriodInputs,
+    team_period,
+)
 from .recovery import Recovery
 from .supervisor import Supervisor, Surroundings
 from .thresholds import Thresholds
@@ -62,6 +71,7 @@ HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
+PARALLEL_ALLOWED = True  # False keeps the compiled period on one core (benchmarks, tests)
 
 
 class Team:
@@ -210,7 +220,10 @@ class Team:
         self._u_g = np.empty((m, 2))
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
-        self._row = np.empty(m * 2)  # one robot's residual (scratch of the compiled period)
+        # one robot's residual per group of robots the compiled period's passes run in
+        split = m >= PARALLEL_FROM and PARALLEL_ALLOWED
+        groups = max(2, numba.get_num_threads()) if split else 1
+        self._row = np.empty((groups, m * 2))
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
         self.r_norm = np.empty((m, m))
         self._raised = np.zeros((m, m), bool)
