@@ -216,6 +216,9 @@ def make_blocks(
     out: dict[str, Block] = {}
     for k in blocks_mod.BLOCKS:
         if k in given:
+            why = blocks_mod.not_a_block(k, given[k], f"blocks[{k!r}]")
+            if why:
+                raise ScenarioError(f"blocks: {why}")
             out[k] = given[k]
             continue
         name = getattr(s.onboard, k)

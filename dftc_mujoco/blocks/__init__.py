@@ -1,12 +1,14 @@
 """Plug-in points for the six onboard blocks of the paper's Fig. 1.
 
 A block is selected by a built-in name (``"paper"``) or by an import path
-``"module:attribute"`` naming a class (or a factory) that returns a block
-instance; keyword parameters come from ``[onboard.params.<block>]``. The
-paper's blocks are :mod:`dftc_mujoco.blocks.paper`. Block classes are imported
-where the run executes (CLI process, campaign worker, Ray worker), so a user's
-module only has to be importable there: on ``sys.path``, or beside the
-scenario file that names it.
+``"module:Class"`` naming a class derived from that block's class in
+:mod:`dftc_mujoco.blocks.paper` (checked before use: any other callable, a function of
+the standard library say, is refused in one line and never called); keyword
+parameters come from ``[onboard.params.<block>]``. Block classes are imported where
+the run executes (CLI process, campaign worker, Ray worker), so a user's module only
+has to be importable there: on ``sys.path``, or beside the scenario file that names it.
+Importing a module runs its code, as any plug-in does: a scenario that names a module
+is as trusted as that module.
 """
 
 from __future__ import annotations
@@ -88,9 +90,37 @@ def _import(module_name: str, search: Sequence[Path], where: str) -> Any:
     ) from None
 
 
+def base_class(block: str) -> type:
+    """The class every ``block`` derives from (the paper's block of that plug-in point)."""
+    from ..onboard.team import PAPER_BLOCKS
+
+    return PAPER_BLOCKS[block]
+
+
+def not_a_block(block: str, obj: Any, name: str) -> str | None:
+    """Why ``obj`` (what ``name`` selects) cannot fill ``block``, or None when it can:
+    a class derived from :func:`base_class`, or an instance of one."""
+    base = base_class(block)
+    if (isinstance(obj, type) and issubclass(obj, base)) or isinstance(obj, base):
+        return None
+    if isinstance(obj, type):
+        got = f"class {obj.__module__}.{obj.__qualname__}"
+    elif callable(obj):
+        where = f"{getattr(obj, '__module__', None) or '?'}.{getattr(obj, '__qualname__', '?')}"
+        got = f"{type(obj).__name__} {where}"
+    else:
+        got = f"{type(obj).__name__} {obj!r:.60}"
+    return (
+        f"{name!r} is not a {block} block: expected a class derived from "
+        f"dftc_mujoco.blocks.paper.{base.__name__}, got {got}"
+    )
+
+
 def load_class(block: str, name: str, search: Sequence[Path] = (), where: str = "") -> Any:
-    """The class (or factory) ``name`` selects for ``block``; ``search`` folders are tried
-    after sys.path."""
+    """The block class ``name`` selects for ``block``; ``search`` folders are tried after
+    sys.path. ScenarioError when it is not a class derived from :func:`base_class`."""
+    if block not in BUILTIN:
+        raise ScenarioError(f"unknown block {block!r}; expected one of {', '.join(BLOCKS)}")
     where = where or f"onboard.{block}"
     target = BUILTIN[block].get(name, name)
     module_name, _, attr = target.partition(":")
@@ -100,6 +130,9 @@ def load_class(block: str, name: str, search: Sequence[Path] = (), where: str = 
         if not hasattr(obj, part):
             raise ScenarioError(f"{where}: module {module_name!r} has no attribute {attr!r}")
         obj = getattr(obj, part)
+    why = not_a_block(block, obj, name)
+    if why:
+        raise ScenarioError(f"{where}: {why}")
     return obj
 
 

@@ -94,7 +94,14 @@ class Team:
         unknown = set(blocks or {}) - set(PAPER_BLOCKS)
         if unknown:
             raise ValueError(f"unknown blocks {sorted(unknown)}; expected {list(PAPER_BLOCKS)}")
-        chosen = {k: (blocks or {}).get(k) or cls() for k, cls in PAPER_BLOCKS.items()}
+        given = dict(blocks or {})
+        for k, b in given.items():  # a block that is falsy is still the user's block
+            if not isinstance(b, PAPER_BLOCKS[k]):
+                raise ValueError(
+                    f"blocks[{k!r}]: expected an instance of a class derived from "
+                    f"{PAPER_BLOCKS[k].__name__}, got {type(b).__name__}"
+                )
+        chosen = {k: given[k] if k in given else cls() for k, cls in PAPER_BLOCKS.items()}
         n = config.graph.n
         self.config = config
         self.n = n
