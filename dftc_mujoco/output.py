@@ -85,9 +85,19 @@ def _owner_alive(folder: Path) -> bool:
     return not (started and now and now != started)
 
 
+def destination(out: Path | str) -> Path:
+    """``out`` as an absolute path with ``.`` and ``..`` taken as the shell takes them
+    (``p/new/..`` is ``p``, whether ``p/new`` exists or not); OutputError for a path that
+    names no folder a run can be moved to (``/``)."""
+    path = Path(os.path.normpath(Path(out).absolute()))
+    if path.name in ("", ".", ".."):
+        raise OutputError(f"{out}: --out must name a folder below an existing one, not {path}")
+    return path
+
+
 def check_destination(out: Path, overwrite: bool) -> Path:
     """The absolute destination, or an OutputError saying why it cannot be used."""
-    out = Path(out).absolute()
+    out = destination(out)
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: --out names a file, not a folder; choose a folder")
     if out.is_dir() and any(out.iterdir()):
@@ -112,7 +122,7 @@ def locked(out: Path) -> Iterator[Path]:
     Raises OutputError when another live process holds the lock or the parent folder
     cannot be created or written.
     """
-    out = Path(out).absolute()
+    out = destination(out)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -135,7 +145,9 @@ def _private_name(out: Path) -> re.Pattern[str]:
 def tidy(out: Path) -> list[Path]:
     """Remove the private folders of dead writers beside ``out`` and put back a
     destination left set aside by a replacement that was killed half-way (call with the
-    lock held). Returns what was removed."""
+    lock held). A dead writer's folder that holds finished records (``summary.json``: a
+    run killed while drawing its figures or video) is never removed: it is kept beside
+    ``out`` as ``<name>.recovered-<k>`` and said on stderr. Returns what was removed."""
     pattern = _private_name(out)
     try:
         beside = [p for p in out.parent.iterdir() if pattern.match(p.name) and p.is_dir()]
@@ -149,15 +161,42 @@ def tidy(out: Path) -> list[Path]:
                 continue
         elif _owner_alive(p):
             continue
+        elif (p / "summary.json").is_file():
+            _recover(p, out)
+            continue
         shutil.rmtree(p, ignore_errors=True)
         removed.append(p)
     return removed
+
+
+def _recover(work: Path, out: Path) -> Path:
+    """Keep the finished records a killed writer left in ``work`` as a run folder beside
+    ``out`` (its unfinished figures or video dropped); says where on stderr."""
+    for tmp in [*work.glob(".*.tmp*"), work / OWNER]:
+        tmp.unlink(missing_ok=True)
+    k = 1
+    while (kept := out.parent / f"{out.name}.recovered-{k}").exists():
+        k += 1
+    os.rename(work, kept)
+    print(
+        f"note: a run writing {out} was killed after its records were written (while "
+        f"drawing); they are kept in {kept} (python -m dftc_mujoco.plot {kept} draws the rest)",
+        file=sys.stderr,
+    )
+    return kept
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def private_folder(out: Path) -> Path:
     """A new private folder beside ``out``, owned (``.owner``) by this process."""
     try:
         work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+        os.chmod(work, 0o777 & ~_umask())  # a run folder as mkdir makes it, not mkdtemp's 0700
         (work / OWNER).write_text(f"{os.getpid()} {_started(os.getpid())}")
     except OSError as exc:
         raise os_problem(exc, "creating a private folder") from None

@@ -48,27 +48,39 @@ class RunResult:
         """True when the physics ran to the end without trouble."""
         return self.error is None
 
-    def save(self, out: str | Path, *, figures: bool = True, video: bool = False) -> Path:
-        """Write what ``python -m dftc_mujoco.run`` writes into ``out``.
+    def save(
+        self, out: str | Path, *, figures: bool = True, video: bool = False, overwrite: bool = False
+    ) -> Path:
+        """Write what ``python -m dftc_mujoco.run`` writes into the run folder ``out``.
 
-        ``log.npz``, ``scenario.toml`` and then ``summary.json`` (each atomically,
-        the summary last), the paper's figures in ``figures/`` unless ``figures`` is
-        False, and ``video.mp4`` (640x480 at 30 fps, offscreen through the GL backend
-        chosen when dftc_mujoco was imported) if ``video``. Returns ``out``.
+        ``log.npz``, ``scenario.toml`` and ``summary.json``, the paper's figures in
+        ``figures/`` unless ``figures`` is False, and ``video.mp4`` (640x480 at 30 fps,
+        offscreen through the GL backend chosen when dftc_mujoco was imported) if ``video``,
+        all written into a private folder that replaces ``out`` as a whole at the end: a
+        folder that holds another run is replaced only with ``overwrite`` (never mixed
+        with this one's files), a folder that holds no run is never replaced
+        (OutputError). Returns ``out``.
         """
-        out = Path(out)
-        write_npz(out / "log.npz", self.log)
-        write_text(out / "scenario.toml", self.scenario.to_toml())
-        write_json(out / "summary.json", self.summary)
+        from .output import run_folder
+
+        with run_folder(Path(out), overwrite) as work:
+            self.write(work, figures=figures, video=video)
+        return Path(out)
+
+    def write(self, folder: Path, *, figures: bool = True, video: bool = False) -> None:
+        """Write the run's files into ``folder`` as they are (``summary.json`` after the
+        records it describes, each file atomically); :meth:`save` is the safe way."""
+        write_npz(folder / "log.npz", self.log)
+        write_text(folder / "scenario.toml", self.scenario.to_toml())
+        write_json(folder / "summary.json", self.summary)
         if figures:
             from .render import figures as figures_mod
 
-            figures_mod.draw_all(self.log, self.summary, out / "figures")
+            figures_mod.draw_all(self.log, self.summary, folder / "figures")
         if video:
             from .render.video import write_video
 
-            write_video(out / "video.mp4", self.scenario, self.log, self.summary)
-        return out
+            write_video(folder / "video.mp4", self.scenario, self.log, self.summary)
 
     def figures(self) -> dict[str, Any]:
         """The paper's figures of this run as matplotlib Figures, by name (nothing saved)."""
@@ -98,7 +110,7 @@ def open_run(folder: str | Path) -> RunResult:
     log = _read_log(files["log.npz"])
     try:
         data = tomllib.loads(files["scenario.toml"].read_text())
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:
         raise ScenarioError(f"{files['scenario.toml']}: unreadable: {_one_line(exc)}") from None
     scenario = from_dict(data, source=str(files["scenario.toml"]))
     events = Events([dict(e) for e in summary.get("events", [])])

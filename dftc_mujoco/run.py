@@ -36,7 +36,7 @@ from .errors import (
 )
 from .events import describe
 from .interrupt import Interrupted, Signals
-from .output import OutputError, free_space_check, os_problem, run_folder
+from .output import OutputError, destination, free_space_check, os_problem, run_folder
 from .render import gl
 
 if TYPE_CHECKING:
@@ -137,8 +137,15 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             value = text  # a bare word: a string
+        except RecursionError:
+            raise ScenarioError(f"--set {key.strip()}: the value is nested too deep") from None
         out[key.strip()] = value
     return out
+
+
+def _factor(x: float) -> str:
+    """A real-time factor as 325x, 3.2x or 0.053x."""
+    return f"{x:.0f}x" if x >= 10 else f"{x:.2g}x"
 
 
 def report(result: RunResult, out: Path) -> str:
@@ -147,7 +154,7 @@ def report(result: RunResult, out: Path) -> str:
     lines = [
         f"{s['scenario']} (seed {s['seed']}, {s['robots']} x {s['robot_model']}): "
         f"{s['simulated_time']:.2f} s simulated in {s['wall_time']:.2f} s "
-        f"({s['real_time_factor']:.0f}x real time)  status: {s['status']}",
+        f"({_factor(s['real_time_factor'])} real time)  status: {s['status']}",
         "",
         "   t [s]  event",
     ]
@@ -209,7 +216,7 @@ def report(result: RunResult, out: Path) -> str:
 def write_records(result: RunResult, out: Path) -> None:
     """Write ``log.npz``, ``scenario.toml`` then ``summary.json`` (atomically) into ``out``
     (figures and video follow, in :func:`render_outputs`)."""
-    result.save(out, figures=False)
+    result.write(out, figures=False)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -254,6 +261,9 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             # came while the simulation was being built: signals are deferred until then)
             with Simulation(s) as sim, signals.stopping(sim):
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
+                long = [e for e in sim.events.items if "will take at least" in e.get("message", "")]
+                for e in long:  # said now, not after the hours it announces
+                    print(f"note: {e['message']}", file=sys.stderr)
                 if args.viewer:
                     from .viewer import ViewerUnavailable, watch
 
@@ -262,7 +272,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                     except ViewerUnavailable as exc:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
                 result = sim.run(progress=progress)
-            return _finish(result, work, Path(out).absolute(), signals, options, progress)
+            return _finish(result, work, destination(out), signals, options, progress)
     except (ScenarioError, OutputError) as exc:
         return cli.fail(exc)
     except OSError as exc:

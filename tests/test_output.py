@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from dftc_mujoco import plot, run
+from dftc_mujoco import open_run, plot, run
 from dftc_mujoco.output import OWNER
 from tests.conftest import needs_gl
 
@@ -167,7 +167,8 @@ def _wait_for(pattern: str, folder: Path, proc: subprocess.Popen, timeout: float
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
     """SIGTERM while the video renders: the records and figures land, no video and no
-    temporary file; SIGKILL: nothing lands, and the next run removes what was left."""
+    temporary file; SIGKILL: nothing lands, and the next run on that --out keeps the
+    finished records aside (``run.recovered-1``) and says so, never deletes them."""
     out = tmp_path / "run"
     proc = _video_run(out)
     _wait_for(".run.*.tmp/.video.mp4.tmp.mp4", tmp_path, proc)
@@ -189,7 +190,11 @@ def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
         assert not out.exists()
         again = _run("--duration", "1", "--no-video", "--out", str(out))
         assert again.returncode == 0, again.stderr
-        assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+        kept = tmp_path / "run.recovered-1"
+        assert f"they are kept in {kept}" in again.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "run.recovered-1"]
+        assert {"log.npz", "scenario.toml", "summary.json"} <= {p.name for p in kept.iterdir()}
+        assert open_run(kept).summary["simulated_time"] > 1.0  # the killed run's, not the new
     assert not [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
 
 
