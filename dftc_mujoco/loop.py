@@ -142,6 +142,13 @@ class Simulation:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _open(self, what: str) -> None:
+        """RuntimeError when the simulation was closed."""
+        if self.plant is None:
+            raise RuntimeError(
+                f"{what}: this Simulation was closed; reset() starts it again, or create a new one"
+            )
+
     def close(self) -> None:
         """Restore the model's healthy actuators and drop the run's data."""
         if self.plant is not None:
@@ -149,7 +156,12 @@ class Simulation:
             self.plant = None
 
     def reset(self, seed: int | None = None) -> None:
-        """Start the run again from t = 0 (with another ``seed`` if given)."""
+        """Start the run again from t = 0 (with another ``seed`` if given: a whole number
+        ≥ 0)."""
+        if seed is not None and (
+            isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
+        ):
+            raise ValueError(f"reset(seed): expected a whole number ≥ 0, got {seed!r}")
         wall0 = time.perf_counter()
         if seed is not None:
             self.scenario = self.scenario.with_overrides(seed=seed)
@@ -239,6 +251,8 @@ class Simulation:
             self.path.position[::every],
             every * dt,
             input_limit=config.input_limit,
+            xi_bar=xi_bar,
+            G=effective_G(s, model),
         )
         if refusal:
             found.refusals.append(refusal)
@@ -318,7 +332,11 @@ class Simulation:
     # ------------------------------------------------------------------ stepping
 
     def step(self, periods: int = 1) -> Snapshot:
-        """Advance ``periods`` control periods and return the state after the last one."""
+        """Advance ``periods`` control periods (a whole number ≥ 1) and return the state after
+        the last one."""
+        self._open("step()")
+        if isinstance(periods, bool) or not isinstance(periods, int | np.integer) or periods < 1:
+            raise ValueError(f"step(periods): expected a whole number ≥ 1, got {periods!r}")
         if self.done:
             raise RuntimeError("the run is over (duration reached or stopped); call reset()")
         self._advance(min(self.k + int(periods), self.steps + 1), None)
@@ -330,6 +348,7 @@ class Simulation:
         ``progress``: show a progress bar (None: when the output is a terminal or a
         notebook).
         """
+        self._open("run()")
         if progress is None:
             progress = sys.stderr.isatty() or "ipykernel" in sys.modules
         if not self.done:
