@@ -20,11 +20,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ScenarioError
-from .mission import formation_offsets
+from .mission import ARENA_HALF, formation_offsets
 from .scenario import Scenario
 
 CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
-ARENA_HALF = 50.0  # the floor is 100 m x 100 m (models/arena.xml)
 FAULT_CAP = 10.0  # a bias beyond this many command ranges has no physical meaning
 MEMORY_FRACTION = 0.8  # refuse a run estimated to need more of the available memory
 
@@ -59,14 +58,15 @@ def memory_estimate(s: Scenario) -> dict[str, int]:
         matrix = min(rows * nn, MATRIX_LOG_BUDGET + nn)
     else:
         matrix = rows * nn / max(1.0, s.physics.log_rate / float(s.physics.matrix_log_rate))
-    return {
+    parts = {
         # the log, its derived fields and the copies written to log.npz
-        "log": int(2 * (rows * per_row + matrix)),
+        "log": 2 * (rows * per_row + matrix),
         # every robot's estimate of the whole team: ~15 N x N x 2 float64 arrays
-        "team": int(15 * 16 * n * n),
-        "path": int(32 * periods),  # the desired centroid at every period
-        "physics": int(400_000 * n + 300 * 2**20),  # MuJoCo model and data, interpreter
+        "team": 15 * 16 * n * n,
+        "path": 32 * periods,  # the desired centroid at every period
+        "physics": 400_000 * n + 300 * 2**20,  # MuJoCo model and data, interpreter
     }
+    return {k: int(min(float(v), 2.0**62)) for k, v in parts.items()}  # no overflow
 
 
 def available_memory() -> int:
@@ -120,12 +120,15 @@ def preflight(
     path: np.ndarray,
     path_dt: float,
     input_limit: float = math.inf,
+    xi_bar: float = 0.0,
+    G: np.ndarray | None = None,
 ) -> Findings:
     """Check scenario ``s`` with robot model ``robot`` (footprint, drive) whose planar
     command range is ``command_limit`` per axis; ``safe`` and ``activation`` are the
     cylinders' distances after they were raised for the robot's footprint; ``path`` (T, 2)
     the desired centroid every ``path_dt`` seconds; ``input_limit`` the applied input's
-    range per axis (``assembly.input_limit``)."""
+    range per axis (``assembly.input_limit``); ``xi_bar`` and ``G`` the run's ξ̄ and G (the
+    scenario's or the robot's)."""
     out = Findings()
     src = s.source
     reach = robot.footprint_radius
@@ -245,6 +248,8 @@ def preflight(
                 f"{speed:g} m/s: it acts as an unrecoverable fault",
                 refuse=False,
             )
+    _magnitudes(s, finding, name, command_limit, xi_bar, G)
+    _walls(s, finding, name, safe, reach, path, path_dt)
     # the path stays on the floor
     w = np.asarray(s.mission.centroid.waypoints)
     far = np.abs(w).max() + _radius(formation_offsets(s.mission.formation, n)) + reach
@@ -256,6 +261,118 @@ def preflight(
             refuse=True,
         )
     return out
+
+
+#: [s] a run expected to take longer than this (wall time) is announced before it starts
+LONG_RUN = 600.0
+#: [s] wall time of one physics step per robot, and per step (this machine, measured with
+#: benchmarks/bench_scale.py: 2 ms for 5 steps of 1000 robots; ~10 µs a step at N = 4)
+STEP_COST = (0.4e-6, 5e-6)
+
+
+def run_time(s: Scenario) -> float:
+    """A rough wall time [s] for the physics of ``s`` alone (a lower bound of the run's)."""
+    steps = s.duration / s.physics.timestep
+    return steps * (STEP_COST[0] * s.team.robots + STEP_COST[1])
+
+
+def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
+    """Numbers that pass their type and sign checks but mean nothing physically: refused or
+    warned with the unit the user probably meant."""
+    if math.isfinite(limit) and xi_bar >= limit:
+        finding(
+            "noise.xi_bar",
+            f"{xi_bar:g} m/s of actuator noise is as large as the {name} robots' whole command "
+            f"range (±{limit:.3g} m/s): no fault can be told from it (ξ̄ is in m/s: 5 mm/s is "
+            "0.005)",
+            refuse=True,
+        )
+    elif math.isfinite(limit) and xi_bar > 0.2 * limit:
+        finding(
+            "noise.xi_bar",
+            f"{xi_bar:g} m/s of actuator noise is {xi_bar / limit:.0%} of the {name} robots' "
+            f"command range (±{limit:.3g} m/s): the thresholds grow with it and a stop may go "
+            "undetected (ξ̄ is in m/s: 5 mm/s is 0.005)",
+            refuse=False,
+        )
+    spacing = _closest_pair(formation_offsets(s.mission.formation, s.team.robots))
+    if s.noise.eta_bar > 0.5 * spacing:
+        finding(
+            "noise.eta_bar",
+            f"{s.noise.eta_bar:g} m of position noise is more than half the formation's spacing "
+            f"({spacing:.3g} m): the robots cannot tell their slots apart (η̄ is in m: 1 mm is "
+            "0.001)",
+            refuse=s.noise.eta_bar >= spacing,
+        )
+    h = s.physics.control_period
+    if s.fdir.enabled and G is not None:
+        g = float(np.linalg.eigvalsh(np.asarray(G, float)).min())
+        k = float(np.linalg.eigvalsh(np.asarray(s.gains.K, float)).max())
+        gain = h * (1.0 / g + k)  # eqs. 28-31 at period h: e⁺ = (1 − h(1/G + K)) e + ...
+        if gain >= 2.0:
+            need = h / (2.0 - h * k) if h * k < 2.0 else math.inf
+            finding(
+                "gains.G",
+                f"G = {g:g} s makes the fault estimator's compensation loop unstable at "
+                f"control_period = {h:g} s (control_period·(1/G + K) = {gain:.3g}, expected < 2): "
+                f"φ̂ would grow without bound; expected G > {need:.3g} (the paper's is 0.01)",
+                refuse=True,
+            )
+    d = s.fdir.excluded_safe_distance
+    width = 2 * _radius(formation_offsets(s.mission.formation, s.team.robots))
+    if s.fdir.enabled and d > max(width, 1.0):
+        finding(
+            "fdir.excluded_safe_distance",
+            f"{d:g} m around an excluded robot is "
+            + (
+                f"more than the arena's half-width ({ARENA_HALF:g} m): no teammate could ever "
+                "get out of it"
+                if d > ARENA_HALF
+                else f"wider than the whole formation ({width:.3g} m across): at an exclusion "
+                "every teammate is inside it at once and turns away"
+            )
+            + " (a robot's size is a few tenths of a metre)",
+            refuse=d > ARENA_HALF,
+        )
+    wall = run_time(s)
+    if wall > LONG_RUN:
+        finding(
+            "physics.timestep",
+            f"{s.duration / s.physics.timestep:.3g} physics steps of {s.team.robots} robots "
+            f"(timestep = {s.physics.timestep:g} s): this run will take at least "
+            f"{wall / 60:.0f} min of physics alone",
+            refuse=False,
+        )
+
+
+def _walls(s, finding, name: str, safe: np.ndarray, reach: float, path, dt: float) -> None:
+    """Cylinders too close to pass between (their safe discs overlap, or leave less than a
+    robot's width) that the path runs into: the supervisor avoids one obstacle at a time
+    (eq. 8), and a robot pushed from one into the next can be trapped or pushed into a
+    hull."""
+    if len(s.obstacles) < 2:
+        return
+    centres = np.array([ob.position for ob in s.obstacles])
+    gap = np.linalg.norm(centres[:, None] - centres[None], axis=2) - safe[:, None] - safe[None]
+    np.fill_diagonal(gap, np.inf)
+    joined = gap < 2 * reach + CLEARANCE
+    offsets = formation_offsets(s.mission.formation, s.team.robots)
+    slots = path[:, None, :] + offsets[None]  # (T, N, 2)
+    dist = np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)  # (T, N, O)
+    entered = (dist < safe[None, None]).any(axis=(0, 1))  # cylinders some slot runs into
+    for k in np.flatnonzero(entered & joined.any(axis=1)):
+        group = sorted({int(k), *np.flatnonzero(joined[k]).tolist()})
+        t = float(np.flatnonzero((dist[:, :, k] < safe[k]).any(axis=1))[0] * dt)
+        finding(
+            f"obstacles[{k + 1}]",
+            f"cylinders {', '.join(str(g + 1) for g in group)} leave no room for a {name} "
+            f"robot between their safe distances, and the formation runs into them near "
+            f"t = {t:.0f} s: the supervisor avoids one cylinder at a time (eq. 8), so a robot "
+            "can be trapped between them; open a gap of at least "
+            f"{2 * reach + CLEARANCE:.3g} m or route the path around them",
+            refuse=False,
+        )
+        return
 
 
 def _squeeze(

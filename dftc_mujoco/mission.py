@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+ARENA_HALF = 50.0  # [m] the floor is 100 m x 100 m (models/arena.xml): every mission is on it
+
 # --------------------------------------------------------------------------- the types
 
 

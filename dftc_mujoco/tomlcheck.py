@@ -24,6 +24,10 @@ from .errors import ScenarioError
 __all__ = ["Abort", "Doc", "Table", "describe", "read_toml"]
 
 N_DIM = 2  # planar robots: n = 2 in the paper's notation
+#: no number of a planar robot team's set-up is larger (in m, s, m/s, counts...): beyond it a
+#: value is a typo, and sizes computed from it would overflow
+MAGNITUDE = 1e9
+_HUGE = " (no quantity of a planar robot team is that large)"
 _MISSING = object()
 _T = TypeVar("_T")
 
@@ -172,6 +176,8 @@ class Table:
             v = float(v)
             if not math.isfinite(v):
                 self.fail(name, f"expected a finite number, got {v}")
+            if abs(v) > MAGNITUDE:
+                self.fail(name, f"expected a number within ±{MAGNITUDE:g}, got {v:g}{_HUGE}")
             if low is not None and (v <= low if strict_low else v < low):
                 self.fail(
                     name, f"expected a number {'>' if strict_low else '>='} {low:g}, got {v:g}"
@@ -182,13 +188,24 @@ class Table:
         except Abort:
             return 1.0 if default is _MISSING else float(default)
 
-    def integer(self, name: str, default: Any = _MISSING, *, low: int | None = None) -> int:
+    def integer(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        low: int | None = None,
+        high: int | None = None,
+    ) -> int:
         try:
             v = self.raw(name, default)
             if isinstance(v, bool) or not isinstance(v, int):
                 self.fail(name, f"expected an integer, got {describe(v)}")
             if low is not None and v < low:
                 self.fail(name, f"expected an integer >= {low}, got {v}")
+            if high is not None and v > high:
+                self.fail(name, f"expected an integer <= {high}, got {v}")
+            if abs(v) > MAGNITUDE:
+                self.fail(name, f"expected an integer within ±{MAGNITUDE:g}, got {v:g}{_HUGE}")
             return int(v)
         except Abort:
             return (low or 0) if default is _MISSING else int(default)
@@ -232,6 +249,9 @@ class Table:
                 self.fail(name, f"expected {want}, got {describe(v)}")
             if not np.all(np.isfinite(arr)):
                 self.fail(name, f"expected finite numbers, got {v!r}")
+            if np.abs(arr).max() > MAGNITUDE:
+                big = float(np.abs(arr).max())
+                self.fail(name, f"expected numbers within ±{MAGNITUDE:g}, got {big:g}{_HUGE}")
             return _ro(arr)
         except Abort:
             if default is not _MISSING:
@@ -314,6 +334,10 @@ def read_toml(path: Path) -> dict[str, Any]:
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(
+            f"{path}: not a usable TOML file: its arrays or tables are nested too deep"
+        ) from None
     except UnicodeDecodeError as exc:
         raise ScenarioError(
             f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset "

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..blocks import BLOCKS, check_name
 from ..graph import Graph
-from ..mission import CentroidPath, Formation, Mission, formation_offsets
+from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
 from .parts import (
     Fault,
@@ -152,13 +152,31 @@ def _physics(t: Table) -> Physics:
     return Physics(timestep, period, log_rate, contacts, matrix_rate)
 
 
+#: the largest team: every robot estimates the whole team, 15·16·N² bytes (6 GB at 5000)
+MAX_ROBOTS = 5000
+
+
+def _off_the_floor(t: Table, key: str, points: np.ndarray, what: str) -> None:
+    """Report the first of ``points`` (k, 2) beyond the arena's floor (±ARENA_HALF)."""
+    far = np.flatnonzero(np.abs(points).max(axis=1) > ARENA_HALF)
+    if len(far):
+        k = int(far[0])
+        x, y = points[k]
+        more = f" (and {len(far) - 1} more)" if len(far) > 1 else ""
+        t.report(
+            key,
+            f"{what.format(k + 1)} at [{x:.4g}, {y:.4g}] is off the arena's floor, which ends "
+            f"at ±{ARENA_HALF:g} m{more}",
+        )
+
+
 _FAMILIES = ("explicit", "ring_chords", "random", "knn", "line")
 
 
 def _team(t: Table, mission: Mission | None, seed: int) -> Team:
     """The team; its graph is None when a problem (recorded) left it unknown."""
     assert t.doc is not None
-    n = t.integer("robots", low=2)
+    n = t.integer("robots", low=2, high=MAX_ROBOTS)
     known_n = n if t.ok("robots") else None
     model = t.string("robot_model", "disk")
     x0 = t.doc.guard(_initial_positions, t, known_n, mission, seed)
@@ -194,6 +212,8 @@ def _initial_positions(
             (n, N_DIM),
             what=f'{pairs}, or a table {{layout = "formation" | "random" | "circle", ...}}',
         )
+        if t.ok("initial_positions"):
+            _off_the_floor(t, "initial_positions", x0, "robot {}")
         return x0 if t.ok("initial_positions") else None
     lay = t.table("initial_positions")
     layout = lay.string("layout", choices=("formation", "random", "circle"))
@@ -212,11 +232,22 @@ def _initial_positions(
     start = np.asarray(mission.centroid.waypoints[0])
     rng = np.random.default_rng([seed, 7])
     if layout == "random":  # uniform in a square around the path's start, points apart
+        corners = start + np.array([[-spread, -spread], [spread, spread]])
+        _off_the_floor(lay, "spread", corners, "the square's corner {}")
+        if not lay.ok("spread"):
+            return None
         pts: list[np.ndarray] = []
+        cells: dict[tuple[int, int], list[np.ndarray]] = {}  # the points by spacing-wide cell
+        size = spacing if spacing > 0 else 1.0
         for _ in range(2000 * n):
             p = start + rng.uniform(-spread, spread, 2)
-            if all(np.hypot(*(p - q)) >= spacing for q in pts):
+            cx, cy = int(p[0] // size), int(p[1] // size)
+            near = (
+                q for i in (-1, 0, 1) for j in (-1, 0, 1) for q in cells.get((cx + i, cy + j), ())
+            )
+            if spacing <= 0 or all(np.hypot(*(p - q)) >= spacing for q in near):
                 pts.append(p)
+                cells.setdefault((cx, cy), []).append(p)
                 if len(pts) == n:
                     return _ro(np.array(pts))
         t.report(
@@ -230,8 +261,11 @@ def _initial_positions(
         # starts up to a diameter away from its own slot
         r = radius or float(np.linalg.norm(offsets, axis=1).max())
         ang = 2 * np.pi * rng.permutation(n) / n
-        return _ro(start + r * np.c_[np.cos(ang), np.sin(ang)])
+        pts_ = start + r * np.c_[np.cos(ang), np.sin(ang)]
+        _off_the_floor(t, "initial_positions", pts_, "the layout puts robot {}")
+        return _ro(pts_)
     pts_ = start + offsets + rng.uniform(-jitter, jitter, (n, 2))
+    _off_the_floor(t, "initial_positions", pts_, "the layout puts robot {}")
     return _ro(pts_)
 
 
@@ -354,8 +388,11 @@ def _noise(t: Table) -> Noise:
 
 def _centroid(t: Table) -> CentroidPath:
     c = t.table("centroid")
+    waypoints = c.array("waypoints", (None, N_DIM), what="a list of [x, y] waypoints")
+    if c.ok("waypoints"):
+        _off_the_floor(c, "waypoints", waypoints, "waypoint {}")
     path = CentroidPath(
-        waypoints=c.array("waypoints", (None, N_DIM), what="a list of [x, y] waypoints"),
+        waypoints=waypoints,
         speed=c.number("speed", low=0.0),
         corner_radius=c.number("corner_radius", 0.3, low=0.0, strict_low=False),
         ramp_time=c.number("ramp_time", 2.0, low=0.0),
@@ -389,6 +426,8 @@ def _mission(t: Table, duration: float | None) -> Mission:
 
 def _obstacle(t: Table) -> Obstacle:
     pos = t.array("position", (N_DIM,), what="an [x, y] pair")
+    if t.ok("position"):
+        _off_the_floor(t, "position", pos[None], "the cylinder")
     radius = t.number("radius", low=0.0)
     safe = t.number("safe_distance", low=0.0)
     if t.ok("radius", "safe_distance") and safe <= radius:

@@ -22,7 +22,6 @@ computed at the initial pose. Every problem is one line naming the file and the 
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -190,17 +189,9 @@ def load(path: Path) -> RobotModel:
 
 
 def _load_robot_file(path: Path) -> RobotModel:
-    from ..tomlcheck import Doc, Table
+    from ..tomlcheck import Doc, Table, read_toml
 
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise ScenarioError(f"{path}: not valid TOML: the file is not UTF-8 text") from None
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
+    data = read_toml(path)
     doc = Doc(str(path), data)
     t = Table(str(path), data, "", doc)
     mjcf_name = t.string("mjcf")
