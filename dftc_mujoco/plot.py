@@ -89,8 +89,16 @@ def _plot(args, signals: interrupt.Signals) -> int:
                 output.replace_into(work, out, drawn)
             finally:
                 shutil.rmtree(work, ignore_errors=True)
-    except OutputError as exc:
+    except (OutputError, ScenarioError) as exc:  # ScenarioError: the video's robot file
         return cli.fail(exc)
+    except (ValueError, TypeError, KeyError, IndexError) as exc:  # records edited by hand
+        print(
+            f"error: {args.run_dir}: these records cannot be drawn ({type(exc).__name__}: "
+            f"{str(exc).splitlines()[0] if str(exc) else ''}); were they edited, or written by "
+            "another version? python -m dftc_mujoco.run writes them again",
+            file=sys.stderr,
+        )
+        return EXIT_INPUT
     except OSError as exc:
         cli.print_error(output.os_problem(exc, "drawing the figures and video", args.run_dir))
         print(f"note: the figures and video in {args.run_dir} are unchanged", file=sys.stderr)

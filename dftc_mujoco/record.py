@@ -136,14 +136,31 @@ class Events:
 
 
 def write_json(path: Path, obj: Any) -> None:
-    """Write ``obj`` as indented JSON, atomically."""
-    text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
+    """Write ``obj`` as indented JSON, atomically; a non-finite number (a run whose numbers
+    blew up) is written as null rather than losing the file (JSON has no inf or NaN)."""
+    try:
+        text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
+    except ValueError:
+        text = json.dumps(_finite(obj), indent=2, allow_nan=False, default=_json_default) + "\n"
     atomic_write(path, lambda fh: fh.write(text.encode()))
 
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write arrays as a compressed ``.npz``, atomically."""
     atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))  # type: ignore[arg-type]
+
+
+def _finite(o: Any) -> Any:
+    """``o`` with every non-finite float (numpy's too) replaced by None."""
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_finite(v) for v in o]
+    if isinstance(o, float | np.floating):
+        return float(o) if np.isfinite(o) else None
+    if isinstance(o, np.ndarray):
+        return _finite(o.tolist())
+    return o
 
 
 def _json_default(o: Any) -> Any:

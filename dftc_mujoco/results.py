@@ -114,7 +114,8 @@ def open_run(folder: str | Path) -> RunResult:
         raise ScenarioError(f"{files['scenario.toml']}: unreadable: {_one_line(exc)}") from None
     scenario = from_dict(data, source=str(files["scenario.toml"]))
     events = Events([dict(e) for e in summary.get("events", [])])
-    error = SimulationError(summary["error"]) if summary.get("status") == "failed" else None
+    failed = summary.get("status") == "failed"
+    error = SimulationError(str(summary.get("error") or "failed")) if failed else None
     return RunResult(scenario, log, events, summary, error)
 
 
@@ -137,6 +138,12 @@ def _read_log(path: Path) -> dict[str, np.ndarray]:
     missing = [k for k in LOG_FIELDS if k not in log]
     if missing:
         raise ScenarioError(f"{path}: not a run log: missing {', '.join(missing)}")
+    odd = [k for k, a in log.items() if a.dtype.kind not in "biuf"]
+    if odd:
+        k = odd[0]
+        raise ScenarioError(
+            f"{path}: not a run log: field {k!r} holds {log[k].dtype.name} values, expected numbers"
+        )
     t = log["t"]
     if t.ndim != 1 or not len(t) or any(len(log[k]) != len(t) for k in ("x", "u", "pose")):
         raise ScenarioError(f"{path}: not a run log: its arrays do not have one row per time")

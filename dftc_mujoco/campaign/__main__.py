@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import cli, interrupt, output
-from ..errors import EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
+from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_PHYSICS, OutputError, ScenarioError
 from ..interrupt import Interrupted, Signals
 
 
@@ -131,6 +131,15 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
         f"{failed} failed) on {outcome.engine} in {out}"
     )
     print(f"report: {path}")
+    if rows and failed == len(rows):  # nothing was learnt: say so, and not with exit 0
+        errors = [str(r.get("error", "")) for r in rows]
+        refused = all(e.startswith(("InputError", "ScenarioError")) for e in errors)
+        print(
+            f"error: every run {'was refused' if refused else 'failed'} ({failed} of "
+            f"{len(rows)}); the first: {errors[0].splitlines()[0] if errors[0] else '?'}",
+            file=sys.stderr,
+        )
+        return EXIT_INPUT if refused else EXIT_PHYSICS
     return EXIT_OK
 
 

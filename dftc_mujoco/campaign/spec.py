@@ -83,7 +83,7 @@ def load(path: str | Path) -> Spec:
     # the base scenario must be valid on its own: its errors name its file, not a run
     scenario_mod.from_dict(copy.deepcopy(base), source=f"{base_file} (base scenario of {path})")
     runs = top.integer("runs", low=1)
-    seed = top.integer("seed", 0, low=0)
+    seed = top.integer("seed", 0, low=0, high=2**63 - 1)
     overrides = top.raw("set", {})
     if not isinstance(overrides, dict):
         top.fail("set", f"expected a table of scenario keys, got {describe(overrides)}")
@@ -92,6 +92,7 @@ def load(path: str | Path) -> Spec:
     _check_faulty_robots(path, vary, base)
     spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
     scenario_for(spec, draw(spec, 0))  # the scenarios it makes must be valid
+    _check_variety(spec)
     _check_choices(spec)
     for i in range(1, min(runs, 3)):
         scenario_for(spec, draw(spec, i))
@@ -120,6 +121,22 @@ def _check_faulty_robots(path: Path, vary: dict[str, Any], base: dict[str, Any])
                 f"{path}: vary.faulty_robot: none of robots {robots} exists in a team of {n} "
                 f"(vary.robots = {vary['robots']}); give at least one from 1 to {n}"
             )
+
+
+def _check_variety(spec: Spec) -> None:
+    """Refuse a campaign whose runs would all be one and the same scenario (``[vary] seed =
+    false`` and nothing else drawn): N identical copies say nothing N times."""
+    if spec.runs < 2:
+        return
+    first = {k: v for k, v in draw(spec, 0).items() if k != "run"}
+    for i in range(1, min(spec.runs, 16)):
+        if {k: v for k, v in draw(spec, i).items() if k != "run"} != first:
+            return
+    raise ScenarioError(
+        f"{spec.source}: vary: every one of the {spec.runs} runs would be the same scenario "
+        "(seed = false and nothing else varies): set [vary] seed = true, vary something, or "
+        "ask for runs = 1"
+    )
 
 
 def _check_choices(spec: Spec) -> None:
@@ -170,8 +187,13 @@ def _vary(t: Table) -> dict[str, Any]:
             t.fail("robots", f"expected a list of team sizes >= 3, got {describe(ns)}")
         v["robots"] = ns
     g = t.table("graph", {})
+    chords = g.raw("chords", [2])
+    if not isinstance(chords, list) or any(
+        isinstance(c, bool) or not isinstance(c, int) or c < 1 for c in chords
+    ):
+        g.fail("chords", f"expected a list of chord lengths >= 1, got {describe(chords)}")
     v["graph"] = {
-        "chords": g.raw("chords", [2]),
+        "chords": chords,
         "in_degree": g.integer("in_degree", 2, low=1),
         "k": g.integer("k", 2, low=1),
     }

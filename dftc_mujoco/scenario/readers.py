@@ -50,7 +50,7 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
         top.report("name", problem)
     description = top.string("description", "")
     duration = top.number("duration", low=0.0)
-    seed = top.integer("seed", 0, low=0)
+    seed = top.integer("seed", 0, low=0, high=2**63 - 1)
     known_duration = duration if top.ok("duration") else None
 
     physics = doc.guard(lambda: _physics(top.table("physics", {})))
