@@ -1,0 +1,229 @@
+"""Hostile but fair input (issue 22, list v3): every case is one ``error:`` line naming the
+file, the key, what was expected and what was found, with the right exit code and nothing
+lost, or it runs when it is legitimate. One test per family: scenario files, overrides,
+robot files, campaign specs, the command line, the Python API and process faults."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dftc_mujoco import Simulation, load_scenario, open_run, plot, run, simulate
+from dftc_mujoco.blocks import paper
+from dftc_mujoco.campaign import __main__ as campaign_cli
+from dftc_mujoco.errors import EXIT_INPUT, InputError, OutputError
+from dftc_mujoco.scenario import SCENARIOS
+
+GOOD = (SCENARIOS / "paper_case.toml").read_text()
+
+
+def _one_error_line(err: str, *needles: str) -> None:
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert lines, err
+    assert "Traceback" not in err, err
+    for needle in needles:
+        assert any(needle in line for line in lines), (needle, err)
+
+
+def _variant(old: str, new: str) -> str:
+    assert old in GOOD, old
+    return GOOD.replace(old, new, 1)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "needles"),
+    [
+        # a robot that starts off the floor: the mission used to end at t = 0
+        ("[-0.40, -0.20]", "[70.0, -0.20]", ("team.initial_positions", "robot 1 at [70")),
+        # mm/s typed as m/s: a stop was never detected
+        ("eta_bar = 0.001", "eta_bar = 0.001\nxi_bar = 5.0", ("noise.xi_bar", "5 mm/s is 0.005")),
+        # G of 1e-4: fault estimates 27-54 m/s wrong; 1e-300: a summary that could not be saved
+        ('G = "auto"', "G = 1e-4", ("gains.G", "expected G > 0.00508")),
+        ('G = "auto"', "G = 1e-300", ("gains.G", "unstable")),
+        # every robot was excluded
+        ("[fdir]", "[fdir]\nexcluded_safe_distance = 1000.0", ("fdir.excluded_safe_distance",)),
+        # numbers that passed the finite check overflowed later
+        ("duration = 60.0", "duration = 1e308", ("duration: expected a number within",)),
+    ],
+)
+def test_a_meaningless_scenario_is_refused_before_simulating(tmp_path, capsys, old, new, needles):
+    path = tmp_path / "s.toml"
+    path.write_text(_variant(old, new))
+    out = tmp_path / "out"
+    assert run.main([str(path), "--no-video", "--no-progress", "--out", str(out)]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, str(path), *needles)
+    assert not out.exists()
+
+
+def test_a_toml_file_nested_50000_deep_is_one_line(tmp_path, capsys):
+    path = tmp_path / "deep.toml"
+    path.write_text("x = " + "[" * 50_000 + "]" * 50_000 + "\n")
+    assert run.main([str(path), "--no-video", "--out", str(tmp_path / "o")]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, str(path), "nested too deep")
+
+
+@pytest.mark.parametrize(
+    ("value", "got"),
+    [
+        ("os:_exit", "builtin_function_or_method posix._exit"),  # exited 0 with no records
+        ("subprocess:call", "function subprocess.call"),  # ran a shell command
+        ("collections:OrderedDict", "class collections.OrderedDict"),  # silently replaced
+    ],
+)
+def test_an_override_naming_a_callable_that_is_not_a_block_is_refused(tmp_path, capsys, value, got):
+    out = tmp_path / "out"
+    code = run.main(
+        ["paper_case", "--set", f"onboard.decision={value}", "--no-video", "--out", str(out)]
+    )
+    assert code == EXIT_INPUT
+    _one_error_line(
+        capsys.readouterr().err,
+        "onboard.decision",
+        "expected a class derived from dftc_mujoco.blocks.paper.Decision",
+        got,
+    )
+    assert not out.exists()
+
+
+def test_overrides_of_sizes_are_checked_before_use(capsys):
+    assert run.main(["paper_case", "--set", "team.robots=6000", "--no-video"]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "team.robots: expected an integer <= 5000")
+    deep = "[" * 50_000 + "]" * 50_000
+    assert run.main(["paper_case", "--set", f"team.graph={deep}", "--no-video"]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "--set team.graph", "nested too deep")
+
+
+def test_a_robot_file_with_a_huge_number_or_too_deep_is_one_line(tmp_path, capsys):
+    data = Path(__file__).parent / "data" / "robots"
+    text = (data / "slowbase.robot.toml").read_text()
+    for name, body, needle in [
+        ("deep", text + "\nx = " + "[" * 50_000 + "]" * 50_000 + "\n", "nested too deep"),
+        ("huge", text.replace("lag = 2.503", "lag = 1e300", 1), "calibration.lag"),
+    ]:
+        path = tmp_path / f"{name}.robot.toml"
+        path.write_text(body)
+        for item in (data / "slowbase").iterdir():  # the robot file's own folder of models
+            (tmp_path / "slowbase").mkdir(exist_ok=True)
+            (tmp_path / "slowbase" / item.name).write_bytes(item.read_bytes())
+        code = run.main(["paper_case", "--robot", str(path), "--no-video"])
+        assert code == EXIT_INPUT
+        _one_error_line(capsys.readouterr().err, str(path), needle)
+
+
+def test_campaign_specs_that_mean_nothing_are_refused(tmp_path, capsys):
+    spec = tmp_path / "c.toml"
+    spec.write_text(
+        'name = "c"\nscenario = "paper_case"\nruns = 3\n[vary]\ngraph_family = ["ring_chords"]\n'
+        '[vary.graph]\nchords = "x"\n'
+    )
+    assert campaign_cli.main([str(spec), "--out", str(tmp_path / "c")]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "vary.graph.chords: expected a list of chord")
+    spec.write_text('name = "c"\nscenario = "paper_case"\nruns = 2\n[vary]\nseed = false\n')
+    assert campaign_cli.main([str(spec), "--out", str(tmp_path / "c")]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "every one of the 2 runs would be the same scenario")
+
+
+def test_a_campaign_whose_every_run_is_refused_does_not_exit_0(tmp_path, capsys):
+    spec = tmp_path / "e.toml"
+    spec.write_text(
+        'name = "e"\nscenario = "paper_case"\nruns = 2\n[set]\nfaults = []\nduration = 8.0\n'
+        "mission.centroid.speed = 5.0\n"
+    )
+    code = campaign_cli.main([str(spec), "--out", str(tmp_path / "e"), "--workers", "1"])
+    assert code == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "every run was refused (2 of 2)", "command range")
+
+
+def test_out_with_dot_dot_lands_where_the_shell_would_put_it(tmp_path, capsys):
+    """--out p/new/.. simulated, printed "records: ...", then exited 5 and kept nothing."""
+    p = tmp_path / "p"
+    p.mkdir()
+    (p / "keep.txt").write_text("")
+    target = tmp_path / "q"
+    code = run.main(
+        [
+            "paper_case",
+            "--duration",
+            "1",
+            "--no-video",
+            "--no-progress",
+            "--out",
+            f"{target}/new/..",
+        ]
+    )
+    assert code == 0, capsys.readouterr().err
+    assert open_run(target).summary["simulated_time"] >= 1.0
+    assert not (target / "new").exists()
+
+
+def test_plot_answers_hand_edited_records_in_one_line(tmp_path, capsys, fault_free_run):
+    out = fault_free_run.save(tmp_path / "run", figures=False)
+    summary = json.loads((out / "summary.json").read_text())
+    summary["status"] = "failed"
+    summary.pop("error", None)  # a failed summary without its error: KeyError before
+    (out / "summary.json").write_text(json.dumps(summary))
+    assert open_run(out).error is not None
+    log = dict(np.load(out / "log.npz"))
+    log["t"] = log["t"].astype(str)  # a time column of text: TypeError in the figures before
+    np.savez(out / "log.npz", **log)
+    assert plot.main([str(out)]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "log.npz", "field 't' holds str")
+
+
+class _Falsy(paper.Thresholds):
+    """A user's thresholds block that is falsy (a container that is empty, say)."""
+
+    def __len__(self) -> int:
+        return 0
+
+
+def test_the_api_refuses_what_it_cannot_do_in_one_line(tmp_path):
+    s = load_scenario("paper_case", {"duration": 1.0, "faults": []})
+    sim = Simulation(s)
+    for bad in (0, -5, 1.5, True):  # step(0) and step(-5) returned snapshots at t < 0
+        with pytest.raises(ValueError, match="step\\(periods\\): expected a whole number"):
+            sim.step(bad)
+    with pytest.raises(ValueError, match="reset\\(seed\\)"):  # ran seed 1
+        sim.reset(seed=1.5)
+    sim.close()
+    with pytest.raises(RuntimeError, match="was closed"):  # AttributeError before
+        sim.step()
+    with pytest.raises(InputError, match="unknown block 'observr'"):  # KeyError before
+        from dftc_mujoco import blocks
+
+        blocks.create("observr", "paper")
+    falsy = _Falsy()
+    with Simulation(s, blocks={"thresholds": falsy}) as sim2:  # replaced by the paper's before
+        assert sim2.team.thresholds is falsy
+    with pytest.raises(InputError, match="not a thresholds block"):
+        Simulation(s, blocks={"thresholds": paper.Decision()})
+
+
+def test_save_never_mixes_two_runs(tmp_path):
+    """RunResult.save over a saved run left the old figures beside the new records."""
+    short = simulate(load_scenario("paper_case", {"duration": 1.0, "faults": []}))
+    longer = simulate(load_scenario("paper_case", {"duration": 2.0, "faults": []}))
+    out = short.save(tmp_path / "run")
+    assert (out / "figures").is_dir()
+    with pytest.raises(OutputError, match="holds another run"):
+        longer.save(out, figures=False)
+    assert open_run(out).summary["simulated_time"] == pytest.approx(1.0, abs=0.02)
+    longer.save(out, figures=False, overwrite=True)
+    assert open_run(out).summary["simulated_time"] == pytest.approx(2.0, abs=0.02)
+    assert not (out / "figures").exists()  # replaced as a whole
+
+
+def test_run_folders_get_the_users_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        out = simulate(load_scenario("paper_case", {"duration": 1.0, "faults": []})).save(
+            tmp_path / "run", figures=False
+        )
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o755  # mkdtemp's 0700 before
