@@ -85,6 +85,17 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
                 f"ko * control_period * (2 * max in-degree + 1) = {step_gain:g}, expected < 2; "
                 "lower ko or physics.control_period",
             )
+    if (
+        mission is not None
+        and physics is not None
+        and doc.ok("mission.centroid.ramp_time", "physics.control_period")
+        and mission.centroid.ramp_time < physics.control_period
+    ):  # the path's speed cannot ramp within less than a period (and its table would not end)
+        doc.record(
+            "mission.centroid.ramp_time",
+            f"expected at least control_period = {physics.control_period:g} s, got "
+            f"{mission.centroid.ramp_time:g}",
+        )
     if doc.problems:
         return None
     # every reader returned its value where it recorded no problem
@@ -234,6 +245,13 @@ def _initial_positions(
     if layout == "random":  # uniform in a square around the path's start, points apart
         corners = start + np.array([[-spread, -spread], [spread, spread]])
         _off_the_floor(lay, "spread", corners, "the square's corner {}")
+        room = (2 * spread / spacing + 1) ** 2 if spacing > 0 else math.inf
+        if lay.ok("spread") and n > room:  # not even a square grid of that pitch holds them
+            lay.report(
+                "spread",
+                f"{n} robots {spacing:g} m apart do not fit within ±{spread:g} m (at most "
+                f"{int(room)}): raise spread or lower spacing",
+            )
         if not lay.ok("spread"):
             return None
         pts: list[np.ndarray] = []

@@ -92,11 +92,11 @@ def compose(
     for name in OPTION_NAMES:  # the arena's options apply; differences are in Scene.notes
         setattr(robot_spec.option, name, getattr(spec.option, name))
     base = robot_spec.body(robot.base)
+    _filter(base, robot, robot_contacts)  # once: every attached copy carries the bits
     shift = np.asarray(robot.init_point)  # the control point at the initial pose, own frame
     for i, (x, y) in enumerate(positions):
         frame = spec.worldbody.add_frame(pos=[x - shift[0], y - shift[1], 0.0])
-        attached = frame.attach_body(base, robot_prefix(i), "")
-        _filter(attached, robot, robot_contacts)
+        frame.attach_body(base, robot_prefix(i), "")
     for k, ob in enumerate(obstacles):
         spec.worldbody.add_geom(
             name=f"obstacle{k + 1}",
@@ -129,7 +129,8 @@ def compose(
 
 
 def _filter(body: mujoco.MjsBody, robot: RobotModel, robot_contacts: bool) -> None:
-    """Collision bits of one attached robot, by membership (module docstring)."""
+    """Collision bits of the robot whose base is ``body``, by membership (module
+    docstring); set on the robot's own spec before it is attached N times."""
     for g in body.find_all(mujoco.mjtObj.mjOBJ_GEOM):
         ct, ca = int(g.contype), int(g.conaffinity)
         if not (ct or ca):
