@@ -49,6 +49,9 @@ def _variant(old: str, new: str) -> str:
         ("[fdir]", "[fdir]\nexcluded_safe_distance = 1000.0", ("fdir.excluded_safe_distance",)),
         # numbers that passed the finite check overflowed later
         ("duration = 60.0", "duration = 1e308", ("duration: expected a number within",)),
+        # a hang in the path's table, and an overflow of the substeps (found by fuzzing)
+        ("[mission.centroid]", "[mission.centroid]\nramp_time = 1e-9", ("ramp_time",)),
+        ("timestep = 0.002", "timestep = 1e-300", ("physics.timestep: expected at least",)),
     ],
 )
 def test_a_meaningless_scenario_is_refused_before_simulating(tmp_path, capsys, old, new, needles):

@@ -129,11 +129,22 @@ def _supervision(t: Table) -> Supervision:
     return s
 
 
+#: physics steps per control period beyond which a timestep is a typo (1e-7 s at 10 ms is 1e5
+#: steps, about an hour for a minute of paper_case, and is warned about; 1e-300 overflowed)
+MAX_SUBSTEPS = 1e6
+
+
 def _physics(t: Table) -> Physics:
     timestep = t.number("timestep", 0.002, low=0.0, high=0.1)
     period = t.number("control_period", 0.01, low=0.0, high=1.0)
     ratio = period / timestep
-    if t.ok("timestep", "control_period") and (
+    if t.ok("timestep", "control_period") and ratio > MAX_SUBSTEPS:
+        t.report(
+            "timestep",
+            f"expected at least control_period / {MAX_SUBSTEPS:g} = {period / MAX_SUBSTEPS:g} s "
+            f"(at most {MAX_SUBSTEPS:g} physics steps per control period), got {timestep:g}",
+        )
+    elif t.ok("timestep", "control_period") and (
         ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-6
     ):
         t.report(
