@@ -50,7 +50,7 @@ def _variant(old: str, new: str) -> str:
         # numbers that passed the finite check overflowed later
         ("duration = 60.0", "duration = 1e308", ("duration: expected a number within",)),
         # a hang in the path's table, and an overflow of the substeps (found by fuzzing)
-        ("[mission.centroid]", "[mission.centroid]\nramp_time = 1e-9", ("ramp_time",)),
+        ("ramp_time = 2.0", "ramp_time = 1e-9", ("mission.centroid.ramp_time: expected at least",)),
         ("timestep = 0.002", "timestep = 1e-300", ("physics.timestep: expected at least",)),
     ],
 )
