@@ -114,6 +114,115 @@ PARALLEL_FROM = 200
 
 
 @njit(cache=True)
+def begin(inp: PeriodInputs, out: PeriodBuffers) -> None:  # pragma: no cover - compiled
+    """Stage 1: the members' own measurements, and the mission's x_d = J⁻¹σ_d (eq. 14)."""
+    x_m, rows, c, c_dot, offsets, rates = (
+        inp.x_m,
+        inp.rows,
+        inp.c,
+        inp.c_dot,
+        inp.offsets,
+        inp.rates,
+    )
+    for i in range(rows.shape[0]):
+        for d in range(c.shape[0]):
+            out.x_own[i, d] = x_m[rows[i], d]
+            out.x_d[i, d] = c[d] + offsets[i, d]
+            out.xd_dot[i, d] = c_dot[d] + rates[i, d]
+
+
+@njit(cache=True)
+def act(
+    inp: PeriodInputs,
+    sup: SupervisorRecord,
+    seen: Surroundings,
+    drive: DriveRecord,
+    out: PeriodBuffers,
+) -> int:  # pragma: no cover - compiled
+    """Stage 3: each robot's nominal input (eqs. 8, 18, 22) within its drive's acceleration
+    and range (Remark 4.1); returns SWITCHED | SATURATED bits."""
+    code = 0
+    if supervise(
+        out.x_own,
+        out.u_g,
+        seen.obstacles,
+        seen.safe,
+        seen.activation,
+        sup.theta,
+        sup.release,
+        sup.active,
+        out.u_mem,
+        out.du,
+        seen.mates,
+        sup.mate_safe,
+        sup.mate_act,
+    ):
+        code |= SWITCHED
+    if limit_input(
+        out.u_mem, out.u_g, out.du, drive.input_limit, drive.command, inp.rows, drive.accel_step
+    ):
+        code |= SATURATED
+    return code
+
+
+@njit(cache=True)
+def deliver(
+    inp: PeriodInputs,
+    ob: ObserverRecord,
+    drive: DriveRecord,
+    est: EstimatorRecord,
+    out: PeriodBuffers,
+) -> None:  # pragma: no cover - compiled
+    """Stage 5: the inputs on the robot axis (an excluded robot is told to stay), the drive's
+    lag, ∫u (eqs. 20-21), and (with FDIR) every robot's fault estimator and ū (eqs. 28-31)."""
+    rows, u, u_mem, du, u_bar, command = (
+        inp.rows,
+        out.u,
+        out.u_mem,
+        out.du,
+        out.u_bar,
+        drive.command,
+    )
+    m = rows.shape[0]
+    if m < u.shape[0]:
+        u[:] = 0.0
+    for i in range(m):
+        for d in range(2):
+            u[rows[i], d] = u_mem[i, d]
+    if drive.lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
+        lag_input(u, drive.v_hat, command, drive.lag_a, drive.lag_b)
+        for i in range(m):
+            for d in range(2):
+                u_mem[i, d] = u[rows[i], d]
+                du[i, d] = u_mem[i, d] - out.u_g[i, d]
+    else:
+        command[:] = u
+    integrate_inputs(ob.int_u_hat, ob.int_u_own, du, u_mem, ob.dt)  # eqs. 20-21
+    if not inp.fdir:
+        u_bar[:] = command
+        return
+    applied = est.applied
+    estimate_faults(
+        inp.x_m,
+        u,
+        est.z,
+        est.int_e,
+        est.phi_hat,
+        applied,
+        est.K,
+        est.g_inv,
+        est.dt,
+        est.limit,
+        est.alpha,
+        est.hold,
+        u_bar,
+    )
+    for r in range(u.shape[0]):
+        for d in range(2):
+            u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
+
+
+@njit(cache=True)
 def team_period(
     inp: PeriodInputs,
     ob: ObserverRecord,
@@ -125,7 +234,11 @@ def team_period(
     dec: DecisionRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
-    """One period for the members ``inp.rows``; returns RAISED | SWITCHED | SATURATED bits.
+    """One period for the members ``inp.rows`` on one core; returns RAISED | SWITCHED |
+    SATURATED bits. The stages in the order of Fig. 1: :func:`begin`, the estimate pass
+    (eqs. 15, 16, 20, 21), :func:`act`, the residual pass (eqs. 35, 19), :func:`deliver`,
+    the decision (eq. 39); :func:`team_period_split` runs the same stages with the passes
+    and the decision over every core.
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
     ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
@@ -134,111 +247,133 @@ def team_period(
     Robots that are not members get u = 0 and only run their fault estimator. ŷ of the
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
-    x_m, rows, c, c_dot, offsets, rates = (
-        inp.x_m,
-        inp.rows,
-        inp.c,
-        inp.c_dot,
-        inp.offsets,
-        inp.rates,
-    )
-    x_own, x_d, xd_dot, x_hat = out.x_own, out.x_d, out.xd_dot, out.x_hat
-    u_g, u_mem, du, row, r_norm, u, u_bar = (
-        out.u_g,
-        out.u_mem,
-        out.du,
+    begin(inp, out)
+    m, _, n = ob.y_hat.shape
+    y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
+    xh, xd, vd = out.x_hat.reshape(m, m * n), out.x_d.reshape(-1), out.xd_dot.reshape(-1)
+    estimates(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, 1)
+    code = act(inp, sup, seen, drive, out)
+    yn = ob.y_next.reshape(m, m * n)
+    residuals(
+        ob.y_hat,
+        ob.int_u_own,
+        out.x_own,
+        ob.src,
+        ob.first_edge,
+        ob.in_degree,
         out.row,
         out.r_norm,
-        out.u,
-        out.u_bar,
+        yn,
+        ob.ko,
+        ob.dt,
     )
-    y_hat, y_next, int_u_hat, int_u_own = ob.y_hat, ob.y_next, ob.int_u_hat, ob.int_u_own
-    kc, ko, dt = ctl.kc, ob.ko, ob.dt
-    command = drive.command
-    m, _, n = y_hat.shape
-    code = 0
-    for i in range(m):
-        for d in range(n):
-            x_own[i, d] = x_m[rows[i], d]
-            x_d[i, d] = c[d] + offsets[i, d]  # J⁻¹σ_d, the mission (eq. 14)
-            xd_dot[i, d] = c_dot[d] + rates[i, d]
-    y, s = y_hat.reshape(m, m * n), int_u_hat.reshape(m, m * n)
-    xh, xd, vd = x_hat.reshape(m, m * n), x_d.reshape(-1), xd_dot.reshape(-1)
-    if row.shape[0] > 1:  # pass 1, robot by robot
-        estimates_parallel(y, s, xh, xd, vd, u_g, kc, dt, n, row.shape[0])
-    else:
-        estimates(y, s, xh, xd, vd, u_g, kc, dt, n, 1)
-    # eqs. 8, 18
-    if supervise(
-        x_own,
-        u_g,
-        seen.obstacles,
-        seen.safe,
-        seen.activation,
-        sup.theta,
-        sup.release,
-        sup.active,
-        u_mem,
-        du,
-        seen.mates,
-        sup.mate_safe,
-        sup.mate_act,
+    deliver(inp, ob, drive, est, out)
+    if inp.fdir and decide_in_groups(
+        out.r_norm,
+        dec.mu,
+        dec.above,
+        dec.below,
+        dec.flag,
+        dec.dt,
+        dec.window,
+        dec.exclusive,
+        dec.isolated,
+        dec.raised,
+        1,
     ):
-        code |= SWITCHED
-    # the input the robot applies (Remark 4.1): its drive's acceleration and range
-    if limit_input(u_mem, u_g, du, drive.input_limit, command, rows, drive.accel_step):
-        code |= SATURATED
-    yn = y_next.reshape(m, m * n)
-    # pass 2: every robot reads its in-neighbours' current messages
-    if row.shape[0] > 1:
-        residuals_parallel(
-            y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, row, r_norm, yn, ko, dt
-        )
-    else:
-        residuals(
-            y_hat, int_u_own, x_own, ob.src, ob.first_edge, ob.in_degree, row, r_norm, yn, ko, dt
-        )
-    if m < u.shape[0]:
-        u[:] = 0.0  # an excluded robot is told to stay where it is
-    for i in range(m):
-        for d in range(2):
-            u[rows[i], d] = u_mem[i, d]
-    if drive.lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
-        lag_input(u, drive.v_hat, command, drive.lag_a, drive.lag_b)
-        for i in range(m):
-            for d in range(2):
-                u_mem[i, d] = u[rows[i], d]
-                du[i, d] = u_mem[i, d] - u_g[i, d]
-    else:
-        command[:] = u
-    integrate_inputs(int_u_hat, int_u_own, du, u_mem, dt)  # eqs. 20-21
-    if inp.fdir:
-        applied = est.applied
-        estimate_faults(
-            x_m,
-            u,
-            est.z,
-            est.int_e,
-            est.phi_hat,
-            applied,
-            est.K,
-            est.g_inv,
-            est.dt,
-            est.limit,
-            est.alpha,
-            est.hold,
-            u_bar,
-        )
-        for r in range(u.shape[0]):
-            for d in range(2):
-                u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
-        args = (r_norm, dec.mu, dec.above, dec.below, dec.flag, dec.dt, dec.window)
-        if row.shape[0] > 1:
-            raised = decide_parallel(*args, dec.exclusive, dec.isolated, dec.raised, row.shape[0])
-        else:
-            raised = decide_in_groups(*args, dec.exclusive, dec.isolated, dec.raised, 1)
-        if raised:  # eq. 39
-            code |= RAISED
-    else:
-        u_bar[:] = command
+        code |= RAISED
     return code
+
+
+def team_period_split(
+    inp: PeriodInputs,
+    ob: ObserverRecord,
+    ctl: ControllerRecord,
+    sup: SupervisorRecord,
+    seen: Surroundings,
+    drive: DriveRecord,
+    est: EstimatorRecord,
+    dec: DecisionRecord,
+    out: PeriodBuffers,
+) -> int:
+    """:func:`team_period`'s stages with the two passes over the N × N state and the decision
+    run in ``out.row.shape[0]`` groups of robots over every core: the same arithmetic per
+    robot, so the same numbers bit for bit. Called stage by stage from Python (a few µs,
+    nothing at the N ≥ PARALLEL_FROM it is for): a compiled caller of the parallel passes
+    pays the thread pool's cost even where it runs them on one core (4.5 µs per period at
+    N = 4)."""
+    groups = out.row.shape[0]
+    begin(inp, out)
+    m, _, n = ob.y_hat.shape
+    y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
+    xh, xd, vd = out.x_hat.reshape(m, m * n), out.x_d.reshape(-1), out.xd_dot.reshape(-1)
+    estimates_parallel(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, groups)
+    code = act(inp, sup, seen, drive, out)
+    yn = ob.y_next.reshape(m, m * n)
+    residuals_parallel(
+        ob.y_hat,
+        ob.int_u_own,
+        out.x_own,
+        ob.src,
+        ob.first_edge,
+        ob.in_degree,
+        out.row,
+        out.r_norm,
+        yn,
+        ob.ko,
+        ob.dt,
+    )
+    deliver(inp, ob, drive, est, out)
+    if inp.fdir and decide_parallel(
+        out.r_norm,
+        dec.mu,
+        dec.above,
+        dec.below,
+        dec.flag,
+        dec.dt,
+        dec.window,
+        dec.exclusive,
+        dec.isolated,
+        dec.raised,
+        groups,
+    ):
+        code |= RAISED
+    return int(code)
+
+
+@njit(cache=True)
+def team_period_flat(*a):  # pragma: no cover - compiled
+    """:func:`team_period` with the records' fields passed one by one, in the records' order
+    (``team_period_flat(*inputs, *observer, ..., *buffers)``), the records rebuilt inside
+    compiled code, where building them costs nothing. At the boundary numba types a tuple
+    argument element by element in Python on every call (10 µs for the nine records at
+    N = 4, twice the period's arithmetic) and a flat argument list in its C fast path. The
+    slices below are checked against the records' field counts (:data:`RECORDS`)."""
+    return team_period(
+        PeriodInputs(*a[0:7]),
+        ObserverRecord(*a[7:16]),
+        ControllerRecord(*a[16:17]),
+        SupervisorRecord(*a[17:22]),
+        Surroundings(*a[22:26]),
+        DriveRecord(*a[26:32]),
+        EstimatorRecord(*a[32:43]),
+        DecisionRecord(*a[43:52]),
+        PeriodBuffers(*a[52:63]),
+    )
+
+
+#: the records :func:`team_period` takes, in order (``team_period_flat`` slices them)
+RECORDS = (
+    PeriodInputs,
+    ObserverRecord,
+    ControllerRecord,
+    SupervisorRecord,
+    Surroundings,
+    DriveRecord,
+    EstimatorRecord,
+    DecisionRecord,
+    PeriodBuffers,
+)
+_ENDS = (7, 16, 17, 22, 26, 32, 43, 52, 63)  # where each record ends in team_period_flat's a
+if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
+    raise ImportError("team_period_flat's slices no longer match the records' fields")

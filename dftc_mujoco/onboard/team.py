@@ -32,11 +32,11 @@ from numba import njit
 from ..events import make
 from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
-from .applied import DriveModel
+from .applied import DriveModel, DriveRecord
 from .block import Block, TeamConfig
-from .controller import Controller
+from .controller import Controller, ControllerRecord
 from .decision import Decision
-from .fault_estimator import FaultEstimator
+from .fault_estimator import EstimatorRecord, FaultEstimator
 from .observer import Observer
 from .period import (
     PARALLEL_FROM,
@@ -45,10 +45,11 @@ from .period import (
     SWITCHED,
     PeriodBuffers,
     PeriodInputs,
-    team_period,
+    team_period_flat,
+    team_period_split,
 )
 from .recovery import Recovery
-from .supervisor import Supervisor, Surroundings
+from .supervisor import Supervisor, SupervisorRecord, Surroundings
 from .thresholds import Thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -242,6 +243,7 @@ class Team:
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
         )
         self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
+        self._flat: dict[tuple[int, int, bool], tuple] = {}  # see _flat_records
         self._buffers = PeriodBuffers(
             self.x_own,
             self.x_d,
@@ -312,22 +314,60 @@ class Team:
         return code
 
     def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
-        """The period as one compiled call over the blocks' state records (:mod:`.period`)."""
-        cfg = self.config
-        code = team_period(
-            PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, cfg.fdir),
-            self.observer.record(),
+        """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
+        fdir = self.config.fdir
+        if self._row.shape[0] > 1:  # a large team: the passes on every core
+            ctl, sup, seen, drive, est = self._records()
+            code = team_period_split(
+                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir),
+                self.observer.record(),
+                ctl,
+                sup,
+                seen,
+                drive,
+                est,
+                self.decision.record(self.mu),
+                self._buffers,
+            )
+        else:  # one compiled call, the records passed field by field (team_period_flat)
+            code = team_period_flat(
+                x_m, self.members, c, c_dot, offsets, rates, fdir, *self._flat_records()
+            )
+        self.observer.advance()  # ŷ of the next period (eq. 19)
+        self._raised = self.decision.raised
+        return code
+
+    def _flat_records(self) -> tuple:
+        """Every record but the period's inputs, field by field, in team_period_flat's order.
+        Their arrays change only at an exclusion (the cache is emptied then), ŷ and ŷ⁺ swap
+        every period and a thresholds rule may hand out a new ⁱμ_k: the tuples are kept per
+        (ŷ, μ, range reading), at most a few. Each holds its arrays, so no id is reused."""
+        key = (id(self.observer.y_hat), id(self.mu), self._sensed)
+        flat = self._flat.get(key)
+        if flat is None:
+            if len(self._flat) >= 4:
+                self._flat.clear()
+            records = (
+                self.observer.record(),
+                *self._records(),
+                self.decision.record(self.mu),
+                self._buffers,
+            )
+            flat = self._flat[key] = tuple(v for r in records for v in r)
+        return flat
+
+    def _records(
+        self,
+    ) -> tuple[ControllerRecord, SupervisorRecord, Surroundings, DriveRecord, EstimatorRecord]:
+        """The records that change only at an exclusion (and with the range sensor's
+        reading): controller, supervisor, surroundings, drive, fault estimator."""
+        return (
             self.controller.record(),
             self.supervisor.record(self._sensed),
             self._seen,
             self.drive.record(),
             self.estimator.record(self._touch),
-            self.decision.record(self.mu),
-            self._buffers,
         )
-        self.observer.advance()  # ŷ of the next period (eq. 19)
-        self._raised = self.decision.raised
-        return code
 
     def _general(self, x_m, c, c_dot, offsets, rates) -> int:
         """The same period through the blocks' Python methods (any block set)."""
