@@ -124,11 +124,14 @@ def test_a_killed_campaign_loses_no_finished_run(tmp_path):
     assert all(after[k] == v for k, v in kept.items())  # finished runs untouched
 
 
-def test_a_run_that_raises_is_recorded_and_the_campaign_goes_on(tmp_path):
+def test_a_run_that_raises_is_recorded_and_the_campaign_goes_on(tmp_path, capsys):
+    """Every run refused: each is recorded with its error, the report is written, and the
+    campaign says so and exits 2 (it exited 0 with nothing learnt)."""
     bad = tmp_path / "bad.toml"
     bad.write_text(TINY.read_text().replace("[set]", '[set.team]\nrobot_model = "tank"\n\n[set]'))
     out = tmp_path / "out"
-    assert campaign_main([str(bad), "--workers", "1", "--out", str(out), "--no-progress"]) == 0
+    assert campaign_main([str(bad), "--workers", "1", "--out", str(out), "--no-progress"]) == 2
+    assert "every run was refused (4 of 4)" in capsys.readouterr().err
     rows = _rows(out)
     assert len(rows) == 4 and all(r["status"] == "failed" for r in rows.values())
     assert all("unknown robot model 'tank'" in r["error"] for r in rows.values())

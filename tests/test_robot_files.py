@@ -541,17 +541,19 @@ def test_impossible_set_ups_are_refused_before_simulating():
     )
     t0 = time.perf_counter()
     ring = {"family": "ring_chords", "chords": [2]}
-    for n, duration in ((1000, 1e9), (100_000, 60.0)):  # log and N x N estimates, one line
-        lines = _refusals(
-            {
-                "team.robots": n,
-                "team.initial_positions": {"layout": "formation"},
-                "team.graph": ring,
-                "duration": duration,
-                "faults": [],
-            }
-        )
-        assert len(lines) == 1 and "GB" in lines[0] and "reduce" in lines[0], lines
+    lines = _refusals(  # a log that does not fit: one line, with the estimate
+        {
+            "team.robots": 1000,
+            "team.initial_positions": {"layout": "formation"},
+            "mission.formation": {"shape": "grid", "side": 0.5},
+            "team.graph": ring,
+            "duration": 1e9,
+            "faults": [],
+        }
+    )
+    assert len(lines) == 1 and "GB" in lines[0] and "reduce" in lines[0], lines
+    with pytest.raises(ScenarioError, match=r"team\.robots: expected an integer <= 5000"):
+        scenario.load_scenario("paper_case", {"team.robots": 100_000, "team.graph": ring})
     assert time.perf_counter() - t0 < 20
 
 

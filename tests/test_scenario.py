@@ -158,6 +158,6 @@ def test_generated_start_layouts_for_untuned_batteries():
             "paper_case",
             {**base, "team.initial_positions": {"layout": "random", "spread": 1.0}},
         )
-    assert "team.initial_positions: cannot place 40 robots 0.5 m apart within ±1 m" in str(
+    assert "team.initial_positions.spread: 40 robots 0.5 m apart do not fit within ±1 m" in str(
         err.value
     )
