@@ -138,18 +138,7 @@ class Decision(Block):
 
     def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
         """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
-        decide(
-            np.ascontiguousarray(r_norm, float),
-            np.ascontiguousarray(mu, float),
-            self.above,
-            self.below,
-            self.flag,
-            self.dt,
-            self.window,
-            self.exclusive,
-            self.isolated,
-            self._raised,
-        )
+        decide(np.ascontiguousarray(r_norm, float), *self.record(np.ascontiguousarray(mu, float)))
         return self._raised
 
     def record(self, mu: np.ndarray) -> DecisionRecord:

@@ -151,19 +151,8 @@ class FaultEstimator(Block):
         u_bar = np.empty(self.z.shape)
         if hold is None:
             hold = np.zeros(len(self.z), bool)
+        state = self.record(np.ascontiguousarray(hold, bool))[:-1]  # all but `compensate`
         estimate_faults(
-            np.ascontiguousarray(x_m, float),
-            np.ascontiguousarray(u, float),
-            self.z,
-            self.int_e,
-            self.phi_hat,
-            self.applied,
-            self.K,
-            self.g_inv,
-            self.dt,
-            self.command_limit,
-            self.alpha,
-            np.ascontiguousarray(hold, bool),
-            u_bar,
+            np.ascontiguousarray(x_m, float), np.ascontiguousarray(u, float), *state, u_bar
         )
         return u_bar

@@ -280,7 +280,7 @@ def team_period(
         dec.isolated,
         dec.raised,
         1,
-    ):
+    ):  # eq. 39 (star-unpacking a NamedTuple does not compile)
         code |= RAISED
     return code
 
@@ -324,19 +324,7 @@ def team_period_split(
         ob.dt,
     )
     deliver(inp, ob, drive, est, out)
-    if inp.fdir and decide_parallel(
-        out.r_norm,
-        dec.mu,
-        dec.above,
-        dec.below,
-        dec.flag,
-        dec.dt,
-        dec.window,
-        dec.exclusive,
-        dec.isolated,
-        dec.raised,
-        groups,
-    ):
+    if inp.fdir and decide_parallel(out.r_norm, *dec, groups):  # eq. 39
         code |= RAISED
     return int(code)
 
