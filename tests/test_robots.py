@@ -291,3 +291,30 @@ def test_a_path_faster_than_the_applied_range_is_refused_before_the_run():
     msg = str(info.value)
     assert "mission.centroid.speed: 0.6 m/s is beyond the diffdrive robots' applied range" in msg
     assert "±0.59 m/s" in msg
+
+
+@pytest.mark.parametrize("name", ["hexbot", "diffdrive"])
+def test_robots_attached_in_groups_make_the_same_model(name, monkeypatch):
+    """The scene attaches robots into small specs of scene.GROUP first (attach_body costs in
+    proportion to the spec it attaches into: 1.8 s for 1000 robots one by one, 0.16 s in
+    groups): the compiled model is the same, array for array and name for name, whatever
+    the group size (1: every robot through its own group; 7: groups and a remainder)."""
+    robot = robots.get(name)
+    pos = np.array([[(i % 5) * 2.0, (i // 5) * 2.0] for i in range(15)])
+    models = []
+    for group in (1, 7, 64):
+        monkeypatch.setattr(scene, "GROUP", group)
+        models.append(scene.compose(robot, pos).model)
+    arrays = [
+        a
+        for a in dir(models[0])
+        if not a.startswith("_") and isinstance(getattr(models[0], a), np.ndarray)
+    ]
+    assert len(arrays) > 100
+    for m in models[1:]:
+        assert m.names == models[0].names
+        for a in arrays:
+            if a == "mesh_pathadr":  # where a mesh's file path is stored, not the mesh
+                continue
+            assert np.array_equal(getattr(m, a), getattr(models[0], a), equal_nan=True), a
+    assert mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, f"robot15/{robot.base}") > 0

@@ -57,9 +57,13 @@ class Scene:
     notes: tuple[str, ...] = field(default_factory=tuple)  # warnings about the composition
 
 
+PREFIX = "robot"  # every robot's names start with it (robot_prefix)
+GROUP = 32  # robots attached into one small spec before it joins the arena
+
+
 def robot_prefix(i: int) -> str:
     """Name prefix of robot i (0-based) in the scene: robot 1 is ``robot1/``."""
-    return f"robot{i + 1}/"
+    return f"{PREFIX}{i + 1}/"
 
 
 def build(scenario: Scenario, robot: RobotModel) -> Scene:
@@ -94,9 +98,20 @@ def compose(
     base = robot_spec.body(robot.base)
     _filter(base, robot, robot_contacts)  # once: every attached copy carries the bits
     shift = np.asarray(robot.init_point)  # the control point at the initial pose, own frame
-    for i, (x, y) in enumerate(positions):
-        frame = spec.worldbody.add_frame(pos=[x - shift[0], y - shift[1], 0.0])
-        frame.attach_body(base, robot_prefix(i), "")
+    # attach_body costs in proportion to the spec it attaches into (3.7 ms per robot at
+    # N = 1000, 1.8 s in all): robots go into groups of GROUP small specs first, each group
+    # then into the arena through a frame. Frames vanish at compilation and the prefixes
+    # compose ("robot" + "7/"), so the model is the one robot-by-robot attaching gives.
+    for g0 in range(0, len(positions), GROUP):
+        group = mujoco.MjSpec()
+        group.copy_during_attach = True
+        for name in OPTION_NAMES:  # the arena's options throughout (nothing to reconcile)
+            setattr(group.option, name, getattr(spec.option, name))
+        for i in range(g0, min(g0 + GROUP, len(positions))):
+            x, y = positions[i]
+            frame = group.worldbody.add_frame(pos=[x - shift[0], y - shift[1], 0.0])
+            frame.attach_body(base, robot_prefix(i).removeprefix(PREFIX), "")
+        spec.attach(group, frame=spec.worldbody.add_frame(), prefix=PREFIX, suffix="")
     for k, ob in enumerate(obstacles):
         spec.worldbody.add_geom(
             name=f"obstacle{k + 1}",
