@@ -24,6 +24,12 @@ if _os.environ["MUJOCO_GL"].lower() == "egl":
 
 __version__ = "0.2.0"
 
+# numba's cache forgets that a compiled caller holds its callees' old code: empty it when
+# any source changed (a stale cache crashed runs after an update in place)
+from . import numba_cache as _numba_cache
+
+_numba_cache.refresh(_numba_cache.Path(__file__).parent)
+
 _API = {
     "load_scenario": "scenario",
     "Scenario": "scenario",
