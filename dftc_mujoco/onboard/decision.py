@@ -14,6 +14,7 @@ from numba import njit, prange
 
 from ..graph import Graph
 from .block import Block, TeamConfig
+from .parallel import twin
 
 #: ``fdir.isolation`` -> the mode of :func:`decide`
 ISOLATION = {"pairwise": 0, "exclusive": 1, "exclusive_history": 2}
@@ -67,7 +68,7 @@ def _decide(
 
 # eq. 39 on one core, or split over the cores (the compiled period's choice, :mod:`.period`)
 decide_in_groups = njit(cache=True)(_decide)
-decide_parallel = njit(cache=True, parallel=True)(_decide)
+decide_parallel = njit(cache=True, parallel=True)(twin(_decide, "_decide_parallel"))
 
 
 @njit(cache=True)

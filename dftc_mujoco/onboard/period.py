@@ -36,6 +36,7 @@ from .observer import (
     residual_row,
     row_norms,
 )
+from .parallel import twin
 from .supervisor import SupervisorRecord, Surroundings, supervise
 
 RAISED = 1  # some flag was raised (detection events to report)
@@ -107,9 +108,9 @@ def _residuals(
 # the passes over the team's N × N state, each on one core or split over the cores (a team
 # of PARALLEL_FROM robots or more: below it, starting the threads costs more than it saves)
 estimates = njit(cache=True)(_estimates)
-estimates_parallel = njit(cache=True, parallel=True)(_estimates)
+estimates_parallel = njit(cache=True, parallel=True)(twin(_estimates, "_estimates_parallel"))
 residuals = njit(cache=True)(_residuals)
-residuals_parallel = njit(cache=True, parallel=True)(_residuals)
+residuals_parallel = njit(cache=True, parallel=True)(twin(_residuals, "_residuals_parallel"))
 PARALLEL_FROM = 200
 
 
