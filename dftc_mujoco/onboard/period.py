@@ -1,20 +1,23 @@
-"""One control period of the whole team with the paper's blocks, compiled as one call.
+"""One control period of the whole team with the paper's blocks, compiled.
 
 This is not a second implementation: it calls, in the order of Fig. 1, the
 same compiled functions the blocks call (observer :func:`~.observer.estimate_one`,
 :func:`~.observer.residual_row`, :func:`~.observer.advance_one`,
 :func:`~.observer.integrate_inputs`; controller :func:`~.controller.collective_one`;
 supervisor :func:`~.supervisor.supervise`; fault estimator
-:func:`~.fault_estimator.estimate_faults`; decision :func:`~.fdir.decide`), each
+:func:`~.fault_estimator.estimate_faults`; decision :func:`~.decision.decide`), each
 equation written once (only the mission's x_d = c + offsets of eq. 14, one addition, is
-spelled out in both paths). Composed in one compiled call, the period costs no Python
-overhead per block, and the per-entry functions are fused into two passes over
-the team's N × N state instead of one pass per equation (the state is memory-bound
-at N = 400): ⁱx̂, ⁱû_g and ∫ⁱû_g in one, then each robot's residual, its norms and
-its next ŷ (written to a second buffer that the caller swaps in, since every robot
-reads its in-neighbours' current messages). :class:`~.team.Team` uses it whenever
-the team runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as
-an array), and composes the blocks' Python methods otherwise.
+spelled out in both paths). It reads and writes the blocks' state records (each block's
+``record()``) and reaches into no block. The stages, in the order of Fig. 1: :func:`begin`,
+the estimate pass (ⁱx̂, ⁱû_g and ∫ⁱû_g fused in one pass over the team's N × N state),
+:func:`act`, the residual pass (each robot's residual, its norms and its next ŷ, written to
+a second buffer the observer swaps in, since every robot reads its in-neighbours' current
+messages), :func:`deliver`, the decision. :func:`team_period` runs them as one compiled
+call on one core (the team calls it through :func:`team_period_flat`);
+:func:`team_period_split` runs the two passes and the decision over every core, for teams
+of :data:`PARALLEL_FROM` robots or more. :class:`~.team.Team` uses them whenever the team
+runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as an array), and
+composes the blocks' Python methods otherwise.
 """
 
 from __future__ import annotations
