@@ -305,7 +305,7 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
             refuse=s.noise.eta_bar >= spacing,
         )
     h = s.physics.control_period
-    if s.fdir.enabled and G is not None:
+    if s.fdir.enabled and s.fdir.compensate and G is not None:  # the loop closes through ū
         g = float(np.linalg.eigvalsh(np.asarray(G, float)).min())
         k = float(np.linalg.eigvalsh(np.asarray(s.gains.K, float)).max())
         gain = h * (1.0 / g + k)  # eqs. 28-31 at period h: e⁺ = (1 − h(1/G + K)) e + ...
