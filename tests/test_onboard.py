@@ -137,6 +137,29 @@ def test_controller_eq15_through_its_public_method():
     assert np.array_equal(ctrl.own_input(u_hat), u_hat[np.arange(4), np.arange(4)])  # eq. 16
 
 
+def _run_side_by_side(a, b, x, v, seed):
+    """Step teams ``a`` and ``b`` on the same measurements for 15 s, robot 2 pushed at
+    1.5 m/s from 8 s (beyond the command range: anti-windup and a detection), asserting
+    that every output and event is the same bit for bit at every period."""
+    rng = np.random.default_rng(seed)
+    xs = x.copy()
+    for k in range(1500):
+        t = k * 0.01
+        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
+        a.step(t, x_m, v * t, v)
+        b.step(t, x_m, v * t, v)
+        out_a, out_b = a.outputs(), b.outputs()
+        for name in out_a:
+            same = np.array_equal(out_a[name], out_b[name], equal_nan=out_a[name].dtype.kind == "f")
+            assert same, f"{name} at step {k}"
+        assert a.events == b.events
+        phi = np.zeros_like(xs)
+        if t > 8.0:
+            phi[1] = [1.5, 0.0]
+        xs = xs + 0.01 * (np.clip(a.u_bar, -1.0, 1.0) + phi)  # actuators saturate at 1 m/s
+    assert a.recovery.detected == b.recovery.detected and a.recovery.detected  # caught on both
+
+
 def test_the_period_split_over_the_cores_is_the_same_computation(monkeypatch):
     """From PARALLEL_FROM robots the compiled period's passes over the N × N state run in
     groups of robots on all cores: the same numbers, bit for bit, as on one core, through a
@@ -146,23 +169,7 @@ def test_the_period_split_over_the_cores_is_the_same_computation(monkeypatch):
     monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", False)
     one, _ = _team(12, obstacles=False, command_limit=1.0)
     assert split._row.shape[0] >= 2 and one._row.shape[0] == 1
-    rng = np.random.default_rng(3)
-    v = np.array([0.1, 0.0])
-    xs = x.copy()
-    for k in range(1500):
-        t = k * 0.01
-        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
-        split.step(t, x_m, v * t, v)
-        one.step(t, x_m, v * t, v)
-        a, b = split.outputs(), one.outputs()
-        for name in a:
-            assert np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f"), name
-        assert split.events == one.events
-        phi = np.zeros_like(xs)
-        if t > 8.0:
-            phi[1] = [1.5, 0.0]
-        xs = xs + 0.01 * (np.clip(split.u_bar, -1.0, 1.0) + phi)
-    assert split.recovery.detected == one.recovery.detected and split.recovery.detected
+    _run_side_by_side(split, one, x, np.array([0.1, 0.0]), seed=3)
 
 
 @pytest.mark.parametrize(("n", "obstacles"), [(4, True), (4, False), (12, False)])
@@ -173,27 +180,8 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
     monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", False)
     slow, _ = _team(n, obstacles=obstacles, command_limit=1.0)
     assert (fast.path, slow.path) == ("compiled", "general")
-    rng = np.random.default_rng(n)
     v = np.array([0.0, 0.1]) if obstacles else np.array([0.1, 0.0])
-    xs = x.copy()
-    for k in range(1500):
-        t = k * 0.01
-        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
-        fast.step(t, x_m, v * t, v)
-        slow.step(t, x_m, v * t, v)
-        a, b = fast.outputs(), slow.outputs()
-        for name in a:
-            assert np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f"), (
-                f"{name} at step {k}"
-            )
-        assert fast.events == slow.events
-        phi = np.zeros_like(xs)
-        if t > 8.0:
-            phi[1] = [1.5, 0.0]  # beyond the command range: anti-windup and a detection
-        xs = xs + 0.01 * (np.clip(fast.u_bar, -1.0, 1.0) + phi)  # actuators saturate at 1 m/s
-    assert (
-        fast.recovery.detected == slow.recovery.detected and fast.recovery.detected
-    )  # the fault was caught on both
+    _run_side_by_side(fast, slow, x, v, seed=n)
     assert list(fast.members) == list(slow.members)
     assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
     copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)
