@@ -196,7 +196,9 @@ def preflight(
                 refuse=False,
             )
     # room to avoid a cylinder without running into a teammate (no teammate avoidance)
-    squeeze = _squeeze(s, safe, reach, path, path_dt)
+    # every formation slot's distance to every cylinder along the path (T, N, O)
+    dist = _slot_distances(s, path) if s.obstacles else None
+    squeeze = _squeeze(s, safe, reach, dist, path_dt)
     if squeeze is not None:
         k, t, depth, room = squeeze
         finding(
@@ -249,7 +251,7 @@ def preflight(
                 refuse=False,
             )
     _magnitudes(s, finding, name, command_limit, xi_bar, G)
-    _walls(s, finding, name, safe, reach, path, path_dt)
+    _walls(s, finding, name, safe, reach, dist, path_dt)
     # the path stays on the floor
     w = np.asarray(s.mission.centroid.waypoints)
     far = np.abs(w).max() + _radius(formation_offsets(s.mission.formation, n)) + reach
@@ -345,20 +347,17 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
         )
 
 
-def _walls(s, finding, name: str, safe: np.ndarray, reach: float, path, dt: float) -> None:
+def _walls(s, finding, name: str, safe: np.ndarray, reach: float, dist, dt: float) -> None:
     """Cylinders too close to pass between (their safe discs overlap, or leave less than a
     robot's width) that the path runs into: the supervisor avoids one obstacle at a time
     (eq. 8), and a robot pushed from one into the next can be trapped or pushed into a
-    hull."""
+    hull. ``dist``: :func:`_slot_distances`."""
     if len(s.obstacles) < 2:
         return
     centres = np.array([ob.position for ob in s.obstacles])
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=2) - safe[:, None] - safe[None]
     np.fill_diagonal(gap, np.inf)
     joined = gap < 2 * reach + CLEARANCE
-    offsets = formation_offsets(s.mission.formation, s.team.robots)
-    slots = path[:, None, :] + offsets[None]  # (T, N, 2)
-    dist = np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)  # (T, N, O)
     entered = (dist < safe[None, None]).any(axis=(0, 1))  # cylinders some slot runs into
     for k in np.flatnonzero(entered & joined.any(axis=1)):
         group = sorted({int(k), *np.flatnonzero(joined[k]).tolist()})
@@ -375,18 +374,24 @@ def _walls(s, finding, name: str, safe: np.ndarray, reach: float, path, dt: floa
         return
 
 
+def _slot_distances(s: Scenario, path: np.ndarray) -> np.ndarray:
+    """(T, N, O): each formation slot's distance to each cylinder at each sample of the
+    desired centroid ``path`` (T, 2)."""
+    slots = path[:, None, :] + formation_offsets(s.mission.formation, s.team.robots)[None]
+    centres = np.array([ob.position for ob in s.obstacles])
+    return np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)
+
+
 def _squeeze(
-    s: Scenario, safe: np.ndarray, reach: float, path: np.ndarray, dt: float
+    s: Scenario, safe: np.ndarray, reach: float, dist: np.ndarray | None, dt: float
 ) -> tuple[int, float, float, float] | None:
     """The deepest pass of a formation slot inside a cylinder's safe distance that is deeper
-    than the room between two robots' hulls: (cylinder, time, depth, room), or None."""
-    if not s.obstacles:
+    than the room between two robots' hulls: (cylinder, time, depth, room), or None.
+    ``dist``: :func:`_slot_distances` (None: no cylinders)."""
+    if dist is None:
         return None
     offsets = formation_offsets(s.mission.formation, s.team.robots)
     room = _closest_pair(offsets) - 2 * reach - CLEARANCE
-    slots = path[:, None, :] + offsets[None]  # (T, N, 2)
-    centres = np.array([ob.position for ob in s.obstacles])
-    dist = np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)  # (T, N, O)
     depth = (safe[None, None, :] - dist).max(axis=1)  # (T, O)
     t, k = np.unravel_index(int(depth.argmax()), depth.shape)
     if depth[t, k] <= max(room, 0.0):
