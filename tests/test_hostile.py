@@ -131,6 +131,18 @@ def test_campaign_specs_that_mean_nothing_are_refused(tmp_path, capsys):
     _one_error_line(capsys.readouterr().err, "every one of the 2 runs would be the same scenario")
 
 
+def test_a_ray_timeout_must_be_a_time_and_needs_ray(tmp_path, capsys):
+    spec = Path(__file__).resolve().parent.parent / "campaigns" / "tiny.toml"
+    for extra, needle in (
+        (["--ray-timeout", "nan", "--ray"], "--ray-timeout: expected seconds in (0, 3600]"),
+        (["--ray-timeout", "-1", "--ray"], "--ray-timeout: expected seconds in (0, 3600]"),
+        (["--ray-timeout", "30"], "--ray-timeout: only with --ray"),
+    ):
+        assert campaign_cli.main([str(spec), "--out", str(tmp_path / "t"), *extra]) == EXIT_INPUT
+        _one_error_line(capsys.readouterr().err, needle)
+    assert not (tmp_path / "t").exists()
+
+
 def test_a_campaign_whose_every_run_is_refused_does_not_exit_0(tmp_path, capsys):
     spec = tmp_path / "e.toml"
     spec.write_text(

@@ -126,8 +126,13 @@ def test_a_campaign_joins_a_running_cluster_by_address_and_by_bare_ray(head, loc
 
 def test_ray_client_addresses_work_with_the_cluster_extra(head, local_rows, tmp_path):
     pytest.importorskip("grpc", reason="ray[client] is not installed (the cluster extra)")
+    # Ray's client server starts a server process per driver: tens of seconds on a
+    # loaded 2-core machine (CI once gave up at 25 s), hence the long --ray-timeout.
     code, _, err, _ = _campaign(
-        "--runs", "2", "--ray", head["client"], "--out", str(tmp_path), env=head["env"]
+        *("--runs", "2", "--ray", head["client"], "--ray-timeout", "150"),
+        *("--out", str(tmp_path)),
+        env=head["env"],
+        timeout=240,
     )
     assert code == 0, err
     assert _rows(tmp_path) == local_rows

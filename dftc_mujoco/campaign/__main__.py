@@ -46,6 +46,14 @@ def main(argv: list[str] | None = None) -> int:
         "private one with --workers CPUs; or the cluster at ADDRESS (HOST:PORT, or "
         "ray://HOST:PORT with the cluster extra)",
     )
+    p.add_argument(
+        "--ray-timeout",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="give joining the cluster this long before giving up (default: 60; a ray:// "
+        "client starts a server per driver, tens of seconds on a busy head node)",
+    )
     p.add_argument("--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)")
     p.add_argument("--runs", type=int, help="override the spec's number of runs")
     p.add_argument("--limit", type=int, help="stop after this many new runs (resume later)")
@@ -80,12 +88,20 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
             if args.workers < 1:
                 raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
+            if args.ray_timeout is not None:
+                if args.ray is None:
+                    raise ScenarioError("--ray-timeout: only with --ray")
+                if not 0 < args.ray_timeout <= 3600:  # also refuses nan
+                    raise ScenarioError(
+                        f"--ray-timeout: expected seconds in (0, 3600], got {args.ray_timeout:g}"
+                    )
         out = Path(args.out or Path.cwd() / "renders" / "campaigns" / spec.name).absolute()
         if args.ray is not None:  # join the cluster first: a failure leaves no folder behind
             from . import cluster
 
             with signals.active():
-                engine = cluster.connect(args.ray or None, args.workers)
+                deadline = args.ray_timeout or cluster.CONNECT_DEADLINE
+                engine = cluster.connect(args.ray or None, args.workers, deadline)
             signals.install()  # ray.init replaces the SIGTERM handler with its own
         with output.locked(out):
             with signals.active():

@@ -9,7 +9,9 @@ none (and stop it at the end). ``--ray ADDRESS``: the cluster's GCS address
 
 Connecting never hangs: the address is first tried as a plain TCP connection
 (:data:`REACH_TIMEOUT`), and Ray's own handshake (which retries for a long time on
-its own) is given until :data:`CONNECT_DEADLINE` after the start; past it the
+its own) is given until ``deadline`` (:data:`CONNECT_DEADLINE` unless told; a
+ray:// client starts a server process per driver, which takes tens of seconds on a
+busy machine) after the start; past it the
 command says so in one line and exits with :data:`EXIT_CLUSTER`. Ray's messages
 while connecting are kept out of the terminal; the one that explains a failure
 (a missing or wrong token) is turned into the error line.
@@ -40,7 +42,7 @@ from ..errors import EXIT_CLUSTER, ClusterError
 from .spec import Spec
 
 REACH_TIMEOUT = 5.0  # s for the plain TCP check of an address
-CONNECT_DEADLINE = 25.0  # s from the start of connecting to giving up
+CONNECT_DEADLINE = 60.0  # s from the start of connecting to giving up (default)
 POLL = 0.25  # s between two looks at the stop request while waiting for rows
 CLIENT_PORT, GCS_PORT = 10001, 6379
 
@@ -149,12 +151,12 @@ def _give_up(fd: int, message: str) -> None:
     os._exit(EXIT_CLUSTER)
 
 
-def connect(address: str | None, workers: int) -> Connection:
+def connect(address: str | None, workers: int, deadline: float = CONNECT_DEADLINE) -> Connection:
     """Join the cluster at ``address`` (None: the local instance, or a new private one).
 
     Raises ClusterError (one line) when Ray is missing or the cluster cannot be joined;
-    exits the process with EXIT_CLUSTER when joining takes longer than
-    :data:`CONNECT_DEADLINE` seconds.
+    exits the process with EXIT_CLUSTER when joining takes longer than ``deadline``
+    seconds.
     """
     ray = _import_ray()
     if ray.is_initialized():  # the caller already joined a cluster (the Python API)
@@ -193,11 +195,11 @@ def connect(address: str | None, workers: int) -> Connection:
     shown = "a new local Ray instance" if start else (address or "the local Ray instance")
     real_stderr = os.dup(2)
     message = (
-        f"--ray: could not join {shown} within {CONNECT_DEADLINE:g} s; check the address, "
+        f"--ray: could not join {shown} within {deadline:g} s (--ray-timeout); check the address, "
         "the cluster's state (`ray status` there) and its token (RAY_AUTH_MODE=token, "
         "RAY_AUTH_TOKEN)"
     )
-    timer = threading.Timer(CONNECT_DEADLINE, _give_up, args=(real_stderr, message))
+    timer = threading.Timer(deadline, _give_up, args=(real_stderr, message))
     timer.daemon = True
     timer.start()
     try:
