@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from . import blocks as blocks_mod
+from . import network
 from .checks import CLEARANCE
 from .errors import ScenarioError
 from .onboard.block import Block
@@ -161,6 +162,8 @@ def team_config(
         self_exclusion=f.self_exclusion,
         postpone_on_contact=f.postpone_on_contact,
         excluded_relay=f.excluded_relay,
+        networked=not s.network.ideal,
+        round_periods=network.timing(s.network, s.physics.control_period).round,
     )
 
 

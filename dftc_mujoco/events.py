@@ -31,6 +31,11 @@ KINDS: dict[str, tuple[str, ...]] = {
     "warning": ("message",),
     "mission_ended": ("reason", "robots"),
     "simulation_error": ("message",),
+    # the network (dftc_mujoco.network)
+    "radio_fault": ("fault", "robot", "link", "value"),
+    "link_silent": ("robot", "heard_by", "since"),
+    "link_heard": ("robot", "heard_by"),
+    "robot_silent": ("robot", "reported_by", "since"),
 }
 
 
@@ -125,6 +130,25 @@ def describe(e: Mapping[str, Any]) -> str:
         return f"MISSION ENDED: {e['reason']}"
     if k == "simulation_error":
         return f"SIMULATION ERROR: {e['message']}"
+    if k == "radio_fault":
+        if e["fault"] == "link_down":
+            return f"radio fault: link {e['link'][0]} -> {e['link'][1]} down"
+        if e["fault"] == "corrupt":
+            return f"radio fault: robot {r} sends corrupted estimates (+{e['value']:g} m)"
+        return f"radio fault: robot {r} falls silent"
+    if k == "link_silent":
+        return (
+            f"robot {e['heard_by']} hears nothing from robot {r} (last message of round "
+            f"{e['since']}): it stops reading that link"
+        )
+    if k == "link_heard":
+        return f"robot {e['heard_by']} hears robot {r} again"
+    if k == "robot_silent":
+        by = ", ".join(str(b) for b in e["reported_by"])
+        return (
+            f"robot {r} is SILENT (a communication fault, not an actuator fault): reported by "
+            f"robots {by}, who keep estimating it without its messages"
+        )
     return f"{k} {dict(e)}"
 
 

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 from tqdm.auto import tqdm
 
-from . import checks, mission, premises
+from . import checks, mission, network, premises
 from .assembly import (
     block_names,
     effective_G,
@@ -259,6 +259,11 @@ class Simulation:
         found.refusals += premises.rule_refusals(
             self.block_names["thresholds"], s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
         )
+        radio_refused, radio_warned = network.refusals(
+            s, self.block_names["thresholds"], str(s.source)
+        )
+        found.refusals += radio_refused
+        found.warnings += radio_warned
         found.raise_refusals()
         for message in found.warnings:
             self.events.add(0.0, "warning", message=message)
@@ -272,6 +277,13 @@ class Simulation:
         )
         self.bumpers = Bumpers(self.scene, self.plant.data)  # each robot's touch sensor
         self.monitor = self._monitor(x0)
+        # the medium between the radios (None: the ideal network, which needs no model)
+        self.channel: network.Channel | None = None
+        if not s.network.ideal:
+            self.channel = network.Channel(
+                s.network, s.team.graph, dt, np.random.default_rng([s.seed, 23])
+            )
+            self.channel.send(-1, 0, x0)  # the start's messages: ŷ(0), round 0
         self.k = 0  # next control period
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
@@ -390,6 +402,7 @@ class Simulation:
         )
         assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
+        channel = self.channel
         watch = MONITOR_ALLOWED
         data = plant.data
         xpos, xmat = data.xpos, data.xmat
@@ -437,7 +450,13 @@ class Simulation:
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)
                     j = k if k < last else last
+                    if channel is not None:
+                        self._radio(t, k, channel)
                     team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
+                    if channel is not None:
+                        channel.send(k, team.content_round, x)
+                        if team.round_now and team.missed and watch:
+                            monitor.network(t, team.missed)
                     ncon = data.ncon
                     if watch:
                         monitor.period(
@@ -478,6 +497,24 @@ class Simulation:
             self.k = k
             bar.close()
             self._wall += time.perf_counter() - wall0
+
+    def _radio(self, t: float, k: int, channel: network.Channel) -> None:
+        """Before period ``k``'s step: radio faults that start now, and the messages that
+        arrive (a corrupted one breaks the network premise)."""
+        if t >= channel.next_fault:
+            for f in channel.faults_due(t):
+                self.events.add(
+                    t,
+                    "radio_fault",
+                    fault=f.kind,
+                    robot=f.robot + 1 if f.robot >= 0 else None,
+                    link=[f.link[0] + 1, f.link[1] + 1] if f.kind == "link_down" else None,
+                    value=f.value if f.kind == "corrupt" else None,
+                )
+        links, rounds, offset = channel.receive(k)
+        self.team.receive(links, rounds, offset)
+        if MONITOR_ALLOWED and offset.any():
+            self.monitor.network(t, int(np.count_nonzero(offset)))
 
     def _take_team_events(self, t: float) -> None:
         """Move the team's events into the run's, each flag labelled with the premises its
@@ -548,6 +585,8 @@ class Simulation:
             stopped=self.stopped,
         )
         summary["premises"] = self.monitor.table()
+        # what the channel did per link (the ideal network: every message in the next period)
+        summary["network"] = self.channel.summary() if self.channel is not None else {"ideal": True}
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}

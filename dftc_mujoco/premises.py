@@ -42,6 +42,8 @@ PREMISES: dict[str, str] = {
     "contact": "no contact between a robot and a teammate or a cylinder",
     "planar": "the base stays on the floor, level, inside the arena",
     "connectivity": "the members' graph is strongly connected",
+    "network": "every round's message arrives on every link in time and intact (delays and "
+    "consecutive losses within the network's declared bounds; no radio fault)",
 }
 
 
@@ -275,6 +277,7 @@ class Monitor:
             "contact": 0.0,
             "planar": HEIGHT_TOLERANCE,
             "connectivity": 0.0,
+            "network": 0.0,
         }
         self.geom_robot = np.ascontiguousarray(geom_robot, dtype=np.int64)
         self.body = np.ascontiguousarray(body, dtype=np.int64)
@@ -368,6 +371,11 @@ class Monitor:
         of every rule from now on (its thresholds are unbounded)."""
         if not strongly_connected:
             self._violate("connectivity", None, 1.0, t)
+
+    def network(self, t: float, links: int) -> None:
+        """At a round of the observers, ``links`` links lacked the round's message or carried
+        a corrupted one: the team's residuals leave the rules' identity (value: how many)."""
+        self._violate("network", None, float(links), t)
 
     def _violate(self, name: str, robot: int | None, value: float, t: float) -> None:
         k = self._index[name]

@@ -62,6 +62,15 @@ class TeamConfig:
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
     drift_bound: float = 0.0  # ē [m]: bounded offset of a robot's drift (from calibration)
+    # the network (dftc_mujoco.network): the observers step in rounds of this many control
+    # periods, on the last message each link delivered; False/1: the paper's ideal network
+    networked: bool = False
+    round_periods: int = 1
+
+    @property
+    def observer_period(self) -> float:
+        """h_o [s]: the observers' step, a round of ``round_periods`` control periods."""
+        return self.dt * self.round_periods if self.round_periods > 1 else self.dt
 
 
 class Block:

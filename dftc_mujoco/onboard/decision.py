@@ -112,7 +112,7 @@ class Decision(Block):
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """All timers at zero, nobody flagged."""
-        self.dt = config.dt
+        self.dt = config.observer_period  # it decides at every round of the observers
         self.window = config.detection_window if self.window_param is None else self.window_param
         isolation = config.isolation if self.isolation_param is None else self.isolation_param
         if isolation not in ISOLATION:

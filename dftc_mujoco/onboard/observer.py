@@ -37,18 +37,22 @@ def advance_one(y, r, ko, dt):  # pragma: no cover - compiled
 
 
 @njit(inline="always")
-def residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, i, row):  # pragma: no cover
+def residual_row(
+    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, i, row
+):  # pragma: no cover - compiled
     """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ); returns
     nothing. Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
-    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, docs/notes.md, 2)."""
+    first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, docs/notes.md, 2). On a
+    network (``networked``) the message of edge e is the last one its link delivered,
+    ``links[pick[e]]`` (M·n,), instead of the sender's current ŷ."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     for a in range(m * n):
         row[a] = -in_degree[i] * y[i, a]
     for e in range(first_edge[i], first_edge[i + 1]):
-        j = src[e]
+        msg = links[pick[e]] if networked else y[src[e]]
         for a in range(m * n):
-            row[a] += y[j, a]
+            row[a] += msg[a]
     for d in range(n):
         row[i * n + d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
 
@@ -72,12 +76,16 @@ def estimate(y_hat, int_u_hat, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def residual(y_hat, int_u_own, x_m, src, first_edge, in_degree, r, r_norm):  # pragma: no cover
+def residual(
+    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, r, r_norm
+):  # pragma: no cover - compiled
     """ⁱr (eq. 35) of every robot into ``r`` (M, M, n), ‖ⁱr_k‖ into ``r_norm`` (M, M)."""
     m, _, n = y_hat.shape
     rr = r.reshape(m, m * n)
     for i in range(m):
-        residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, i, rr[i])
+        residual_row(
+            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, i, rr[i]
+        )
         row_norms(rr[i], i, n, r_norm)
 
 
@@ -92,11 +100,12 @@ def integrate_inputs(int_u_hat, int_u_own, delta_u, u, dt):  # pragma: no cover 
 
 
 @njit(cache=True)
-def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt):  # pragma: no cover
+def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt, dt_o):  # pragma: no cover
     """Advance every robot's observer by one control period, in place (eqs. 19-21, Euler).
 
     ``u_hat_g`` (M, M, n) is ⁱû_g, ``delta_u`` (M, n) is Δuᵢ (eq. 22) and ``u``
-    (M, n) the nominal input uᵢ of eq. 8 each robot applied.
+    (M, n) the nominal input uᵢ of eq. 8 each robot applied; the integrals advance by the
+    control period ``dt``, ŷ by the observer's step ``dt_o`` (a round, docs/thresholds.md).
     """
     s, g = int_u_hat.reshape(-1), u_hat_g.reshape(-1)
     for a in range(s.shape[0]):
@@ -104,7 +113,7 @@ def update(y_hat, int_u_hat, int_u_own, r, u_hat_g, delta_u, u, ko, dt):  # prag
     integrate_inputs(int_u_hat, int_u_own, delta_u, u, dt)
     y, rr = y_hat.reshape(-1), r.reshape(-1)
     for a in range(y.shape[0]):
-        y[a] = advance_one(y[a], rr[a], ko, dt)
+        y[a] = advance_one(y[a], rr[a], ko, dt_o)
 
 
 class Messages:
@@ -128,7 +137,20 @@ class Messages:
         r, r_norm = np.empty_like(y_hat), np.empty((m, m))
         own = np.zeros((m, y_hat.shape[2]))
         diag = y_hat[np.arange(m), np.arange(m)]
-        residual(y_hat, own, diag, self.src, self.first_edge, self.in_degree, r, r_norm)
+        none = np.zeros((0, m * y_hat.shape[2]))
+        residual(
+            y_hat,
+            own,
+            diag,
+            self.src,
+            self.first_edge,
+            self.in_degree,
+            none,
+            self.src,
+            False,
+            r,
+            r_norm,
+        )
         return r
 
 
@@ -142,8 +164,17 @@ class ObserverRecord(NamedTuple):
     src: np.ndarray  # the edges into each robot (:class:`Messages`)
     first_edge: np.ndarray
     in_degree: np.ndarray
+    links: np.ndarray  # (E, M·n) the last message each link delivered (a network)
+    pick: np.ndarray  # (edges,) the link each edge of the residual reads
+    networked: bool  # read ``links`` instead of the senders' current ŷ
     ko: float
-    dt: float
+    dt: float  # the control period: the integrals
+    dt_o: float  # the observer's step, a round of the network (eq. 19)
+
+
+#: rounds of broadcasts a robot keeps for its radio (a message in flight carries a round at
+#: most one older than the newest: a delay is shorter than a round)
+SENT_ROUNDS = 3
 
 
 class Observer(Block):
@@ -153,6 +184,11 @@ class Observer(Block):
     broadcasts; ``int_u_hat`` (M, M, n) ∫(ⁱû_g + Γᵢᵀ Δuᵢ); ``int_u_own``
     (M, n) ∫uᵢ. Every robot starts believing its teammates are at their planned
     slots (``prior``) and itself where it measures itself.
+
+    On a network (``config.networked``) a robot reads, for each in-neighbour, the last
+    message its link delivered (``links``, filled by :meth:`receive`) and knows which
+    round it carries (``link_round``); ŷ steps once per round of the network (β = k_o h_o,
+    h_o = ``config.observer_period``), the integrals every control period.
 
     Override :meth:`estimate`, :meth:`residual` and :meth:`update` to try
     another observer; row i of what they return may use only robot i's own
@@ -165,15 +201,31 @@ class Observer(Block):
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Start every robot's estimate: ⁱx̂(0) = ``prior`` except ⁱx̂ᵢ(0) = x_m,i(0)."""
         n = len(x_m0)
-        self.ko, self.dt = config.ko, config.dt
+        self.ko, self.dt, self.dt_o = config.ko, config.dt, config.observer_period
+        self.networked = bool(config.networked)
         self.y_hat = np.repeat(np.asarray(prior, float)[None], n, axis=0)
         self.y_hat[np.arange(n), np.arange(n)] = x_m0
         self.int_u_hat = np.zeros_like(self.y_hat)
         self.int_u_own = np.zeros((n, self.y_hat.shape[2]))
+        self.allowed = Messages(config.graph.edges, n)  # the links a message may take
+        width = n * self.y_hat.shape[2]
+        if self.networked:
+            # no message yet: a link holds the receiver's own ŷ (no pull either way)
+            self.links = np.ascontiguousarray(self.y_hat[self._link_dst()].reshape(-1, width))
+            self.sent = np.repeat(self.y_hat.reshape(1, n, width), SENT_ROUNDS, axis=0)
+        else:
+            self.links = np.zeros((0, width))
+            self.sent = np.zeros((0, n, width))
+        self.link_round = np.full(len(self.allowed.src), -1, dtype=np.int64)
         self._connect(config.graph)
+
+    def _link_dst(self) -> np.ndarray:
+        fe = self.allowed.first_edge
+        return np.repeat(np.arange(len(fe) - 1), np.diff(fe))
 
     def _connect(self, graph: Graph) -> None:
         self.messages = Messages(graph.edges, graph.n)
+        self.pick = np.arange(len(self.messages.src), dtype=np.intp)
         m = self.y_hat.shape[0]
         self.y_next = np.empty_like(self.y_hat)  # the compiled period writes ŷ⁺ here, then swaps
         self._x_hat = np.empty_like(self.y_hat)
@@ -191,8 +243,12 @@ class Observer(Block):
             msg.src,
             msg.first_edge,
             msg.in_degree,
+            self.links,
+            self.pick,
+            self.networked,
             self.ko,
             self.dt,
+            self.dt_o,
         )
 
     def advance(self) -> None:
@@ -200,13 +256,57 @@ class Observer(Block):
         becomes the current one."""
         self.y_hat, self.y_next = self.y_next, self.y_hat
 
+    # ------------------------------------------------------------------ the radio
+
+    def broadcast(self, content_round: int) -> None:
+        """Keep ŷ as the message of ``content_round`` (what the radio sends from now on)."""
+        if self.networked:
+            self.sent[content_round % SENT_ROUNDS] = self.y_hat.reshape(len(self.y_hat), -1)
+
+    def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
+        """Links ``links`` (indices into :attr:`allowed`) delivered the messages of
+        ``rounds``, each with ``offset`` [m] added by a corrupting sender."""
+        if not len(links):
+            return
+        src = self.allowed.src[links]
+        self.links[links] = self.sent[rounds % SENT_ROUNDS, src]
+        if offset.any():
+            self.links[links] += offset[:, None]
+        self.link_round[links] = rounds
+
+    def listen(self, live: np.ndarray) -> None:
+        """Use only the links ``live`` (bool over :attr:`allowed`) in the residual: a robot
+        stops reading an in-neighbour it no longer hears (and reads it again when it does)."""
+        order = np.flatnonzero(live)
+        al = self.allowed
+        dst = self._link_dst()
+        edges = tuple((int(al.src[e]), int(dst[e])) for e in order)
+        self.messages = Messages(edges, len(self.y_hat))
+        self.pick = order.astype(np.intp)
+
+    # ------------------------------------------------------------------ exclusions
+
     def drop(self, p: int, graph: Graph, t: float) -> None:
         """Robot at team position ``p`` leaves: every collective vector shrinks (§5.2.2)."""
-        keep = np.delete(np.arange(len(self.y_hat)), p)
+        m, _, n = self.y_hat.shape
+        keep = np.delete(np.arange(m), p)
         self.y_hat = self.y_hat[np.ix_(keep, keep)]
         self.int_u_hat = self.int_u_hat[np.ix_(keep, keep)]
         self.int_u_own = self.int_u_own[keep]
+        if self.networked:
+            al, dst = self.allowed, self._link_dst()
+            stay = (al.src != p) & (dst != p)
+            cols = np.delete(np.arange(m * n).reshape(m, n), p, axis=0).ravel()
+            self.links = np.ascontiguousarray(self.links[np.ix_(stay, cols)])
+            self.sent = np.ascontiguousarray(self.sent[:, keep][:, :, cols])
+            self.link_round = self.link_round[stay]
+            j_new = al.src[stay] - (al.src[stay] > p)
+            i_new = dst[stay] - (dst[stay] > p)
+            edges = tuple(zip(j_new.tolist(), i_new.tolist(), strict=True))
+            self.allowed = Messages(edges, m - 1)
         self._connect(graph)
+
+    # ------------------------------------------------------------------ the equations
 
     def estimate(self) -> np.ndarray:
         """ⁱx̂ of every robot (eq. 21), shape (M, M, n); valid until the next call."""
@@ -223,6 +323,9 @@ class Observer(Block):
             msg.src,
             msg.first_edge,
             msg.in_degree,
+            self.links,
+            self.pick,
+            self.networked,
             self._r,
             self._r_norm,
         )
@@ -231,7 +334,8 @@ class Observer(Block):
     def update(
         self, r: np.ndarray, u_hat_g: np.ndarray, delta_u: np.ndarray, u: np.ndarray
     ) -> None:
-        """Advance by one control period (eqs. 19-21) with the period's residual and inputs."""
+        """Advance by one control period (eqs. 19-21) with the period's residual and inputs
+        (between two rounds of a network the team passes r = 0: only the integrals move)."""
         update(
             self.y_hat,
             self.int_u_hat,
@@ -242,4 +346,5 @@ class Observer(Block):
             np.ascontiguousarray(u, dtype=float),
             self.ko,
             self.dt,
+            self.dt_o,
         )

@@ -12,8 +12,11 @@ spelled out in both paths). It reads and writes the blocks' state records (each 
 the estimate pass (ⁱx̂, ⁱû_g and ∫ⁱû_g fused in one pass over the team's N × N state),
 :func:`act`, the residual pass (each robot's residual, its norms and its next ŷ, written to
 a second buffer the observer swaps in, since every robot reads its in-neighbours' current
-messages), :func:`deliver`, the decision. :func:`team_period` runs them as one compiled
-call on one core (the team calls it through :func:`team_period_flat`);
+messages), :func:`deliver`, the decision. On a network the residual pass and the decision
+run only at the observers' rounds (``PeriodInputs.round_now``), on the messages the links
+delivered (``ObserverRecord.links``); every period on the ideal network.
+:func:`team_period` runs them as one compiled call on one core (the team calls it through
+:func:`team_period_flat`);
 :func:`team_period_split` runs the two passes and the decision over every core, for teams
 of :data:`PARALLEL_FROM` robots or more. :class:`~.team.Team` uses them whenever the team
 runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as an array), and
@@ -57,6 +60,7 @@ class PeriodInputs(NamedTuple):
     offsets: np.ndarray  # (M, n) the formation's slots and their rates
     rates: np.ndarray
     fdir: bool  # the fault estimator and the decision run
+    round_now: bool  # the observers step and the decision runs (every period: ideal network)
 
 
 class PeriodBuffers(NamedTuple):
@@ -91,7 +95,20 @@ def _estimates(y, s, xh, xd, vd, u_g, kc, dt, n, blocks):  # pragma: no cover - 
 
 
 def _residuals(
-    y_hat, int_u_own, x_own, src, first_edge, in_degree, rows, r_norm, yn, ko, dt
+    y_hat,
+    int_u_own,
+    x_own,
+    src,
+    first_edge,
+    in_degree,
+    links,
+    pick,
+    networked,
+    rows,
+    r_norm,
+    yn,
+    ko,
+    dt,
 ):  # pragma: no cover - compiled
     """Pass 2 for every robot i, in as many contiguous groups of rows as ``rows`` (B, M·n)
     has scratch rows: ⁱr (eq. 35), its norms, and ⁱŷ of the next period (eq. 19) into
@@ -102,7 +119,19 @@ def _residuals(
     for b in prange(blocks):
         row = rows[b]
         for i in range(b * m // blocks, (b + 1) * m // blocks):
-            residual_row(y_hat, int_u_own, x_own, src, first_edge, in_degree, i, row)  # eq. 35
+            residual_row(  # eq. 35
+                y_hat,
+                int_u_own,
+                x_own,
+                src,
+                first_edge,
+                in_degree,
+                links,
+                pick,
+                networked,
+                i,
+                row,
+            )
             row_norms(row, i, n, r_norm)
             for a in range(m * n):
                 yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
@@ -258,32 +287,40 @@ def team_period(
     estimates(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, 1)
     code = act(inp, sup, seen, drive, out)
     yn = ob.y_next.reshape(m, m * n)
-    residuals(
-        ob.y_hat,
-        ob.int_u_own,
-        out.x_own,
-        ob.src,
-        ob.first_edge,
-        ob.in_degree,
-        out.row,
-        out.r_norm,
-        yn,
-        ob.ko,
-        ob.dt,
-    )
+    if inp.round_now:  # a round of the observers (every period on the ideal network)
+        residuals(
+            ob.y_hat,
+            ob.int_u_own,
+            out.x_own,
+            ob.src,
+            ob.first_edge,
+            ob.in_degree,
+            ob.links,
+            ob.pick,
+            ob.networked,
+            out.row,
+            out.r_norm,
+            yn,
+            ob.ko,
+            ob.dt_o,
+        )
     deliver(inp, ob, drive, est, out)
-    if inp.fdir and decide_in_groups(
-        out.r_norm,
-        dec.mu,
-        dec.above,
-        dec.below,
-        dec.flag,
-        dec.dt,
-        dec.window,
-        dec.exclusive,
-        dec.isolated,
-        dec.raised,
-        1,
+    if (
+        inp.fdir
+        and inp.round_now
+        and decide_in_groups(
+            out.r_norm,
+            dec.mu,
+            dec.above,
+            dec.below,
+            dec.flag,
+            dec.dt,
+            dec.window,
+            dec.exclusive,
+            dec.isolated,
+            dec.raised,
+            1,
+        )
     ):  # eq. 39 (star-unpacking a NamedTuple does not compile)
         code |= RAISED
     return code
@@ -314,21 +351,25 @@ def team_period_split(
     estimates_parallel(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, groups)
     code = act(inp, sup, seen, drive, out)
     yn = ob.y_next.reshape(m, m * n)
-    residuals_parallel(
-        ob.y_hat,
-        ob.int_u_own,
-        out.x_own,
-        ob.src,
-        ob.first_edge,
-        ob.in_degree,
-        out.row,
-        out.r_norm,
-        yn,
-        ob.ko,
-        ob.dt,
-    )
+    if inp.round_now:  # a round of the observers (every period on the ideal network)
+        residuals_parallel(
+            ob.y_hat,
+            ob.int_u_own,
+            out.x_own,
+            ob.src,
+            ob.first_edge,
+            ob.in_degree,
+            ob.links,
+            ob.pick,
+            ob.networked,
+            out.row,
+            out.r_norm,
+            yn,
+            ob.ko,
+            ob.dt_o,
+        )
     deliver(inp, ob, drive, est, out)
-    if inp.fdir and decide_parallel(out.r_norm, *dec, groups):  # eq. 39
+    if inp.fdir and inp.round_now and decide_parallel(out.r_norm, *dec, groups):  # eq. 39
         code |= RAISED
     return int(code)
 
@@ -342,15 +383,15 @@ def team_period_flat(*a):  # pragma: no cover - compiled
     N = 4, twice the period's arithmetic) and a flat argument list in its C fast path. The
     slices below are checked against the records' field counts (:data:`RECORDS`)."""
     return team_period(
-        PeriodInputs(*a[0:7]),
-        ObserverRecord(*a[7:16]),
-        ControllerRecord(*a[16:17]),
-        SupervisorRecord(*a[17:22]),
-        Surroundings(*a[22:26]),
-        DriveRecord(*a[26:32]),
-        EstimatorRecord(*a[32:43]),
-        DecisionRecord(*a[43:52]),
-        PeriodBuffers(*a[52:63]),
+        PeriodInputs(*a[0:8]),
+        ObserverRecord(*a[8:21]),
+        ControllerRecord(*a[21:22]),
+        SupervisorRecord(*a[22:27]),
+        Surroundings(*a[27:31]),
+        DriveRecord(*a[31:37]),
+        EstimatorRecord(*a[37:48]),
+        DecisionRecord(*a[48:57]),
+        PeriodBuffers(*a[57:68]),
     )
 
 
@@ -366,6 +407,6 @@ RECORDS = (
     DecisionRecord,
     PeriodBuffers,
 )
-_ENDS = (7, 16, 17, 22, 26, 32, 43, 52, 63)  # where each record ends in team_period_flat's a
+_ENDS = (8, 21, 22, 27, 31, 37, 48, 57, 68)  # where each record ends in team_period_flat's a
 if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
     raise ImportError("team_period_flat's slices no longer match the records' fields")

@@ -71,6 +71,8 @@ _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decisio
 HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
+#: rounds in a row without the round's message after which a robot stops reading a link
+SILENT_ROUNDS = 2
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 PARALLEL_ALLOWED = True  # False keeps the compiled period on one core (benchmarks, tests)
 
@@ -157,6 +159,18 @@ class Team:
         self._window = max(1, round(VELOCITY_WINDOW / config.dt))
         self._x_past = np.zeros((self._window, n, 2))
         self._k = 0
+        # the network: the observers step in rounds of R periods (1: the ideal network)
+        self.rounds = max(1, int(config.round_periods))
+        self.period = 0  # control periods stepped so far
+        self.content_round = 0  # the round of the ŷ each robot's radio sends now
+        self.networked = bool(config.networked)
+        links = len(self.observer.allowed.src) if self.networked else 0
+        self.late = np.zeros(links, dtype=np.int64)  # rounds each link missed in a row
+        self.deaf = np.zeros(links, bool)  # links their receivers stopped reading
+        self.missed = 0  # links whose round message was missing at the last round
+        self._link_map = np.arange(links)  # the channel's link -> the observers' (-1: gone)
+        self._silent_robot = np.zeros(n, bool)
+        self.round_now = True
         self._resize()
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
@@ -300,11 +314,21 @@ class Team:
             if self.config.teammate_safe > 0:
                 np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
-        self.mu = self.thresholds.mu(t)
+        k, big_r = self.period, self.rounds
+        self.period += 1
+        self.round_now = big_r == 1 or (k + 1) % big_r == 0
+        if self.round_now:
+            s = (k + 1) // big_r - 1  # the round the observers step now
+            self.mu = self.thresholds.mu(t if big_r == 1 else s * self.config.observer_period)
+            if self.networked:
+                self._watch_links(t, s)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
             code = self._general(x_m, c, c_dot, offsets, rates)
+        if self.round_now:
+            self.content_round = (k + 1) // big_r
+            self.observer.broadcast(self.content_round)
         if code & RAISED:
             self._report(t, self._raised)
         if code & RAISED or self.recovery.anomaly is not None:
@@ -313,13 +337,71 @@ class Team:
             self._switches(t)
         return code
 
+    # ------------------------------------------------------------------ the radios
+
+    def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
+        """The channel delivered, on its links ``links``, the messages of ``rounds`` (each
+        with ``offset`` [m] from a corrupting sender): each receiving robot keeps them."""
+        if not len(links):
+            return
+        mine = self._link_map[links]
+        ok = mine >= 0
+        self.observer.receive(mine[ok], rounds[ok], offset[ok])
+
+    def _watch_links(self, t: float, s: int) -> None:
+        """At round ``s``: each robot checks that the message of round s came on each of its
+        links. Under the network's declared bounds it always has (docs/thresholds.md, "Over
+        a network"); a link that missed SILENT_ROUNDS rounds in a row is not read any more
+        until it delivers again (``link_silent``, ``link_heard``), and a robot none of whose
+        listeners hears it is reported ``robot_silent``."""
+        obs = self.observer
+        fresh = obs.link_round >= s
+        self.missed = int(len(fresh) - np.count_nonzero(fresh))
+        if not self.missed and not self.deaf.any():
+            self.late[:] = 0
+            return
+        self.late = np.where(fresh, 0, self.late + 1)
+        deaf = self.late >= SILENT_ROUNDS
+        changed = np.flatnonzero(deaf != self.deaf)
+        if not len(changed):
+            return
+        ids = self.members + 1
+        src, dst = obs.allowed.src, obs._link_dst()
+        for e in changed:
+            sender, heard_by = int(ids[src[e]]), int(ids[dst[e]])
+            if deaf[e]:
+                since = int(obs.link_round[e])
+                self.events.append(
+                    make(t, "link_silent", robot=sender, heard_by=heard_by, since=since)
+                )
+            else:
+                self.events.append(make(t, "link_heard", robot=sender, heard_by=heard_by))
+        self.deaf = deaf
+        obs.listen(~deaf)
+        self._flat.clear()
+        for j in np.unique(src[changed]):
+            out = src == j
+            robot = int(self.members[j])
+            silent = bool(deaf[out].all())
+            if silent and not self._silent_robot[robot]:
+                self.events.append(
+                    make(
+                        t,
+                        "robot_silent",
+                        robot=robot + 1,
+                        reported_by=[int(ids[d]) for d in dst[out]],
+                        since=int(obs.link_round[out].max()),
+                    )
+                )
+            self._silent_robot[robot] = silent
+
     def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
         """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
         fdir = self.config.fdir
         if self._row.shape[0] > 1:  # a large team: the passes on every core
             ctl, sup, seen, drive, est = self._records()
             code = team_period_split(
-                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir),
+                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir, self.round_now),
                 self.observer.record(),
                 ctl,
                 sup,
@@ -331,9 +413,18 @@ class Team:
             )
         else:  # one compiled call, the records passed field by field (team_period_flat)
             code = team_period_flat(
-                x_m, self.members, c, c_dot, offsets, rates, fdir, *self._flat_records()
+                x_m,
+                self.members,
+                c,
+                c_dot,
+                offsets,
+                rates,
+                fdir,
+                self.round_now,
+                *self._flat_records(),
             )
-        self.observer.advance()  # ŷ of the next period (eq. 19)
+        if self.round_now:
+            self.observer.advance()  # ŷ of the next period (eq. 19)
         self._raised = self.decision.raised
         return code
 
@@ -398,9 +489,12 @@ class Team:
         if self.drive.lagged:
             u_mem = self.u[mem]
             delta_u = u_mem - u_g
-        r = self.observer.residual(x_own)  # eq. 35
+        if self.round_now:
+            r = self.observer.residual(x_own)  # eq. 35
+            self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
+        else:  # between two rounds of the network only the integrals move
+            r = np.zeros_like(self.x_hat)
         self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
-        self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         code = SWITCHED if not np.array_equal(before, self.supervisor.active) else 0
         if saturated:
             code |= SATURATED
@@ -415,9 +509,10 @@ class Team:
                 self.u_bar[:] = self.drive.command - (self.u - u_bar)
             else:
                 self.u_bar[:] = u_bar
-            self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)  # eq. 39
-            if self._raised.any():
-                code |= RAISED
+            if self.round_now:
+                self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)
+                if self._raised.any():  # eq. 39
+                    code |= RAISED
         else:
             self.u_bar[:] = self.drive.command
         return code
@@ -614,13 +709,26 @@ class Team:
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
         keep = np.delete(np.arange(len(self.members)), p)
+        if self.networked:  # the links of the robot that leaves go with it
+            obs = self.observer
+            stay = (obs.allowed.src != p) & (obs._link_dst() != p)
+            renumber = np.where(stay, np.cumsum(stay) - 1, -1)
+            self._link_map = np.where(self._link_map >= 0, renumber[self._link_map], -1)
+            self.late, self.deaf = self.late[stay], self.deaf[stay]
         old_offsets, _ = self.plan.at(t)
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
         self.members = self.members[keep]
         self.graph = self.graph.without(p, relay=self.config.excluded_relay)
+        big_r = self.rounds
+        # the rules restart at the first round at or after now (its rule time, in rounds)
+        t_rule = (
+            t if big_r == 1 else ((self.period + big_r) // big_r - 1) * self.config.observer_period
+        )
         for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
-            self.blocks[name].drop(p, self.graph, t)
+            self.blocks[name].drop(p, self.graph, t_rule if name == "thresholds" else t)
+        if self.networked and self.deaf.any():
+            self.observer.listen(~self.deaf)
         self._resize()
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])

@@ -28,13 +28,16 @@ from .model import (
     resolve,
 )
 from .parts import (
+    RADIO_FAULTS,
     Fault,
     Fdir,
     Gains,
+    Network,
     Noise,
     Obstacle,
     Onboard,
     Physics,
+    RadioFault,
     Supervision,
     Team,
 )
@@ -43,6 +46,7 @@ from .readers import NAME_PATTERN, name_problem
 __all__ = [
     "NAME_PATTERN",
     "N_DIM",
+    "RADIO_FAULTS",
     "SCENARIOS",
     "CentroidPath",
     "Fault",
@@ -50,10 +54,12 @@ __all__ = [
     "Formation",
     "Gains",
     "Mission",
+    "Network",
     "Noise",
     "Obstacle",
     "Onboard",
     "Physics",
+    "RadioFault",
     "Scenario",
     "Supervision",
     "Team",

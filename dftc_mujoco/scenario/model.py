@@ -21,7 +21,19 @@ from ..graph import Graph
 from ..mission import CentroidPath, Formation, Mission
 from ..paths import SCENARIOS
 from ..tomlcheck import Abort, Doc, _nested, _segments, describe, read_toml
-from .parts import Fault, Fdir, Gains, Noise, Obstacle, Onboard, Physics, Supervision, Team
+from .parts import (
+    Fault,
+    Fdir,
+    Gains,
+    Network,
+    Noise,
+    Obstacle,
+    Onboard,
+    Physics,
+    RadioFault,
+    Supervision,
+    Team,
+)
 from .readers import document
 from .writer import _dumps
 
@@ -65,6 +77,7 @@ class Scenario:
     source: str = "<memory>"
     onboard: Onboard = field(default_factory=Onboard)
     supervisor: Supervision = field(default_factory=Supervision)
+    network: Network = field(default_factory=Network)
 
     def __post_init__(self) -> None:
         if not _TRUSTED.get():
@@ -152,10 +165,12 @@ class Scenario:
                 "formation": _fields(mission.formation),
             },
             "obstacles": [_fields(o) for o in self.obstacles],
-            "faults": [{**_fields(f), "robot": _one_based(_plain(f.robot))} for f in self.faults],
+            "faults": [{**_fields(f), "robot": _one_based(_plain(f.robot))} for f in self.faults]
+            + [_radio_fault(f) for f in self.network.faults],
             "fdir": _fields(self.fdir),
             "supervisor": _fields(self.supervisor),
             "onboard": onboard,
+            **({"network": _network(self.network)} if self.network != Network() else {}),
         }
 
     def to_toml(self) -> str:
@@ -229,6 +244,38 @@ def _fields(obj: Any) -> dict[str, Any]:
     return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
 
 
+def _radio_fault(f: RadioFault) -> dict[str, Any]:
+    """A radio fault as its ``[[faults]]`` table (robots numbered from 1)."""
+    d: dict[str, Any] = {"kind": f.kind, "t": _plain(f.t)}
+    if f.kind == "link_down":
+        d["link"] = [int(f.link[0]) + 1, int(f.link[1]) + 1]
+    else:
+        d["robot"] = int(f.robot) + 1
+    if f.kind == "corrupt":
+        d["value"] = _plain(f.value)
+    return d
+
+
+def _network(net: Network) -> dict[str, Any]:
+    """The ``[network]`` table (radio faults go to ``[[faults]]``; absent keys: defaults)."""
+    d: dict[str, Any] = {}
+    if net.latency_max is not None:
+        d["latency"] = {"mean": _plain(net.latency), "max": _plain(net.latency_max)}
+    else:
+        d["latency"] = _plain(net.latency)
+    if net.rate is not None:
+        d["rate"] = _plain(net.rate)
+    d["loss"], d["loss_model"] = _plain(net.loss), net.loss_model
+    if net.loss_model == "gilbert_elliott":
+        d.update(p_bad=net.p_bad, p_good=net.p_good, loss_bad=net.loss_bad)
+    if net.max_consecutive_losses is not None:
+        d["max_consecutive_losses"] = int(net.max_consecutive_losses)
+    if net.range is not None:
+        d["range"] = _plain(net.range)
+        d["range_hysteresis"] = _plain(net.range_hysteresis)
+    return d
+
+
 def _one_based(v: Any) -> Any:
     return v + 1 if isinstance(v, int) and not isinstance(v, bool) else v
 
@@ -260,6 +307,7 @@ def _structure_problems(s: Scenario, file: str) -> list[str]:
     check("fdir", s.fdir, Fdir)
     check("onboard", s.onboard, Onboard)
     check("supervisor", s.supervisor, Supervision)
+    check("network", s.network, Network)
     if isinstance(s.team, Team) and check("team.graph", s.team.graph, Graph):
         if s.team.graph.n != s.team.robots:
             problems.append(

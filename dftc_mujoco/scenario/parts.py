@@ -117,6 +117,72 @@ class Fault:
     time_constant: float = 0.0
 
 
+#: the kinds of radio fault ``[[faults]]`` may name (actuator faults: "bias", "stop")
+RADIO_FAULTS = ("silent", "link_down", "corrupt")
+
+
+@dataclass(frozen=True)
+class RadioFault:
+    """A fault of the network, not of the actuators, from ``t`` on: robot ``robot``'s radio
+    falls ``"silent"`` (it sends nothing), the link ``link`` = (from, to) (0-based) goes
+    ``"link_down"``, or robot ``robot`` sends ``"corrupt"`` estimates (``value`` [m] added
+    to every entry of each message it sends)."""
+
+    kind: str
+    t: float
+    robot: int = -1  # silent, corrupt
+    link: tuple[int, int] = (-1, -1)  # link_down
+    value: float = 0.0  # corrupt
+
+
+@dataclass(frozen=True)
+class Network:
+    """The medium between the robots' radios (the ``[network]`` table; :mod:`..network`).
+
+    Every default is today's ideal network: each message sent at the end of a period
+    arrives at the start of the next, none is lost, every link of the graph exists. A
+    message is delayed by ``latency`` [s] (or by a random delay of mean ``latency`` up to
+    ``latency_max``), sent ``rate`` times a second (None: every period), lost with
+    probability ``loss`` (``loss_model`` "bernoulli", or "gilbert_elliott" with the bursts
+    ``p_bad`` (good → bad), ``p_good`` (bad → good) and ``loss_bad`` in the bad state), but
+    never more than ``max_consecutive_losses`` in a row on a link (the declared bound b;
+    None: no bound). ``range`` [m] limits a link to robots that close (None: no limit); a
+    link that left the range comes back within ``range − range_hysteresis``.
+    """
+
+    latency: float = 0.0
+    latency_max: float | None = None  # None: the latency is fixed
+    rate: float | None = None
+    loss: float = 0.0
+    loss_model: str = "bernoulli"
+    p_bad: float = 0.0
+    p_good: float = 1.0
+    loss_bad: float = 1.0
+    max_consecutive_losses: int | None = None
+    range: float | None = None
+    range_hysteresis: float = 0.0
+    faults: tuple[RadioFault, ...] = ()
+
+    @property
+    def ideal(self) -> bool:
+        """True when every message arrives in the next period, none is lost or corrupted,
+        and every link exists: the paper's network (rounds of one period)."""
+        return (
+            self.latency == 0.0
+            and not self.latency_max
+            and self.rate is None
+            and self.loss == 0.0
+            and (self.loss_model == "bernoulli" or self.p_bad == 0.0)
+            and self.range is None
+            and not self.faults
+        )
+
+    @property
+    def lossy(self) -> bool:
+        """Some message may be lost by the channel itself (radio faults aside)."""
+        return self.loss > 0.0 or (self.loss_model == "gilbert_elliott" and self.p_bad > 0.0)
+
+
 @dataclass(frozen=True)
 class Fdir:
     """Fault detection, isolation and recovery settings (eqs. 39-43).

@@ -16,13 +16,16 @@ from ..graph import Graph
 from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
 from .parts import (
+    RADIO_FAULTS,
     Fault,
     Fdir,
     Gains,
+    Network,
     Noise,
     Obstacle,
     Onboard,
     Physics,
+    RadioFault,
     Supervision,
     Team,
 )
@@ -60,9 +63,14 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
     noise = doc.guard(lambda: _noise(top.table("noise")))
     obstacles = doc.guard(lambda: tuple(doc.guard(_obstacle, t) for t in top.tables("obstacles")))
     robots = team.robots if team is not None and doc.ok("team.robots") else None
-    faults = doc.guard(
+    all_faults = doc.guard(
         lambda: tuple(doc.guard(_fault, t, robots, known_duration) for t in top.tables("faults"))
     )
+    faults = radio = None
+    if all_faults is not None:
+        faults = tuple(f for f in all_faults if isinstance(f, Fault))
+        radio = tuple(f for f in all_faults if isinstance(f, RadioFault))
+    network = doc.guard(lambda: _network(top.table("network", {}), physics, radio or ()))
     fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
     onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
     supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
@@ -85,6 +93,15 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
                 f"ko * control_period * (2 * max in-degree + 1) = {step_gain:g}, expected < 2; "
                 "lower ko or physics.control_period",
             )
+    if network is not None and team is not None and team.graph is not None and radio:
+        edges = set(team.graph.edges)
+        for k, f in enumerate(all_faults or ()):
+            if isinstance(f, RadioFault) and f.kind == "link_down" and f.link not in edges:
+                doc.record(
+                    f"faults[{k + 1}].link",
+                    f"[{f.link[0] + 1}, {f.link[1] + 1}] is not a link of team.graph "
+                    "([from, to], robots numbered from 1)",
+                )
     if (
         mission is not None
         and physics is not None
@@ -114,11 +131,12 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
         "noise": noise,
         "mission": mission,
         "obstacles": cast(tuple[Obstacle, ...], obstacles),
-        "faults": cast(tuple[Fault, ...], faults),
+        "faults": faults,
         "fdir": fdir,
         "source": doc.file,
         "onboard": onboard,
         "supervisor": supervision,
+        "network": network,
     }
 
 
@@ -473,14 +491,27 @@ def _obstacle(t: Table) -> Obstacle:
     return Obstacle(pos, radius, safe, act, height)
 
 
-def _fault(t: Table, n: int | None, duration: float | None) -> Fault:
-    robot = t.integer("robot")
-    if n is not None and t.ok("robot") and not 1 <= robot <= n:
-        t.report("robot", f"robot {robot} out of range: robots are numbered 1..{n}")
-    kind = t.string("kind", choices=("bias", "stop"))
+def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFault:
+    kind = t.string("kind", choices=("bias", "stop", *RADIO_FAULTS))
     at = t.number("t", low=0.0, strict_low=False)
     if duration is not None and t.ok("t") and at >= duration:
         t.report("t", f"fault at {at:g} s is after the end of the run (duration = {duration:g} s)")
+    if kind == "link_down":
+        link = t.array("link", (2,), what="[from, to], robots numbered from 1")
+        if t.ok("link"):
+            if np.any(link != np.round(link)) or (
+                n is not None and not np.all((link >= 1) & (link <= n))
+            ):
+                t.report("link", f"expected two robots in 1..{n}, got {link.tolist()}")
+        t.finish()
+        return RadioFault(kind, at, link=(int(link[0]) - 1, int(link[1]) - 1))
+    robot = t.integer("robot")
+    if n is not None and t.ok("robot") and not 1 <= robot <= n:
+        t.report("robot", f"robot {robot} out of range: robots are numbered 1..{n}")
+    if kind in RADIO_FAULTS:
+        offset = t.number("value", low=0.0) if kind == "corrupt" else 0.0
+        t.finish()
+        return RadioFault(kind, at, robot=robot - 1, value=offset)
     if not t.ok("kind"):
         t.used.update(t.data)  # which keys belong here depends on the kind
         return Fault(robot - 1, kind, at)
@@ -502,6 +533,70 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault:
         fault = Fault(robot - 1, kind, at)
     t.finish()
     return fault
+
+
+def _network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ...]) -> Network:
+    """The ``[network]`` table: latency (a number, or {mean, max}), rate, loss and its
+    model, the declared bound on consecutive losses, the range (docs/thresholds.md)."""
+    raw = t.data.get("latency", 0.0)
+    latency_max = None
+    if isinstance(raw, dict):
+        lat = t.table("latency")
+        latency = lat.number("mean", low=0.0)
+        latency_max = lat.number("max", low=0.0)
+        lat.finish()
+        if lat.ok("mean", "max") and latency_max < latency:
+            lat.report("max", f"expected at least mean = {latency:g} s, got {latency_max:g}")
+    else:
+        latency = t.number("latency", 0.0, low=0.0, strict_low=False)
+    h = physics.control_period if physics is not None else None
+    rate = None
+    if "rate" in t.data:
+        rate = t.number("rate", low=0.0)
+        if h is not None and t.ok("rate") and rate * h > 1 + 1e-9:
+            t.report(
+                "rate",
+                f"a robot sends at most once a control period: expected at most "
+                f"{1 / h:g} messages per second, got {rate:g}",
+            )
+    loss = t.number("loss", 0.0, low=0.0, strict_low=False, high=1.0)
+    model = t.string("loss_model", "bernoulli", choices=("bernoulli", "gilbert_elliott"))
+    burst = {}
+    for key, default in (("p_bad", 0.0), ("p_good", 1.0), ("loss_bad", 1.0)):
+        if key in t.data and model != "gilbert_elliott":
+            t.report(key, 'only with loss_model = "gilbert_elliott"')
+        burst[key] = t.number(key, default, low=0.0, strict_low=False, high=1.0)
+    bound = None
+    if "max_consecutive_losses" in t.data:
+        bound = t.integer("max_consecutive_losses", low=0, high=10**6)
+    reach = None
+    if "range" in t.data:
+        reach = t.number("range", low=0.0)
+    hysteresis = t.number("range_hysteresis", 0.0, low=0.0, strict_low=False)
+    if reach is not None and t.ok("range", "range_hysteresis") and hysteresis >= reach:
+        t.report("range_hysteresis", f"expected less than range = {reach:g} m, got {hysteresis:g}")
+    if reach is None and "range_hysteresis" in t.data:
+        t.report("range_hysteresis", "only with a range")
+    t.finish()
+    net = Network(
+        latency=latency,
+        latency_max=latency_max,
+        rate=rate,
+        loss=loss,
+        loss_model=model,
+        max_consecutive_losses=bound,
+        range=reach,
+        range_hysteresis=hysteresis,
+        faults=faults,
+        **burst,
+    )
+    if (
+        net.lossy
+        and bound is None
+        and (loss >= 1 or (model == "gilbert_elliott" and burst["p_good"] == 0))
+    ):
+        t.report("loss", "every message would be lost: give max_consecutive_losses")
+    return net
 
 
 def _fdir(t: Table) -> Fdir:

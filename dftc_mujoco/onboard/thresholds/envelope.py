@@ -408,8 +408,10 @@ class _Enveloped(Thresholds):
         self.drift_param = drift_bound
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
-        """Read h, k_o, η̄, ξ̄, ē and G, and compute the rule on the team's graph."""
-        self.h = config.dt
+        """Read h, k_o, η̄, ξ̄, ē and G, and compute the rule on the team's graph. h is the
+        observers' step: the control period, or a round of the network (the rules hold at
+        the rounds exactly as they do every period on the ideal network)."""
+        self.h = config.observer_period
         self.G = np.asarray(config.G, float)
         self.ko, self.eta_bar, self.xi_bar = config.ko, config.eta_bar, config.xi_bar
         self.drift = float(
@@ -421,8 +423,8 @@ class _Enveloped(Thresholds):
         self.drift_given = self.drift
         if self.covers_compensation and config.fdir and config.compensate:
             # with the compensation applied, D_k = G φ̂_k − η_k + η_k(0): ē must cover it
-            phi_bar = estimator_gain(
-                config.K, config.G, self.h, self.eta_bar, self.xi_bar, lag=config.lag
+            phi_bar = estimator_gain(  # the fault estimator runs every control period
+                config.K, config.G, config.dt, self.eta_bar, self.xi_bar, lag=config.lag
             )
             self.drift = max(self.drift, compensation_offset(self.G, phi_bar, self.eta_bar))
         self._setup(config)
