@@ -454,8 +454,8 @@ class Simulation:
                         self._radio(t, k, channel)
                     team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
                     if channel is not None:
-                        channel.send(k, team.content_round, x)
-                        if team.round_now and team.missed and watch:
+                        channel.send(k, team.rounds.content, x)
+                        if team.rounds.now and team.missed and watch:
                             monitor.network(t, team.missed)
                     ncon = data.ncon
                     if watch:

@@ -211,7 +211,7 @@ class Observer(Block):
         width = n * self.y_hat.shape[2]
         if self.networked:
             # no message yet: a link holds the receiver's own ŷ (no pull either way)
-            self.links = np.ascontiguousarray(self.y_hat[self._link_dst()].reshape(-1, width))
+            self.links = np.ascontiguousarray(self.y_hat[self.link_dst()].reshape(-1, width))
             self.sent = np.repeat(self.y_hat.reshape(1, n, width), SENT_ROUNDS, axis=0)
         else:
             self.links = np.zeros((0, width))
@@ -219,7 +219,7 @@ class Observer(Block):
         self.link_round = np.full(len(self.allowed.src), -1, dtype=np.int64)
         self._connect(config.graph)
 
-    def _link_dst(self) -> np.ndarray:
+    def link_dst(self) -> np.ndarray:
         fe = self.allowed.first_edge
         return np.repeat(np.arange(len(fe) - 1), np.diff(fe))
 
@@ -279,7 +279,7 @@ class Observer(Block):
         stops reading an in-neighbour it no longer hears (and reads it again when it does)."""
         order = np.flatnonzero(live)
         al = self.allowed
-        dst = self._link_dst()
+        dst = self.link_dst()
         edges = tuple((int(al.src[e]), int(dst[e])) for e in order)
         self.messages = Messages(edges, len(self.y_hat))
         self.pick = order.astype(np.intp)
@@ -294,7 +294,7 @@ class Observer(Block):
         self.int_u_hat = self.int_u_hat[np.ix_(keep, keep)]
         self.int_u_own = self.int_u_own[keep]
         if self.networked:
-            al, dst = self.allowed, self._link_dst()
+            al, dst = self.allowed, self.link_dst()
             stay = (al.src != p) & (dst != p)
             cols = np.delete(np.arange(m * n).reshape(m, n), p, axis=0).ravel()
             self.links = np.ascontiguousarray(self.links[np.ix_(stay, cols)])

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..events import make
+from ..graph import Graph
 
 #: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
 #: at the last postponement for the flags to count as a contact's decaying trace
@@ -209,3 +210,25 @@ class Recovery:
             flagged_by=flaggers,
             detected_by=self.detectors(robot),
         )
+
+
+def split_event(t: float, graph: Graph, members: np.ndarray) -> dict[str, Any]:
+    """The ``graph_not_strongly_connected`` event: the members' strongly connected
+    components and, for each, the robots it hears nothing from (directly or through
+    others): its estimates of them, and the residuals and thresholds built on them, have
+    no bound any more (eqs. 19, 35)."""
+    ids = members + 1
+    groups = graph.components()
+    unheard = graph.unheard()
+    cost = []
+    for g in groups:
+        lost = np.flatnonzero(unheard[g[0]])
+        cost.append([int(k) for k in ids[lost]])
+    return make(
+        t,
+        "graph_not_strongly_connected",
+        robots=[int(k) for k in ids],
+        components=[[int(k) for k in ids[g]] for g in groups],
+        unheard=cost,  # per component: the robots whose estimates lost their bound
+        pairs=int(unheard.sum()),
+    )

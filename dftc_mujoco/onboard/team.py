@@ -48,7 +48,8 @@ from .period import (
     team_period_flat,
     team_period_split,
 )
-from .recovery import Recovery
+from .radio import Radios, Rounds
+from .recovery import Recovery, split_event
 from .supervisor import Supervisor, SupervisorRecord, Surroundings
 from .thresholds import Thresholds
 
@@ -71,8 +72,6 @@ _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decisio
 HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
-#: rounds in a row without the round's message after which a robot stops reading a link
-SILENT_ROUNDS = 2
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 PARALLEL_ALLOWED = True  # False keeps the compiled period on one core (benchmarks, tests)
 
@@ -160,17 +159,8 @@ class Team:
         self._x_past = np.zeros((self._window, n, 2))
         self._k = 0
         # the network: the observers step in rounds of R periods (1: the ideal network)
-        self.rounds = max(1, int(config.round_periods))
-        self.period = 0  # control periods stepped so far
-        self.content_round = 0  # the round of the ŷ each robot's radio sends now
-        self.networked = bool(config.networked)
-        links = len(self.observer.allowed.src) if self.networked else 0
-        self.late = np.zeros(links, dtype=np.int64)  # rounds each link missed in a row
-        self.deaf = np.zeros(links, bool)  # links their receivers stopped reading
-        self.missed = 0  # links whose round message was missing at the last round
-        self._link_map = np.arange(links)  # the channel's link -> the observers' (-1: gone)
-        self._silent_robot = np.zeros(n, bool)
-        self.round_now = True
+        self.rounds = Rounds(config.round_periods, config.observer_period)
+        self.radios = Radios(self.observer, n) if config.networked else None
         self._resize()
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
@@ -314,21 +304,19 @@ class Team:
             if self.config.teammate_safe > 0:
                 np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
-        k, big_r = self.period, self.rounds
-        self.period += 1
-        self.round_now = big_r == 1 or (k + 1) % big_r == 0
-        if self.round_now:
-            s = (k + 1) // big_r - 1  # the round the observers step now
-            self.mu = self.thresholds.mu(t if big_r == 1 else s * self.config.observer_period)
-            if self.networked:
-                self._watch_links(t, s)
+        if self.rounds.tick():  # the observers step in this period
+            self.mu = self.thresholds.mu(self.rounds.rule_time(t))
+            if self.radios is not None:
+                found = self.radios.watch(t, self.rounds.index, self.members)
+                if found:
+                    self.events += found
+                    self._flat.clear()  # the residual's links changed
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
             code = self._general(x_m, c, c_dot, offsets, rates)
-        if self.round_now:
-            self.content_round = (k + 1) // big_r
-            self.observer.broadcast(self.content_round)
+        if self.rounds.now:
+            self.observer.broadcast(self.rounds.stepped())
         if code & RAISED:
             self._report(t, self._raised)
         if code & RAISED or self.recovery.anomaly is not None:
@@ -337,63 +325,15 @@ class Team:
             self._switches(t)
         return code
 
-    # ------------------------------------------------------------------ the radios
-
     def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
-        """The channel delivered, on its links ``links``, the messages of ``rounds`` (each
-        with ``offset`` [m] from a corrupting sender): each receiving robot keeps them."""
-        if not len(links):
-            return
-        mine = self._link_map[links]
-        ok = mine >= 0
-        self.observer.receive(mine[ok], rounds[ok], offset[ok])
+        """The network delivered messages (:meth:`.radio.Radios.receive`)."""
+        if self.radios is not None:
+            self.radios.receive(links, rounds, offset)
 
-    def _watch_links(self, t: float, s: int) -> None:
-        """At round ``s``: each robot checks that the message of round s came on each of its
-        links. Under the network's declared bounds it always has (docs/thresholds.md, "Over
-        a network"); a link that missed SILENT_ROUNDS rounds in a row is not read any more
-        until it delivers again (``link_silent``, ``link_heard``), and a robot none of whose
-        listeners hears it is reported ``robot_silent``."""
-        obs = self.observer
-        fresh = obs.link_round >= s
-        self.missed = int(len(fresh) - np.count_nonzero(fresh))
-        if not self.missed and not self.deaf.any():
-            self.late[:] = 0
-            return
-        self.late = np.where(fresh, 0, self.late + 1)
-        deaf = self.late >= SILENT_ROUNDS
-        changed = np.flatnonzero(deaf != self.deaf)
-        if not len(changed):
-            return
-        ids = self.members + 1
-        src, dst = obs.allowed.src, obs._link_dst()
-        for e in changed:
-            sender, heard_by = int(ids[src[e]]), int(ids[dst[e]])
-            if deaf[e]:
-                since = int(obs.link_round[e])
-                self.events.append(
-                    make(t, "link_silent", robot=sender, heard_by=heard_by, since=since)
-                )
-            else:
-                self.events.append(make(t, "link_heard", robot=sender, heard_by=heard_by))
-        self.deaf = deaf
-        obs.listen(~deaf)
-        self._flat.clear()
-        for j in np.unique(src[changed]):
-            out = src == j
-            robot = int(self.members[j])
-            silent = bool(deaf[out].all())
-            if silent and not self._silent_robot[robot]:
-                self.events.append(
-                    make(
-                        t,
-                        "robot_silent",
-                        robot=robot + 1,
-                        reported_by=[int(ids[d]) for d in dst[out]],
-                        since=int(obs.link_round[out].max()),
-                    )
-                )
-            self._silent_robot[robot] = silent
+    @property
+    def missed(self) -> int:
+        """Links whose message was missing at the last round of the observers."""
+        return self.radios.missed if self.radios is not None else 0
 
     def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
         """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
@@ -401,7 +341,7 @@ class Team:
         if self._row.shape[0] > 1:  # a large team: the passes on every core
             ctl, sup, seen, drive, est = self._records()
             code = team_period_split(
-                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir, self.round_now),
+                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir, self.rounds.now),
                 self.observer.record(),
                 ctl,
                 sup,
@@ -420,10 +360,10 @@ class Team:
                 offsets,
                 rates,
                 fdir,
-                self.round_now,
+                self.rounds.now,
                 *self._flat_records(),
             )
-        if self.round_now:
+        if self.rounds.now:
             self.observer.advance()  # ŷ of the next period (eq. 19)
         self._raised = self.decision.raised
         return code
@@ -489,7 +429,7 @@ class Team:
         if self.drive.lagged:
             u_mem = self.u[mem]
             delta_u = u_mem - u_g
-        if self.round_now:
+        if self.rounds.now:
             r = self.observer.residual(x_own)  # eq. 35
             self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         else:  # between two rounds of the network only the integrals move
@@ -509,7 +449,7 @@ class Team:
                 self.u_bar[:] = self.drive.command - (self.u - u_bar)
             else:
                 self.u_bar[:] = u_bar
-            if self.round_now:
+            if self.rounds.now:
                 self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)
                 if self._raised.any():  # eq. 39
                     code |= RAISED
@@ -672,7 +612,7 @@ class Team:
                 self.events.append(make(t, "mission_ended", reason=self.ended, robots=left))
                 return
             if not self.graph.is_strongly_connected():
-                self.events.append(self._split(t))
+                self.events.append(split_event(t, self.graph, self.members))
 
     def _worst_ratio(self, p: int) -> float:
         """The largest ‖ⁱr_k‖ / ⁱμ_k among robot k's teammates (k at member position ``p``):
@@ -685,50 +625,21 @@ class Team:
         ratio = ratio[np.isfinite(ratio)]
         return float(ratio.max()) if len(ratio) else float("nan")
 
-    def _split(self, t: float) -> dict[str, Any]:
-        """The ``graph_not_strongly_connected`` event: the members' strongly connected
-        components and, for each, the robots it hears nothing from (directly or through
-        others): its estimates of them, and the residuals and thresholds built on them, have
-        no bound any more (eqs. 19, 35)."""
-        ids = self.members + 1
-        groups = self.graph.components()
-        unheard = self.graph.unheard()
-        cost = []
-        for g in groups:
-            lost = np.flatnonzero(unheard[g[0]])
-            cost.append([int(k) for k in ids[lost]])
-        return make(
-            t,
-            "graph_not_strongly_connected",
-            robots=[int(k) for k in ids],
-            components=[[int(k) for k in ids[g]] for g in groups],
-            unheard=cost,  # per component: the robots whose estimates lost their bound
-            pairs=int(unheard.sum()),
-        )
-
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
         keep = np.delete(np.arange(len(self.members)), p)
-        if self.networked:  # the links of the robot that leaves go with it
-            obs = self.observer
-            stay = (obs.allowed.src != p) & (obs._link_dst() != p)
-            renumber = np.where(stay, np.cumsum(stay) - 1, -1)
-            self._link_map = np.where(self._link_map >= 0, renumber[self._link_map], -1)
-            self.late, self.deaf = self.late[stay], self.deaf[stay]
+        if self.radios is not None:  # the links of the robot that leaves go with it
+            self.radios.drop(p)
         old_offsets, _ = self.plan.at(t)
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
         self.members = self.members[keep]
         self.graph = self.graph.without(p, relay=self.config.excluded_relay)
-        big_r = self.rounds
-        # the rules restart at the first round at or after now (its rule time, in rounds)
-        t_rule = (
-            t if big_r == 1 else ((self.period + big_r) // big_r - 1) * self.config.observer_period
-        )
+        t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
         for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
             self.blocks[name].drop(p, self.graph, t_rule if name == "thresholds" else t)
-        if self.networked and self.deaf.any():
-            self.observer.listen(~self.deaf)
+        if self.radios is not None:
+            self.radios.dropped()
         self._resize()
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])

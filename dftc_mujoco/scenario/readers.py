@@ -15,12 +15,12 @@ from ..blocks import BLOCKS, check_name
 from ..graph import Graph
 from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
+from .network import read_network
 from .parts import (
     RADIO_FAULTS,
     Fault,
     Fdir,
     Gains,
-    Network,
     Noise,
     Obstacle,
     Onboard,
@@ -70,7 +70,7 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
     if all_faults is not None:
         faults = tuple(f for f in all_faults if isinstance(f, Fault))
         radio = tuple(f for f in all_faults if isinstance(f, RadioFault))
-    network = doc.guard(lambda: _network(top.table("network", {}), physics, radio or ()))
+    network = doc.guard(lambda: read_network(top.table("network", {}), physics, radio or ()))
     fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
     onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
     supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
@@ -533,70 +533,6 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFaul
         fault = Fault(robot - 1, kind, at)
     t.finish()
     return fault
-
-
-def _network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ...]) -> Network:
-    """The ``[network]`` table: latency (a number, or {mean, max}), rate, loss and its
-    model, the declared bound on consecutive losses, the range (docs/thresholds.md)."""
-    raw = t.data.get("latency", 0.0)
-    latency_max = None
-    if isinstance(raw, dict):
-        lat = t.table("latency")
-        latency = lat.number("mean", low=0.0)
-        latency_max = lat.number("max", low=0.0)
-        lat.finish()
-        if lat.ok("mean", "max") and latency_max < latency:
-            lat.report("max", f"expected at least mean = {latency:g} s, got {latency_max:g}")
-    else:
-        latency = t.number("latency", 0.0, low=0.0, strict_low=False)
-    h = physics.control_period if physics is not None else None
-    rate = None
-    if "rate" in t.data:
-        rate = t.number("rate", low=0.0)
-        if h is not None and t.ok("rate") and rate * h > 1 + 1e-9:
-            t.report(
-                "rate",
-                f"a robot sends at most once a control period: expected at most "
-                f"{1 / h:g} messages per second, got {rate:g}",
-            )
-    loss = t.number("loss", 0.0, low=0.0, strict_low=False, high=1.0)
-    model = t.string("loss_model", "bernoulli", choices=("bernoulli", "gilbert_elliott"))
-    burst = {}
-    for key, default in (("p_bad", 0.0), ("p_good", 1.0), ("loss_bad", 1.0)):
-        if key in t.data and model != "gilbert_elliott":
-            t.report(key, 'only with loss_model = "gilbert_elliott"')
-        burst[key] = t.number(key, default, low=0.0, strict_low=False, high=1.0)
-    bound = None
-    if "max_consecutive_losses" in t.data:
-        bound = t.integer("max_consecutive_losses", low=0, high=10**6)
-    reach = None
-    if "range" in t.data:
-        reach = t.number("range", low=0.0)
-    hysteresis = t.number("range_hysteresis", 0.0, low=0.0, strict_low=False)
-    if reach is not None and t.ok("range", "range_hysteresis") and hysteresis >= reach:
-        t.report("range_hysteresis", f"expected less than range = {reach:g} m, got {hysteresis:g}")
-    if reach is None and "range_hysteresis" in t.data:
-        t.report("range_hysteresis", "only with a range")
-    t.finish()
-    net = Network(
-        latency=latency,
-        latency_max=latency_max,
-        rate=rate,
-        loss=loss,
-        loss_model=model,
-        max_consecutive_losses=bound,
-        range=reach,
-        range_hysteresis=hysteresis,
-        faults=faults,
-        **burst,
-    )
-    if (
-        net.lossy
-        and bound is None
-        and (loss >= 1 or (model == "gilbert_elliott" and burst["p_good"] == 0))
-    ):
-        t.report("loss", "every message would be lost: give max_consecutive_losses")
-    return net
 
 
 def _fdir(t: Table) -> Fdir:

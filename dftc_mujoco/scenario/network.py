@@ -1,0 +1,71 @@
+"""Reading the ``[network]`` table (:class:`~.parts.Network`; the medium itself is
+:mod:`dftc_mujoco.network`)."""
+
+from __future__ import annotations
+
+from ..tomlcheck import Table
+from .parts import Network, Physics, RadioFault
+
+
+def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ...]) -> Network:
+    """The ``[network]`` table: latency (a number, or {mean, max}), rate, loss and its
+    model, the declared bound on consecutive losses, the range (docs/thresholds.md)."""
+    raw = t.data.get("latency", 0.0)
+    latency_max = None
+    if isinstance(raw, dict):
+        lat = t.table("latency")
+        latency = lat.number("mean", low=0.0)
+        latency_max = lat.number("max", low=0.0)
+        lat.finish()
+        if lat.ok("mean", "max") and latency_max < latency:
+            lat.report("max", f"expected at least mean = {latency:g} s, got {latency_max:g}")
+    else:
+        latency = t.number("latency", 0.0, low=0.0, strict_low=False)
+    h = physics.control_period if physics is not None else None
+    rate = None
+    if "rate" in t.data:
+        rate = t.number("rate", low=0.0)
+        if h is not None and t.ok("rate") and rate * h > 1 + 1e-9:
+            t.report(
+                "rate",
+                f"a robot sends at most once a control period: expected at most "
+                f"{1 / h:g} messages per second, got {rate:g}",
+            )
+    loss = t.number("loss", 0.0, low=0.0, strict_low=False, high=1.0)
+    model = t.string("loss_model", "bernoulli", choices=("bernoulli", "gilbert_elliott"))
+    burst = {}
+    for key, default in (("p_bad", 0.0), ("p_good", 1.0), ("loss_bad", 1.0)):
+        if key in t.data and model != "gilbert_elliott":
+            t.report(key, 'only with loss_model = "gilbert_elliott"')
+        burst[key] = t.number(key, default, low=0.0, strict_low=False, high=1.0)
+    bound = None
+    if "max_consecutive_losses" in t.data:
+        bound = t.integer("max_consecutive_losses", low=0, high=10**6)
+    reach = None
+    if "range" in t.data:
+        reach = t.number("range", low=0.0)
+    hysteresis = t.number("range_hysteresis", 0.0, low=0.0, strict_low=False)
+    if reach is not None and t.ok("range", "range_hysteresis") and hysteresis >= reach:
+        t.report("range_hysteresis", f"expected less than range = {reach:g} m, got {hysteresis:g}")
+    if reach is None and "range_hysteresis" in t.data:
+        t.report("range_hysteresis", "only with a range")
+    t.finish()
+    net = Network(
+        latency=latency,
+        latency_max=latency_max,
+        rate=rate,
+        loss=loss,
+        loss_model=model,
+        max_consecutive_losses=bound,
+        range=reach,
+        range_hysteresis=hysteresis,
+        faults=faults,
+        **burst,
+    )
+    if (
+        net.lossy
+        and bound is None
+        and (loss >= 1 or (model == "gilbert_elliott" and burst["p_good"] == 0))
+    ):
+        t.report("loss", "every message would be lost: give max_consecutive_losses")
+    return net
