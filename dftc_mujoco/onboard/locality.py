@@ -6,7 +6,10 @@ an ideal-integrator plant, then, for every robot i and every other robot k,
 changes robot k's broadcast message (``observer.y_hat[k]``) and measurement and
 steps once more: if k is not an in-neighbour of i, robot i's outputs (inputs,
 fault estimate, residuals, thresholds, flags) and every row i of every block's
-state must stay bit-identical. Use it on your own blocks::
+state must stay bit-identical. With ``networked=True`` the team runs over a network
+(observers in rounds, each robot reading the last message each of its links delivered):
+robot k's messages are changed where they are, on its outgoing links, and robot i's view
+includes the links into it. Use it on your own blocks::
 
     from dftc_mujoco import check_locality
     assert check_locality({"controller": MyController()}) == []
@@ -67,9 +70,22 @@ def integrate(
     for k in range(steps):
         t = t0 + k * team.config.dt
         team.step(t, x.copy(), v * t, v)
+        deliver(team)
         phi = fault(t, team) if fault else 0.0
         x = x + team.config.dt * (team.u_bar + phi)
     return x
+
+
+def deliver(team: Team) -> None:
+    """A perfect network: every link delivers, for the next period, what its sender sends."""
+    if team.radios is not None:
+        e = len(team.radios.link_map)
+        team.receive(np.arange(e), np.full(e, team.rounds.content), np.zeros(e))
+
+
+#: per-link arrays of the observer (rows are links, not robots): shown through the links
+#: into each robot instead
+_LINK_STATE = {"links", "link_round", "sent", "pick"}
 
 
 def robot_view(team: Team, i: int) -> list[np.ndarray]:
@@ -85,9 +101,15 @@ def robot_view(team: Team, i: int) -> list[np.ndarray]:
     ]
     m = len(team.members)
     for block in team.blocks.values():
-        for value in vars(block).values():
+        for name, value in vars(block).items():
+            if name in _LINK_STATE:
+                continue
             if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
                 view.append(value[i])
+    obs = team.observer
+    if team.radios is not None:  # the messages robot i holds from its in-neighbours
+        into = obs.link_dst() == i
+        view += [obs.links[into], obs.link_round[into]]
     return [np.array(v, copy=True) for v in view]
 
 
@@ -97,15 +119,18 @@ def check_locality(
     graph: Graph | None = None,
     warmup: int = 50,
     require_reaction: bool = False,
+    networked: bool = False,
 ) -> list[str]:
     """Locality violations of a block set (empty when every robot uses only what it may).
 
     ``blocks`` replaces the paper's blocks as in :class:`~dftc_mujoco.loop.Simulation`;
     the team has ``n`` robots on ``graph`` (default: a ring with chords). With
     ``require_reaction`` a robot that ignores an in-neighbour's message is
-    reported too.
+    reported too. ``networked``: over a network with rounds of 3 periods (the checked
+    period is a round).
     """
-    team, x = demo_team(n, blocks, graph)
+    changes: dict[str, Any] = {"networked": True, "round_periods": 3} if networked else {}
+    team, x = demo_team(n, blocks, graph, **changes)
     x = integrate(team, x, warmup)
     g = team.config.graph
     c, v = np.array([0.5, 0.0]), np.array([0.1, 0.0])
@@ -120,6 +145,8 @@ def check_locality(
             y_hat = getattr(other.observer, "y_hat", None)
             if isinstance(y_hat, np.ndarray):
                 y_hat[k] += 0.37  # robot k broadcasts a different ŷ
+            if other.radios is not None:  # and its links carry different messages
+                other.observer.links[other.observer.allowed.src == k] += 0.37
             x_m = x.copy()
             if k != i:
                 x_m[k] += 0.21  # and measures something else

@@ -1,0 +1,240 @@
+"""The network between the robots (dftc_mujoco/network.py, onboard/radio.py): the ideal
+network changes nothing, messages within the declared bounds give exactly the synchronous
+observer of docs/thresholds.md ("Over a network"), the paper's outcome over a lossy,
+delayed network, radio faults diagnosed as radio faults, and the [network] table's
+checks."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.graph import ring_with_chords
+from dftc_mujoco.network import Channel, timing
+from dftc_mujoco.onboard.locality import check_locality, demo_team
+from dftc_mujoco.onboard.observer import Observer
+from dftc_mujoco.scenario import Network
+
+LOSSY = {
+    "network.latency": 0.05,
+    "network.loss": 0.1,
+    "network.max_consecutive_losses": 5,
+    "gains.ko": 3.0,
+}
+
+
+def _run(overrides: dict, duration: float | None = None):
+    s = load_scenario("paper_case", overrides=overrides)
+    if duration is not None:
+        s = s.with_overrides(duration=duration)
+    return simulate(s, progress=False)
+
+
+def _detections(result) -> list[tuple[int, int]]:
+    return [(e["by"], e["robot"]) for e in result.events.items if e["kind"] == "detection"]
+
+
+def test_the_round_is_latency_plus_the_messages_the_losses_may_take():
+    h = 0.01
+    assert timing(Network(), h).round == 1  # the paper's observer, every period
+    t = timing(Network(latency=0.05, loss=0.1, max_consecutive_losses=5), h)
+    assert (t.latency, t.every, t.losses, t.round) == (5, 1, 5, 11)
+    t = timing(Network(latency=0.02, latency_max=0.04, rate=50.0), h)
+    assert (t.latency, t.every, t.round) == (4, 2, 6)  # no loss: b = 0
+    assert not timing(Network(loss=0.1), h).guaranteed  # losses without a bound
+
+
+def test_an_ideal_network_table_changes_nothing():
+    a = _run({}, duration=3.0)
+    b = _run({"network.latency": 0.0, "network.loss": 0.0}, duration=3.0)
+    for k, v in a.log.items():
+        assert np.array_equal(v, b.log[k], equal_nan=True), k
+    assert b.summary["network"] == {"ideal": True}
+
+
+def _pair(rounds: int, seed: int, adversarial: Network, periods: int):
+    """Two copies of one networked team on an ideal plant with noise at its bound: one
+    over ``adversarial`` (its delays and losses within the declared bounds), one whose
+    links deliver every message at once; returns both histories."""
+    g = ring_with_chords(6, (2,))  # in-degree 2: ko h_o (2 d + 1) = 2.0 × 0.11 × 5 = 1.1 < 2
+    team, x0 = demo_team(6, graph=g, networked=True, round_periods=rounds, ko=2.0)
+    twin = copy.deepcopy(team)
+    channel = Channel(adversarial, g, team.config.dt, np.random.default_rng(seed))
+    # a channel that delivers every message in the next period (a range nobody leaves)
+    perfect = Channel(Network(range=1e9), g, team.config.dt, np.random.default_rng(seed))
+    for ch in (channel, perfect):
+        ch.send(-1, 0, x0)
+    v, eta = np.array([0.1, 0.0]), team.config.eta_bar
+    out = []
+    for tm, ch in ((team, channel), (twin, perfect)):
+        x, hist = x0.copy(), []
+        noise = np.random.default_rng(seed + 1)
+        for k in range(periods):
+            t = k * tm.config.dt
+            tm.receive(*ch.receive(k))
+            d = noise.normal(size=x.shape)
+            d *= eta / np.linalg.norm(d, axis=1, keepdims=True)  # ‖η‖ = η̄
+            tm.step(t, x + d, v * t, v)
+            ch.send(k, tm.rounds.content, x)
+            hist.append((tm.u_bar.copy(), tm.r_norm.copy(), np.array(tm.flag), tm.missed))
+            x = x + tm.config.dt * tm.u_bar
+        out.append((hist, ch))
+    return out
+
+
+@pytest.mark.parametrize(
+    "net",
+    [
+        # every message lost that the bound allows: 5 lost, 1 through, on every link
+        Network(latency=0.05, loss=1.0, max_consecutive_losses=5),
+        # random delays up to 40 ms, bursts of losses (at most 3 in a row), a message every 2
+        Network(
+            latency=0.02,
+            latency_max=0.04,
+            rate=50.0,
+            loss=0.2,
+            loss_model="gilbert_elliott",
+            p_bad=0.3,
+            p_good=0.3,
+            loss_bad=0.9,
+            max_consecutive_losses=3,
+        ),
+    ],
+    ids=["worst_losses", "random_delays_bursts"],
+)
+def test_messages_within_the_bounds_give_exactly_the_synchronous_observer(net):
+    """The identity every rule rests on holds over the network: with delays ≤ L and at most
+    b losses in a row, each round's messages are all in by the round, so the team computes
+    bit for bit what it computes when every link delivers every message at once (and the
+    rules, derived at h_o = R h, bound it); no healthy robot is flagged."""
+    rounds = timing(net, 0.01).round
+    (adv, ch), (ref, _) = _pair(rounds, 3, net, 1500)
+    for k, (a, b) in enumerate(zip(adv, ref, strict=True)):
+        for x, y in zip(a[:3], b[:3], strict=True):
+            assert np.array_equal(x, y, equal_nan=True), k
+        assert a[3] == 0, f"period {k}: {a[3]} links missed the round's message"
+    assert not np.any([h[2] for h in adv])  # no flag, noise at its bound
+    s = ch.summary()
+    b = net.max_consecutive_losses
+    assert max(x["longest_loss_run"] for x in s["links"]) == b  # the bound was reached
+    assert max(x["delay_max"] for x in s["links"]) <= timing(net, 0.01).latency * 0.01 + 1e-12
+    assert sum(x["lost"] for x in s["links"]) > 0
+
+
+def test_a_message_later_than_the_bounds_is_seen_and_breaks_the_identity():
+    """The converse, so that the test above can fail: a link that loses more than the
+    round allows leaves the round's message missing, and the team differs from the
+    synchronous one."""
+    net = Network(latency=0.05, loss=1.0, max_consecutive_losses=5)
+    (adv, _), (ref, _) = _pair(3, 3, net, 300)  # R = 3 < 11: the bound does not fit
+    assert any(h[3] for h in adv)
+    assert not all(np.array_equal(a[1], b[1]) for a, b in zip(adv, ref, strict=True))
+
+
+class _CrossedLinks(Observer):
+    """An observer that reads each edge's message from the next link: a robot then reads a
+    message that was not sent to it."""
+
+    def residual(self, x_m: np.ndarray) -> np.ndarray:
+        self.pick = np.roll(np.arange(len(self.allowed.src)), 1)
+        return super().residual(x_m)
+
+
+def test_locality_holds_over_the_network():
+    assert check_locality(networked=True) == []
+    assert check_locality(networked=True, require_reaction=True) == []
+    found = check_locality({"observer": _CrossedLinks()}, networked=True)
+    assert found and all("without a link" in p for p in found)
+
+
+@pytest.mark.parametrize("rule", ["l1", "block_row"])
+def test_the_paper_case_over_a_lossy_delayed_network(rule):
+    """50 ms latency, 10 % Bernoulli loss, at most 5 in a row: robot 1's stop is isolated by
+    all four, nobody else is flagged, every premise holds, and the channel kept its bounds."""
+    r = _run({**LOSSY, "onboard.thresholds": rule})
+    found = _detections(r)
+    assert sorted(by for by, k in found if k == 1) == [1, 2, 3, 4]
+    assert all(k == 1 for _, k in found), found
+    excluded = [e["robot"] for e in r.events.items if e["kind"] == "exclusion"]
+    assert excluded == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())
+    net = r.summary["network"]
+    assert net["round_periods"] == 11
+    links = net["links"]
+    assert max(x["longest_loss_run"] for x in links) <= 5
+    assert all(x["delay_max"] == pytest.approx(0.05) for x in links)
+    rate = sum(x["lost"] for x in links) / sum(x["sent"] for x in links)
+    assert 0.08 < rate < 0.12
+
+
+def test_a_silent_robot_is_reported_silent_and_its_stop_is_still_seen():
+    """Robot 1's radio goes silent at 30 s: robot 2 (its only listener) reports it within
+    three rounds, as a communication fault; robot 1 still hears its teammates, so its own
+    residual sees its stop at 41.8 s (the flag is labelled with the network premise)."""
+    r = _run(
+        {
+            "network.latency": 0.02,
+            "gains.ko": 3.0,
+            "onboard.thresholds": "l1",
+            "faults": [
+                {"robot": 1, "kind": "silent", "t": 30.0},
+                {"robot": 1, "kind": "stop", "t": 41.8},
+                {"robot": 2, "kind": "bias", "t": 19.0, "value": [0.3, -0.35]},
+            ],
+        }
+    )
+    h_o = r.summary["network"]["round_periods"] * 0.01
+    silent = [e for e in r.events.items if e["kind"] == "robot_silent"]
+    assert [e["robot"] for e in silent] == [1] and silent[0]["reported_by"] == [2]
+    assert 30.0 < silent[0]["t"] <= 30.0 + 3 * h_o + 1e-9
+    assert not any(e["kind"] == "detection" and e["t"] < 41.8 for e in r.events.items)
+    seen = [e for e in r.events.items if e["kind"] == "detection" and e["robot"] == 1]
+    assert seen and seen[0]["t"] < 43.0 and "network" in seen[0]["premises"]
+    assert not r.summary["premises"]["network"]["held"]
+
+
+def test_the_network_table_is_checked_in_one_line_per_problem():
+    def problems(over: dict) -> str:
+        with pytest.raises(ScenarioError) as e:
+            load_scenario("paper_case", overrides=over)
+        return str(e.value)
+
+    assert "network.rate: a robot sends at most once a control period" in problems(
+        {"network.rate": 500.0}
+    )
+    assert "network.latency.max: expected at least mean = 0.05 s" in problems(
+        {"network.latency": {"mean": 0.05, "max": 0.01}}
+    )
+    assert 'network.p_bad: only with loss_model = "gilbert_elliott"' in problems(
+        {"network.p_bad": 0.1}
+    )
+    assert "network.loss: every message would be lost" in problems({"network.loss": 1.0})
+    assert "faults[1].link: [1, 3] is not a link of team.graph" in problems(
+        {"faults": [{"kind": "link_down", "link": [1, 3], "t": 5.0}]}
+    )
+    s = load_scenario(
+        "paper_case",
+        overrides={**LOSSY, "faults": [{"kind": "corrupt", "robot": 3, "t": 5.0, "value": 0.2}]},
+    )
+    again = type(s).from_dict(s.to_dict())
+    assert again.network == s.network and again.network.faults[0].robot == 2
+
+
+def test_what_a_network_makes_meaningless_is_refused_before_simulating():
+    def refused(over: dict) -> str:
+        with pytest.raises(ScenarioError) as e:
+            _run(over, duration=1.0)
+        return str(e.value)
+
+    msg = refused({**LOSSY, "gains.ko": 6.0, "onboard.thresholds": "l1"})
+    assert "gains.ko: the observers step once a round of the network, R = 11 periods" in msg
+    assert "lower ko below 3.64" in msg
+    msg = refused({**LOSSY})  # eq. 40, the paper's rule
+    assert "eq. 40's thresholds" in msg and "not derived for the observers' rounds" in msg
+    r = _run({"network.loss": 0.05, "onboard.thresholds": "l1", "gains.ko": 3.0}, duration=1.0)
+    warned = [e["message"] for e in r.events.items if e["kind"] == "warning"]
+    assert any("losses have no bound" in w for w in warned)
