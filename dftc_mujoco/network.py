@@ -254,16 +254,28 @@ def refusals(s: Any, rule: str, where: str) -> tuple[list[str], list[str]]:
             "for the ideal network only; set it to false with a [network] table"
         )
     d = int(s.team.graph.in_degree().max()) if s.team.graph.edges else 0
-    gain = s.gains.ko * h * tm.round * (2 * d + 1)
-    if gain >= 2:
-        most = 2 / (h * tm.round * (2 * d + 1))
-        refused.append(
-            f"{where}: gains.ko: the observers step once a round of the network, R = "
-            f"{tm.round} periods (latency {tm.latency} + ({tm.losses or 0} losses + 1) x "
-            f"{tm.every} periods between messages), and ko * R * control_period * "
-            f"(2 * max in-degree + 1) = {gain:.3g} makes that step unstable (expected < 2): "
-            f"lower ko below {most:.3g}, or the latency, the loss bound or the message period"
-        )
+    h_o = h * tm.round
+    why = (
+        f"the observers step once a round of the network, R = {tm.round} periods (latency "
+        f"{tm.latency} + ({tm.losses or 0} losses + 1) x {tm.every} periods between messages)"
+    )
+    if rule in ("l1", "block_row", "drive"):  # the rules need A_k >= 0 at the round
+        worst = s.gains.ko * h_o * (d + 1)
+        if worst > 1 + 1e-12:
+            refused.append(
+                f"{where}: gains.ko: {why}, and rule {rule!r} needs ko * R * control_period * "
+                f"(max in-degree + 1) <= 1, got {worst:.3g}: lower ko to at most "
+                f"{1 / (h_o * (d + 1)):.3g}, or the latency, the loss bound or the message period"
+            )
+    else:
+        gain = s.gains.ko * h_o * (2 * d + 1)
+        if gain >= 2:
+            refused.append(
+                f"{where}: gains.ko: {why}, and ko * R * control_period * (2 * max in-degree "
+                f"+ 1) = {gain:.3g} makes that step unstable (expected < 2): lower ko below "
+                f"{2 / (h_o * (2 * d + 1)):.3g}, or the latency, the loss bound or the message "
+                "period"
+            )
     if not tm.guaranteed:
         warned.append(
             "network: losses have no bound (network.max_consecutive_losses is not set): a "

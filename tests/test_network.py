@@ -232,7 +232,8 @@ def test_what_a_network_makes_meaningless_is_refused_before_simulating():
 
     msg = refused({**LOSSY, "gains.ko": 6.0, "onboard.thresholds": "l1"})
     assert "gains.ko: the observers step once a round of the network, R = 11 periods" in msg
-    assert "lower ko below 3.64" in msg
+    assert "rule 'l1' needs ko * R * control_period * (max in-degree + 1) <= 1" in msg
+    assert "lower ko to at most 3.03" in msg
     msg = refused({**LOSSY})  # eq. 40, the paper's rule
     assert "eq. 40's thresholds" in msg and "not derived for the observers' rounds" in msg
     r = _run({"network.loss": 0.05, "onboard.thresholds": "l1", "gains.ko": 3.0}, duration=1.0)

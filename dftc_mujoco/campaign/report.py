@@ -220,6 +220,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         ]
     lines += _rule_table(ok)
     lines += _scale_table(ok, figs)
+    lines += _network_table(ok, figs)
     path = out / "report.md"
     write_text(path, "\n".join(lines) + "\n")
     return path
@@ -306,6 +307,66 @@ def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     fig.suptitle("Detection against team size, graph and threshold rule")
     _save(fig, figs / "scale.png")
     return [*lines, "", "![scale](figures/scale.png)", ""]
+
+
+#: the network's factors a campaign may vary (dotted keys), in the table's order
+NETWORK_KEYS = ("network.latency", "network.loss")
+
+
+def _network_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
+    """Detection and false alarms per threshold rule against the network's latency and
+    loss, with the figure ("how much network can DFTC take"), when a campaign varies them."""
+    if not any(k in r for r in ok for k in NETWORK_KEYS):
+        return []
+    rows = [
+        {
+            **r,
+            "thresholds": r.get("thresholds") or "paper",
+            **{k: float(r.get(k, 0.0)) for k in NETWORK_KEYS},
+        }
+        for r in ok
+    ]
+    groups = _by(rows, "thresholds", *NETWORK_KEYS)
+    lines = [
+        "| rule | latency [s] | loss | runs | stops detected | by all | first flag: median / "
+        "max [s] | last flag: max [s] | runs with a false alarm | healthy flags: all / "
+        "premises held | healthy excluded | network premise broken (runs) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (rule, lat, loss), rs in groups.items():
+        m = summarise(rs)
+        d = (
+            "n/a"
+            if m["delay_median"] is None
+            else f"{m['delay_median']:.2f} / {m['delay_max']:.2f}"
+        )
+        broken = sum("network" in json.loads(r.get("premises_violated") or "[]") for r in rs)
+        lines.append(
+            f"| {rule} | {lat:g} | {loss:g} | {len(rs)} | {_pct(m['detection_rate'])} | "
+            f"{_pct(m['detected_by_all_rate'])} | {d} | {_num(m['delay_last_max'], 2)} | "
+            f"{_pct(m['false_alarm_rate_per_run'])} | {m['false_flags']} / "
+            f"{m['false_flags_premises_held']} | {m['healthy_exclusions']} | {broken} |"
+        )
+    fig, axes = new_figure(figsize=(9, 3.5), ncols=2)
+    for rule in sorted({k[0] for k in groups}):
+        for lat in sorted({k[1] for k in groups if k[0] == rule}):
+            keys = sorted(k for k in groups if k[0] == rule and k[1] == lat)
+            loss = [k[2] for k in keys]
+            med = [summarise(groups[k])["delay_median"] for k in keys]
+            alarm = [summarise(groups[k])["false_alarm_rate_per_run"] for k in keys]
+            label = f"{rule}, {1000 * lat:g} ms"
+            style = "o-" if rule == "l1" else "s--"
+            axes[0].plot(loss, [np.nan if v is None else v for v in med], style, label=label)
+            axes[1].plot(loss, [np.nan if v is None else v for v in alarm], style, label=label)
+    axes[0].set_ylabel("median first-flag delay of a stop [s]")
+    axes[1].set_ylabel("runs with a healthy robot flagged")
+    axes[1].set_ylim(-0.05, 1.05)
+    for ax in axes:
+        ax.set_xlabel("message loss probability")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("How much network DFTC takes: detection and false alarms against latency and loss")
+    _save(fig, figs / "network.png")
+    return [*lines, "", "![network](figures/network.png)", ""]
 
 
 def _save(fig, path: Path) -> None:

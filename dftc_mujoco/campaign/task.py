@@ -163,6 +163,9 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) ->
         "systemic_anomalies": summary.get("systemic_anomalies", 0),
         # every premise of the run's rule held for the whole run (premises.PREMISES)
         "premises_held": all(p.get("held", True) for p in summary.get("premises", {}).values()),
+        "premises_violated": json.dumps(
+            [k for k, p in summary.get("premises", {}).items() if not p.get("held", True)]
+        ),
         "settle_time": (horizon or {}).get("settle_time") if isinstance(horizon, dict) else None,
         "final_centroid": err["final_centroid"],
         "final_formation": err["final_formation"],

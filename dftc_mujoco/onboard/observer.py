@@ -220,6 +220,7 @@ class Observer(Block):
         self._connect(config.graph)
 
     def link_dst(self) -> np.ndarray:
+        """The receiving robot of each of :attr:`allowed`'s links."""
         fe = self.allowed.first_edge
         return np.repeat(np.arange(len(fe) - 1), np.diff(fe))
 

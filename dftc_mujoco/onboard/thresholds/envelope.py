@@ -115,7 +115,8 @@ def check_nonnegative(graph: Graph, ko: float, h: float, rule: str) -> None:
     if h * ko * (dmax + 1.0) > 1.0 + 1e-12:
         raise ScenarioError(
             f'onboard.thresholds: "{rule}" needs the observer matrix A_k = I − h k_o(L + e_k e_kᵀ) '
-            f"to be non-negative, i.e. ko * control_period * (max in-degree + 1) <= 1; got "
+            f"to be non-negative, i.e. ko * h * (max in-degree + 1) <= 1 (h: the observers' "
+            f"step, the control period or a round of the network); got "
             f"{ko:g} * {h:g} * {dmax + 1:g} = {h * ko * (dmax + 1):g}. Lower gains.ko or "
             'physics.control_period, or use thresholds = "paper"'
         )
