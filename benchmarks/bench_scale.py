@@ -2,6 +2,11 @@
 
     python benchmarks/bench_scale.py [--n 4 16 64 100] [--duration 20]
     python benchmarks/bench_scale.py --n 1000 --duration 30 --repeat 1
+    python benchmarks/bench_scale.py --n 100 --network     # the network's cost
+
+``--network``: each N twice, on the ideal network and over a lossy, delayed,
+range-limited one (:data:`NETWORK`), both with the l1 rule at k_o = 2 (the round of that
+network needs k_o R h (d_max + 1) <= 1), and the network's cost as the loop's ratio.
 
 For each N, in a fresh process (so peak memory is that run's own): a grid
 formation of 0.5 m spacing, a ring with chords 2 and 5, no cylinders, a stop
@@ -26,8 +31,20 @@ import sys
 import time
 from pathlib import Path
 
+#: the network of ``--network``: 50 ms, 10 % Bernoulli loss (at most 5 in a row), a range
+#: every link of the grid keeps (so its cost is measured, not a changed graph)
+NETWORK = {
+    "latency": 0.05,
+    "loss": 0.1,
+    "max_consecutive_losses": 5,
+    "range": 100.0,
+    "range_hysteresis": 0.5,
+}
 
-def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dict:
+
+def one(
+    n: int, duration: float, log_rate: float = 10.0, repeat: int = 3, network: str = ""
+) -> dict:
     from replay import measure
 
     from dftc_mujoco import scenario
@@ -53,6 +70,11 @@ def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dic
         },
         "faults": [{"robot": 1, "kind": "stop", "t": duration / 2}],
     }
+    if network:  # both variants with l1 at k_o = 2; "lossy" adds the network
+        d["gains"]["ko"] = 2.0
+        d["onboard"] = {"thresholds": "l1"}
+        if network == "lossy":
+            d["network"] = NETWORK
     s = scenario.from_dict(d, source=f"bench N={n}")
     t0 = time.perf_counter()
     decay.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
@@ -61,6 +83,7 @@ def one(n: int, duration: float, log_rate: float = 10.0, repeat: int = 3) -> dic
     loop_s = r["loop_us"] * (r["periods"] + 1) * 1e-6
     return {
         "n": n,
+        "network": network,
         "kappa_lambda_s": kappa,
         "bare_us": r["bare_us"],
         "loop_us": r["loop_us"],
@@ -86,10 +109,13 @@ def main() -> None:
     p.add_argument("--duration", type=float, default=20.0)
     p.add_argument("--log-rate", type=float, default=10.0, help="log.npz rate [Hz]")
     p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--network", action="store_true", help="the network's cost (see above)")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)
+    p.add_argument("--variant", default="", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.one:
-        print(json.dumps(one(args.one, args.duration, args.log_rate, args.repeat)))
+        r = one(args.one, args.duration, args.log_rate, args.repeat, args.variant)
+        print(json.dumps(r))
         return
     print(
         f"{os.cpu_count()} cores; {args.duration:g} s of simulated time per N, "
@@ -99,7 +125,10 @@ def main() -> None:
         f"{'N':>4} {'κ/λ':>8} {'setup':>8} {'cold':>8} {'bare':>10} {'loop':>10} "
         f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8} {'process':>8} exact"
     )
-    for n in args.n:
+    variants = ["ideal", "lossy"] if args.network else [""]
+    runs = [(n, v) for n in args.n for v in variants]
+    loops: dict[tuple[int, str], float] = {}
+    for n, variant in runs:
         t0 = time.perf_counter()
         out = subprocess.run(
             [
@@ -113,6 +142,8 @@ def main() -> None:
                 str(args.log_rate),
                 "--repeat",
                 str(args.repeat),
+                "--variant",
+                variant,
             ],
             capture_output=True,
             text=True,
@@ -120,12 +151,16 @@ def main() -> None:
         )
         whole = time.perf_counter() - t0  # the whole child process, imports included
         r = json.loads(out.stdout.strip().splitlines()[-1])
+        loops[(n, variant)] = r["loop_us"]
+        cost = ""
+        if variant == "lossy":
+            cost = f"  network: loop x{r['loop_us'] / loops[(n, 'ideal')]:.3f} of the ideal one"
         print(
-            f"{r['n']:>4} {r['kappa_lambda_s']:>7.2f}s "
+            f"{variant:<6}" * bool(variant) + f"{r['n']:>4} {r['kappa_lambda_s']:>7.2f}s "
             f"{r['setup_s']:>7.2f}s {r['cold_setup_s']:>7.2f}s "
             f"{r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
             f"{r['ratio']:>6.2f} {r['rtf']:>6.1f}x {r['rtf_with_setup']:>9.1f}x "
-            f"{r['peak_mb']:>6.0f}MB {whole:>7.1f}s {'yes' if r['exact'] else 'NO'}"
+            f"{r['peak_mb']:>6.0f}MB {whole:>7.1f}s {'yes' if r['exact'] else 'NO'}{cost}"
         )
 
 

@@ -284,6 +284,12 @@ class Simulation:
                 s.network, s.team.graph, dt, np.random.default_rng([s.seed, 23])
             )
             self.channel.send(-1, 0, x0)  # the start's messages: ŷ(0), round 0
+            e = len(self.channel.edges)  # the links' age and losses, for the figure and video
+            self.log.add_field("link_age", (e,), np.float32, np.nan)
+            self.log.add_field("link_lost", (e,), np.int32, 0)
+            self.log.static["links"] = self.channel.edges + 1
+            self.log.static["link_bounds"] = np.array(self.channel.bounds())
+            self._ages = np.zeros(e)
         self.k = 0  # next control period
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
@@ -455,7 +461,7 @@ class Simulation:
                     team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
                     if channel is not None:
                         channel.send(k, team.rounds.content, x)
-                        if team.rounds.now and team.missed and watch:
+                        if team.missed and watch:  # since the last round
                             monitor.network(t, team.missed)
                     ncon = data.ncon
                     if watch:
@@ -552,6 +558,10 @@ class Simulation:
         assert self.plant is not None
         self.plant.poses(out=d["pose"][row])
         self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
+        if self.channel is not None:
+            self.channel.ages(round(t / self.dt), self._ages)
+            d["link_age"][row] = self._ages
+            d["link_lost"][row] = self.channel.lost
         log.size += 1
 
     # ------------------------------------------------------------------ results

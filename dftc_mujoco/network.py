@@ -91,6 +91,7 @@ class Channel:
         self._pending = np.full((e, self._slots), -1, dtype=np.int64)  # round carried
         self._sent_at = np.full((e, self._slots), -1, dtype=np.int64)  # period it left
         self.newest = np.full(e, -1, dtype=np.int64)  # the newest round each link delivered
+        self.held_sent = np.full(e, -1, dtype=np.int64)  # when the last copy it got left
         self.bad = np.zeros(e, bool)  # Gilbert–Elliott state of each link
         self.in_a_row = np.zeros(e, dtype=np.int64)  # consecutive losses on each link
         self.up = np.ones(e, bool)  # within range (with hysteresis)
@@ -143,6 +144,8 @@ class Channel:
         corruption [m] of their senders), only those newer than what each link holds."""
         slot = period % self._slots
         carried = self._pending[:, slot]
+        heard = (carried >= 0) & (carried >= self.newest)  # a copy of the held round counts
+        self.held_sent[heard] = self._sent_at[heard, slot]
         new = np.flatnonzero(carried > self.newest)
         rounds = carried[new].copy()
         if len(new):
@@ -200,6 +203,17 @@ class Channel:
         self._sent_at[links, slot] = period
 
     # ------------------------------------------------------------------ records
+
+    def ages(self, period: int, out: np.ndarray) -> None:
+        """How long ago [s] the last message each link delivered (of its newest round) left
+        its sender, at the start of ``period``, into ``out`` (E,)."""
+        np.multiply(period - 1 - self.held_sent, self.h, out=out)
+
+    def bounds(self) -> tuple[float, float]:
+        """The ages [s] a link's message has at most when no message was lost (L periods)
+        and when at most b were (a round, R periods): beyond it the premise breaks."""
+        tm = self.timing
+        return tm.latency * self.h, tm.round * self.h
 
     def summary(self) -> dict[str, Any]:
         """What the channel did per link: messages sent, lost, rounds received, their delay [s]

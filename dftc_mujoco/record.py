@@ -102,6 +102,11 @@ class Log:
             if name not in DERIVED_FIELDS
         }
 
+    def add_field(self, name: str, shape: tuple[int, ...], dtype: type, fill: Any) -> None:
+        """A field of this run only (the network's per-link fields), sampled every row."""
+        rows = len(self.data["t"])
+        self.data[name] = np.full((rows, *shape), fill, dtype=dtype)
+
     @property
     def row_nn(self) -> int:
         """Where the current row's N × N fields go, or -1 when this row has none."""

@@ -8,7 +8,8 @@ seed = 7                         # campaign seed: run i draws from (seed, i)
 duration = 60.0
 [vary]
 seed = true                      # a different scenario seed per run (default)
-fault_kind = ["stop"]            # choices among stop, bias, none, two_stops
+fault_kind = ["stop"]            # choices among stop, bias, none, two_stops, silent (the
+                                 # robot's radio falls silent, it stops 5-15 s later)
 faulty_robot = "any"             # or a list of robot numbers
 fault_time = [15.0, 45.0]        # uniform range [s]
 bias_magnitude = [0.05, 1.5]     # uniform range [m/s], random direction
@@ -44,7 +45,7 @@ from .. import scenario as scenario_mod
 from ..errors import ScenarioError
 from ..tomlcheck import Table, describe, read_toml
 
-FAULT_KINDS = ("stop", "bias", "none", "two_stops")
+FAULT_KINDS = ("stop", "bias", "none", "two_stops", "silent")
 FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
 
 
@@ -249,7 +250,7 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
     )
     kind = str(pick("fault_kind")) if "fault_kind" in v else "base"
     p["fault_kind"] = kind
-    if kind in ("stop", "bias", "two_stops"):
+    if kind in ("stop", "bias", "two_stops", "silent"):
         choices = (
             list(range(1, n + 1))
             if v["faulty_robot"] == "any"
@@ -265,6 +266,9 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
         if kind == "two_stops":  # a second robot stops 5-15 s after the first
             others = [r for r in range(1, n + 1) if r != p["faulty_robot"]]
             p["second_robot"] = int(rng.choice(others))
+            p["second_t"] = round(p["fault_t"] + float(rng.uniform(5.0, 15.0)), 3)
+        if kind == "silent":  # the silent robot stops 5-15 s after its radio
+            p["second_robot"] = p["faulty_robot"]
             p["second_t"] = round(p["fault_t"] + float(rng.uniform(5.0, 15.0)), 3)
     for key in ("eta_bar", "xi_bar"):
         if key in v:
@@ -323,6 +327,11 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
         d["faults"] = []
     elif kind == "stop":
         d["faults"] = [{"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]}]
+    elif kind == "silent":
+        d["faults"] = [
+            {"robot": p["faulty_robot"], "kind": "silent", "t": p["fault_t"]},
+            {"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]},
+        ]
     elif kind == "two_stops":
         d["faults"] = [
             {"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]},

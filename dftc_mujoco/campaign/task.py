@@ -119,6 +119,30 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
+def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """The network's side of a run: radio faults, how soon a silent robot was reported, and
+    the channel's measured loss rate and largest delay."""
+    events = summary.get("events", [])
+    silent = [e for e in events if e["kind"] == "radio_fault" and e.get("fault") == "silent"]
+    reported = [e for e in events if e["kind"] == "robot_silent"]
+    delay = None
+    if silent:
+        later = [e["t"] for e in reported if e["robot"] == silent[0]["robot"]]
+        delay = min(later) - silent[0]["t"] if later else None
+    net = summary.get("network") or {}
+    links = net.get("links") or []
+    sent = sum(x["sent"] for x in links)
+    delays = [x["delay_max"] for x in links if x.get("delay_max") is not None]
+    return {
+        "radio_faults": sum(e["kind"] == "radio_fault" for e in events),
+        "silent_reported": bool(silent) and delay is not None,
+        "silent_report_delay": delay,
+        "round_periods": net.get("round_periods", 1),
+        "loss_measured": sum(x["lost"] for x in links) / sent if sent else None,
+        "delay_max_measured": max(delays) if delays else None,
+    }
+
+
 def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) -> dict[str, Any]:
     """A run's row: per fault (``faults``, from the run's own fault events) and per run.
 
@@ -163,6 +187,7 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) ->
         "systemic_anomalies": summary.get("systemic_anomalies", 0),
         # every premise of the run's rule held for the whole run (premises.PREMISES)
         "premises_held": all(p.get("held", True) for p in summary.get("premises", {}).values()),
+        **_radio_facts(summary),
         "premises_violated": json.dumps(
             [k for k, p in summary.get("premises", {}).items() if not p.get("held", True)]
         ),

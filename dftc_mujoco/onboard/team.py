@@ -237,7 +237,7 @@ class Team:
         groups = max(2, numba.get_num_threads()) if split else 1
         self._row = np.empty((groups, m * 2))
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
-        self.r_norm = np.empty((m, m))
+        self.r_norm = np.zeros((m, m))  # no residual before the first round of a network
         self._raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)
         cfg, gone = self.config, len(self.gone)

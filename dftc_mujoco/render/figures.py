@@ -261,7 +261,57 @@ def fig_inputs(log: dict[str, np.ndarray], summary: dict[str, Any]):
     return fig
 
 
+def fig_network(log: dict[str, np.ndarray], summary: dict[str, Any]):
+    """The communication timeline of a run over a network: the age of the message each link
+    holds (above; the two dashed levels: no loss, and a whole round, beyond which the
+    premise 'network' breaks) and the messages lost per second (below)."""
+    t, age = log["t"], np.asarray(log["link_age"], float) * 1000.0
+    links = log["links"]
+    fresh, whole = (1000.0 * float(b) for b in log["link_bounds"])
+    fig, (a0, a1) = new_figure(2, 1, figsize=(8.5, 5.5), sharex=True)
+    show = min(len(links), 24)  # the links whose ages were the largest
+    order = np.argsort(-np.nanmax(np.where(np.isfinite(age), age, -1.0), axis=0))[:show]
+    img = a0.imshow(
+        age[:, order].T,
+        aspect="auto",
+        origin="lower",
+        extent=(float(t[0]), float(t[-1]), -0.5, show - 0.5),
+        cmap="viridis",
+        vmin=0.0,
+        vmax=max(whole * 1.5, 1.0),
+        interpolation="nearest",
+    )
+    a0.set_yticks(range(show))
+    a0.set_yticklabels([f"{a}→{b}" for a, b in links[order]], fontsize=6)
+    a0.set_ylabel("link (from → to)")
+    a0.set_title(f"Age of the message each link holds [ms] (no loss ≤ {fresh:g}, round {whole:g})")
+    fig.colorbar(img, ax=(a0, a1), label="message age [ms]", fraction=0.04, pad=0.02)
+    lost = np.asarray(log["link_lost"], float)
+    if len(t) > 1:  # messages lost over the last second, per link
+        back = np.searchsorted(t, t - 1.0)
+        span = np.maximum(t - t[back], 1e-9)[:, None]
+        per_s = (lost - lost[back]) / span
+        a1.plot(t[1:], per_s[1:].mean(axis=1), lw=1, label="mean over links")
+        a1.plot(t[1:], per_s[1:].max(axis=1), lw=0.8, alpha=0.7, label="worst link")
+    a1.axhline(0.0, color="k", lw=0.5)
+    for e in summary.get("events", []):
+        if e["kind"] in ("radio_fault", "robot_silent"):
+            for ax in (a0, a1):
+                ax.axvline(e["t"], color="r", lw=0.8, ls=":")
+    a1.set_ylabel("lost per second (1 s window)")
+    a1.set_xlabel("t [s]")
+    a1.legend(fontsize=7)
+    a1.grid(alpha=0.3)
+    return fig
+
+
+def figures_of(log: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """The figures a run has: the paper's, and the communication timeline over a network."""
+    return (*FIGURES, "network") if "link_age" in log else FIGURES
+
+
 DRAW = {
+    "network": fig_network,
     "fig3_paths": fig_paths,
     "fig4_fault_estimate": fig_fault_estimate,
     "fig5_8_residuals": fig_residuals,
@@ -272,14 +322,14 @@ DRAW = {
 
 def make_all(log: dict[str, np.ndarray], summary: dict[str, Any]) -> dict[str, Figure]:
     """Every figure of a run as a matplotlib Figure, by name (nothing is written or shown)."""
-    return {name: DRAW[name](log, summary) for name in FIGURES}
+    return {name: DRAW[name](log, summary) for name in figures_of(log)}
 
 
 def draw_all(log: dict[str, np.ndarray], summary: dict[str, Any], folder: Path) -> list[Path]:
     """Draw every figure as a PNG in ``folder`` (each written atomically); returns the paths."""
     folder.mkdir(parents=True, exist_ok=True)
     written = []
-    for name in FIGURES:
+    for name in figures_of(log):
         fig = DRAW[name](log, summary)
         path = folder / f"{name}.png"
         atomic_write(path, partial(fig.savefig, dpi=110, format="png"))

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from ..display import STATES, robot_state
+from ..display import LINKS, STATES, link_state, robot_state
 from ..errors import RenderError
 from ..events import describe
 from ..scenario import Scenario
@@ -181,6 +181,7 @@ class FrameRenderer:
         self._draw_ghost(scn, j, states)
         self._draw_safe_circles(scn)
         self._draw_rings(scn, j, x)
+        self._draw_links(scn, j, x)
         img = self.renderer.render()
         return self._overlay(img, t, x, states)
 
@@ -265,6 +266,32 @@ class FrameRenderer:
             for k in range(0, len(pts) - 1, 2):
                 self._segment(scn, pts[k], pts[k + 1], 1.5, SAFE, z=0.001)
 
+    def _draw_links(self, scn, j, x) -> None:
+        """Over a network, each link between members from sender to receiver, coloured by
+        the age of the message it holds (live, delayed within the round, dropped beyond it),
+        offset to its right so that the two directions of a pair show apart; dashed when
+        dropped."""
+        if "link_age" not in self.log:
+            return
+        fresh, whole = (float(b) for b in self.log["link_bounds"])
+        colours = dict(LINKS)
+        active = self.log["active"][j]
+        for (a, b), age in zip(self.log["links"], self.log["link_age"][j], strict=True):
+            if not (active[a - 1] and active[b - 1]):
+                continue
+            p0, p1 = x[a - 1], x[b - 1]
+            d = p1 - p0
+            length = float(np.hypot(*d))
+            if length < 1e-9:
+                continue
+            side = np.array([d[1], -d[0]]) / length * 0.03
+            state = link_state(float(age), fresh, whole)
+            pieces = 6 if state == "dropped" else 1
+            for k in range(0, pieces, 2 if pieces > 1 else 1):
+                q0 = p0 + d * (k / pieces) + side
+                q1 = p0 + d * ((k + 1) / pieces) + side
+                self._segment(scn, q0, q1, 1.5, colours[state], z=0.0015)
+
     def _draw_rings(self, scn, j, x) -> None:
         for i in np.flatnonzero(self.log["reactive"][j]):
             self._disc(scn, x[i], self.footprint + 0.03, AVOIDING, z=0.005)
@@ -303,6 +330,13 @@ class FrameRenderer:
         xpos += 80
         draw.ellipse([xpos, y0 + 1, xpos + 10, y0 + 11], fill=(205, 215, 240))
         draw.text((xpos + 14, y0), "desired slot", fill=(0, 0, 0), font=font)
+        if "link_age" in self.log:  # the links' legend, above the robots'
+            xpos, y0 = 6, y0 - 15
+            for name, rgba in LINKS:
+                col = tuple(int(255 * v) for v in rgba[:3])
+                draw.line([xpos, y0 + 6, xpos + 12, y0 + 6], fill=col, width=3)
+                draw.text((xpos + 16, y0), f"link {name}", fill=(0, 0, 0), font=font)
+                xpos += 30 + 7 * len(name) + 28
         return np.asarray(pil)
 
 
