@@ -125,10 +125,22 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
     events = summary.get("events", [])
     silent = [e for e in events if e["kind"] == "radio_fault" and e.get("fault") == "silent"]
     reported = [e for e in events if e["kind"] == "robot_silent"]
-    delay = None
+    delay = self_seen = None
     if silent:
-        later = [e["t"] for e in reported if e["robot"] == silent[0]["robot"]]
+        robot = silent[0]["robot"]
+        later = [e["t"] for e in reported if e["robot"] == robot]
         delay = min(later) - silent[0]["t"] if later else None
+        # its own later stop, flagged by itself (its teammates no longer hear it)
+        stop = [e["t"] for e in events if e["kind"] == "fault" and e["robot"] == robot]
+        own = [
+            e["t"] - stop[0]
+            for e in events
+            if stop
+            and e["kind"] == "detection"
+            and e["by"] == robot == e["robot"]
+            and e["t"] >= stop[0]
+        ]
+        self_seen = min(own) if own else None
     net = summary.get("network") or {}
     links = net.get("links") or []
     sent = sum(x["sent"] for x in links)
@@ -137,6 +149,7 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
         "radio_faults": sum(e["kind"] == "radio_fault" for e in events),
         "silent_reported": bool(silent) and delay is not None,
         "silent_report_delay": delay,
+        "silent_stop_self_flag_delay": self_seen,
         "round_periods": net.get("round_periods", 1),
         "loss_measured": sum(x["lost"] for x in links) / sent if sent else None,
         "delay_max_measured": max(delays) if delays else None,
