@@ -138,8 +138,8 @@ def describe(e: Mapping[str, Any]) -> str:
         return f"radio fault: robot {r} falls silent"
     if k == "link_silent":
         return (
-            f"robot {e['heard_by']} hears nothing from robot {r} (last message of round "
-            f"{e['since']}): it stops reading that link"
+            f"robot {e['heard_by']} hears nothing from robot {r} (it keeps its last message, "
+            f"of round {e['since']})"
         )
     if k == "link_heard":
         return f"robot {e['heard_by']} hears robot {r} again"

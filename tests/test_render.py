@@ -252,3 +252,46 @@ def test_large_teams_show_the_robots_worth_showing():
     assert {f"i = {first}", f"i = {last}"} <= set(observers)
     inputs = [ax.get_ylabel() for ax in figs["fig10_inputs"].axes]
     assert len(inputs) == 8 and "u11 [m/s]" in inputs
+
+
+@needs_gl
+def test_a_run_over_a_network_draws_its_links_and_its_timeline(tmp_path):
+    """Over a network with robot 3 silent from 10 s: figures/network.png is drawn, the link
+    3 -> 4 is dropped (red, dashed) in a frame after it and live (green) before."""
+    from dftc_mujoco.display import LINK_DROPPED, LINK_LIVE
+    from dftc_mujoco.render.video import FrameRenderer
+
+    over = [
+        *("--set", "network.latency=0.02", "--set", "onboard.thresholds=l1"),
+        *("--set", "gains.ko=3.0", "--set", 'faults=[{robot=3,kind="silent",t=10.0}]'),
+    ]
+    assert (
+        run.main(
+            [
+                "paper_case",
+                "--duration",
+                "15",
+                "--out",
+                str(tmp_path),
+                "--no-video",
+                "--no-progress",
+                *over,
+            ]
+        )
+        == 0
+    )
+    assert (tmp_path / "figures" / "network.png").stat().st_size > 10_000
+    with np.load(tmp_path / "log.npz") as f:
+        log = {k: f[k] for k in f.files}
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [3, 4] in log["links"].tolist()
+    s = scenario.load("paper_case")
+    with FrameRenderer(s, log, summary) as fr:
+        for t, colour in ((8.0, LINK_LIVE), (13.0, LINK_DROPPED)):
+            img = fr.frame(t).astype(int)
+            a, b = fr.project(fr.positions(t)[[2, 3]], t)
+            mid = (a + b) / 2  # near the link's middle (it is offset by 3 cm)
+            c, r = np.round(mid).astype(int)
+            patch = img[r - 6 : r + 7, c - 6 : c + 7].reshape(-1, 3)
+            want = np.array(colour[:3]) * 255
+            assert np.abs(patch - want).sum(axis=1).min() < 90, (t, patch.min(0), want)

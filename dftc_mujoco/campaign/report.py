@@ -328,10 +328,11 @@ def _network_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     ]
     groups = _by(rows, "thresholds", *NETWORK_KEYS)
     lines = [
-        "| rule | latency [s] | loss | runs | stops detected | by all | first flag: median / "
-        "max [s] | last flag: max [s] | runs with a false alarm | healthy flags: all / "
-        "premises held | healthy excluded | network premise broken (runs) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rule | latency [s] (drawn) | loss (drawn) | R [periods] | measured: loss / largest "
+        "delay [s] | runs | stops detected | by all | first flag: median / max [s] | last flag: "
+        "max [s] | runs with a false alarm | healthy flags: all / premises held | healthy "
+        "excluded | network premise broken (runs) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (rule, lat, loss), rs in groups.items():
         m = summarise(rs)
@@ -341,8 +342,16 @@ def _network_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
             else f"{m['delay_median']:.2f} / {m['delay_max']:.2f}"
         )
         broken = sum("network" in json.loads(r.get("premises_violated") or "[]") for r in rs)
+        rounds = sorted({int(r.get("round_periods") or 1) for r in rs})
+        measured = [r["loss_measured"] for r in rs if r.get("loss_measured") is not None]
+        late = [r["delay_max_measured"] for r in rs if r.get("delay_max_measured") is not None]
+        seen = (
+            f"{_pct(float(np.mean(measured)) if measured else None)} / "
+            f"{_num(max(late) if late else None, 3)}"
+        )
         lines.append(
-            f"| {rule} | {lat:g} | {loss:g} | {len(rs)} | {_pct(m['detection_rate'])} | "
+            f"| {rule} | {lat:g} | {loss:g} | {', '.join(map(str, rounds))} | {seen} | "
+            f"{len(rs)} | {_pct(m['detection_rate'])} | "
             f"{_pct(m['detected_by_all_rate'])} | {d} | {_num(m['delay_last_max'], 2)} | "
             f"{_pct(m['false_alarm_rate_per_run'])} | {m['false_flags']} / "
             f"{m['false_flags_premises_held']} | {m['healthy_exclusions']} | {broken} |"

@@ -165,7 +165,7 @@ class ObserverRecord(NamedTuple):
     first_edge: np.ndarray
     in_degree: np.ndarray
     links: np.ndarray  # (E, M·n) the last message each link delivered (a network)
-    pick: np.ndarray  # (edges,) the link each edge of the residual reads
+    pick: np.ndarray  # (edges,) the link each edge of the residual reads (the paper's: its own)
     networked: bool  # read ``links`` instead of the senders' current ŷ
     ko: float
     dt: float  # the control period: the integrals
@@ -274,16 +274,6 @@ class Observer(Block):
         if offset.any():
             self.links[links] += offset[:, None]
         self.link_round[links] = rounds
-
-    def listen(self, live: np.ndarray) -> None:
-        """Use only the links ``live`` (bool over :attr:`allowed`) in the residual: a robot
-        stops reading an in-neighbour it no longer hears (and reads it again when it does)."""
-        order = np.flatnonzero(live)
-        al = self.allowed
-        dst = self.link_dst()
-        edges = tuple((int(al.src[e]), int(dst[e])) for e in order)
-        self.messages = Messages(edges, len(self.y_hat))
-        self.pick = order.astype(np.intp)
 
     # ------------------------------------------------------------------ exclusions
 

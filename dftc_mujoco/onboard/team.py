@@ -308,9 +308,7 @@ class Team:
             self.mu = self.thresholds.mu(self.rounds.rule_time(t))
             if self.radios is not None:
                 found = self.radios.watch(t, self.rounds.index, self.members)
-                if found:
-                    self.events += found
-                    self._flat.clear()  # the residual's links changed
+                self.events += found
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
@@ -638,8 +636,6 @@ class Team:
         t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
         for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
             self.blocks[name].drop(p, self.graph, t_rule if name == "thresholds" else t)
-        if self.radios is not None:
-            self.radios.dropped()
         self._resize()
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])
