@@ -36,6 +36,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "link_silent": ("robot", "heard_by", "since"),
     "link_heard": ("robot", "heard_by"),
     "robot_silent": ("robot", "reported_by", "since"),
+    "message_fault": ("robot", "reported_by"),
 }
 
 
@@ -143,6 +144,13 @@ def describe(e: Mapping[str, Any]) -> str:
         )
     if k == "link_heard":
         return f"robot {e['heard_by']} hears robot {r} again"
+    if k == "message_fault":
+        by = ", ".join(str(b) for b in e["reported_by"])
+        who = f"robot {r}'s messages" if r else "a message they receive"
+        return (
+            f"MESSAGE FAULT: robots {by} flag more robots at once than the fault hypothesis "
+            f"admits: {who} (not an actuator fault)"
+        )
     if k == "robot_silent":
         by = ", ".join(str(b) for b in e["reported_by"])
         return (

@@ -239,3 +239,22 @@ def test_what_a_network_makes_meaningless_is_refused_before_simulating():
     r = _run({"network.loss": 0.05, "onboard.thresholds": "l1", "gains.ko": 3.0}, duration=1.0)
     warned = [e["message"] for e in r.events.items if e["kind"] == "warning"]
     assert any("losses have no bound" in w for w in warned)
+
+
+def test_corrupted_messages_are_diagnosed_as_a_message_fault_and_exclude_nobody():
+    """Robot 3 adds 0.2 m to everything it sends from 30 s: robot 4, which hears only robot
+    3, flags every robot at once, more than one actuator fault can explain; it reports a
+    message fault naming robot 3, and the systemic-anomaly rule keeps everyone."""
+    r = _run(
+        {
+            "network.latency": 0.02,
+            "gains.ko": 3.0,
+            "onboard.thresholds": "l1",
+            "faults": [{"robot": 3, "kind": "corrupt", "t": 30.0, "value": 0.2}],
+        }
+    )
+    found = [e for e in r.events.items if e["kind"] == "message_fault"]
+    assert found and found[0]["robot"] == 3 and found[0]["reported_by"] == [4]
+    assert 30.0 < found[0]["t"] < 30.5
+    assert not [e for e in r.events.items if e["kind"] == "exclusion"]
+    assert not any(e["kind"] == "detection" and e["t"] < 30.0 for e in r.events.items)

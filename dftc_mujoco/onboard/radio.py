@@ -38,6 +38,7 @@ class Radios:
         self.missed = 0  # links whose round message was missing at the last round
         self.link_map = np.arange(links)  # the channel's link -> the observer's (-1: gone)
         self.silent_robot = np.zeros(n, bool)
+        self.episode = False  # a message fault is reported and not over
 
     def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
         """The channel delivered, on its links ``links``, the messages of ``rounds`` (each
@@ -91,6 +92,30 @@ class Radios:
             self.silent_robot[robot] = silent
         return events
 
+    def message_faults(
+        self, t: float, flag: np.ndarray, members: np.ndarray, max_faults: int
+    ) -> list[dict[str, Any]]:
+        """A robot whose flags stand on more of its columns than the fault hypothesis admits
+        cannot be seeing actuator faults (each moves one column only): something it
+        receives is wrong. The first robots to show it report it (``message_fault``), naming
+        the sender when they have exactly one in-neighbour in common; robots that show it
+        later in the same episode got it through the consensus and add nothing. The episode
+        ends when no robot shows it any more."""
+        many = np.count_nonzero(flag, axis=1) > max(max_faults, 1)
+        if not many.any():
+            self.episode = False
+            return []
+        if self.episode:
+            return []
+        self.episode = True
+        first = np.flatnonzero(many)
+        obs = self.observer
+        src, dst = obs.allowed.src, obs.link_dst()
+        common = set.intersection(*(set(src[dst == i].tolist()) for i in first))
+        sender = int(members[common.pop()]) + 1 if len(common) == 1 else None
+        by = [int(members[i]) + 1 for i in first]
+        return [make(t, "message_fault", robot=sender, reported_by=by)]
+
     def drop(self, p: int) -> None:
         """Before the observer drops team row ``p``: its links go with it."""
         obs = self.observer
@@ -98,7 +123,6 @@ class Radios:
         renumber = np.where(stay, np.cumsum(stay) - 1, -1)
         self.link_map = np.where(self.link_map >= 0, renumber[self.link_map], -1)
         self.late, self.deaf = self.late[stay], self.deaf[stay]
-
 
 
 class Rounds:

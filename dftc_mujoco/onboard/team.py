@@ -317,6 +317,9 @@ class Team:
             self.observer.broadcast(self.rounds.stepped())
         if code & RAISED:
             self._report(t, self._raised)
+        if self.radios is not None and self.rounds.now and self.config.fdir:
+            mf = self.config.max_faults  # corrupted messages flag every column at once
+            self.events += self.radios.message_faults(t, self.flag, self.members, mf)
         if code & RAISED or self.recovery.anomaly is not None:
             self._hypothesis(t)
         if code & SWITCHED:
