@@ -155,7 +155,7 @@ def describe(e: Mapping[str, Any]) -> str:
         by = ", ".join(str(b) for b in e["reported_by"])
         return (
             f"robot {r} is SILENT (a communication fault, not an actuator fault): reported by "
-            f"robots {by}, who keep estimating it without its messages"
+            f"robots {by}, who keep its last messages"
         )
     return f"{k} {dict(e)}"
 

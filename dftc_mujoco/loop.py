@@ -283,7 +283,6 @@ class Simulation:
             self.channel = network.Channel(
                 s.network, s.team.graph, dt, np.random.default_rng([s.seed, 23])
             )
-            self.channel.send(-1, 0, x0)  # the start's messages: ŷ(0), round 0
             e = len(self.channel.edges)  # the links' age and losses, for the figure and video
             self.log.add_field("link_age", (e,), np.float32, np.nan)
             self.log.add_field("link_lost", (e,), np.int32, 0)

@@ -14,11 +14,12 @@ One control period ``p`` of the medium, around the team's step:
 Timing (docs/thresholds.md, "Over a network"): a message sent at the end of period q
 arrives at the start of period q + 1 + ℓ, ℓ the latency in periods (ideal: ℓ = 0, the
 next period). A robot broadcasts at the end of every period q with (q + 1) mod m = 0
-(m periods per message, from the rate; the start's messages count as sent at q = −1).
+(m periods per message, from the rate).
 The observers step in *rounds* of R = L + (b + 1) m periods (L the largest latency in
-periods, b the declared bound on consecutive losses): round s runs at period
-(s + 1) R − 1 on the messages of round s, and with delays ≤ L and ≤ b losses in a row
-every one of them has arrived by then. On the ideal network R = 1: the paper's observer.
+periods, b the declared bound on consecutive losses): round s runs at period s R on the
+messages of round s (round 0 on ŷ(0), which the robots exchange before the start), and
+with delays ≤ L and ≤ b losses in a row every one of them has arrived by then. On the
+ideal network R = 1: the paper's observer.
 
 This module is the simulator's: it reads the robots' true positions (for the range) and
 the radio faults, which no robot knows. It never imports MuJoCo or an onboard block; the
@@ -90,7 +91,8 @@ class Channel:
         self._slots = self.timing.latency + 2  # a ring of arrival periods
         self._pending = np.full((e, self._slots), -1, dtype=np.int64)  # round carried
         self._sent_at = np.full((e, self._slots), -1, dtype=np.int64)  # period it left
-        self.newest = np.full(e, -1, dtype=np.int64)  # the newest round each link delivered
+        # the newest round each link delivered: ŷ(0), exchanged before the start
+        self.newest = np.zeros(e, dtype=np.int64)
         self.held_sent = np.full(e, -1, dtype=np.int64)  # when the last copy it got left
         self.bad = np.zeros(e, bool)  # Gilbert–Elliott state of each link
         self.in_a_row = np.zeros(e, dtype=np.int64)  # consecutive losses on each link

@@ -66,8 +66,6 @@ def _pair(rounds: int, seed: int, adversarial: Network, periods: int):
     channel = Channel(adversarial, g, team.config.dt, np.random.default_rng(seed))
     # a channel that delivers every message in the next period (a range nobody leaves)
     perfect = Channel(Network(range=1e9), g, team.config.dt, np.random.default_rng(seed))
-    for ch in (channel, perfect):
-        ch.send(-1, 0, x0)
     v, eta = np.array([0.1, 0.0]), team.config.eta_bar
     out = []
     for tm, ch in ((team, channel), (twin, perfect)):

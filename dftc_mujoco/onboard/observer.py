@@ -210,13 +210,13 @@ class Observer(Block):
         self.allowed = Messages(config.graph.edges, n)  # the links a message may take
         width = n * self.y_hat.shape[2]
         if self.networked:
-            # no message yet: a link holds the receiver's own ŷ (no pull either way)
-            self.links = np.ascontiguousarray(self.y_hat[self.link_dst()].reshape(-1, width))
+            # the start: the robots exchange ŷ(0) before the mission (round 0 at period 0)
+            self.links = np.ascontiguousarray(self.y_hat[self.allowed.src].reshape(-1, width))
             self.sent = np.repeat(self.y_hat.reshape(1, n, width), SENT_ROUNDS, axis=0)
         else:
             self.links = np.zeros((0, width))
             self.sent = np.zeros((0, n, width))
-        self.link_round = np.full(len(self.allowed.src), -1, dtype=np.int64)
+        self.link_round = np.zeros(len(self.allowed.src), dtype=np.int64)  # ŷ(0) is in
         self._connect(config.graph)
 
     def link_dst(self) -> np.ndarray:

@@ -127,8 +127,9 @@ class Radios:
 
 class Rounds:
     """The observers' clock: a round every ``periods`` control periods (1: every period,
-    the ideal network). Round s runs at period (s + 1) R − 1; the threshold rules count
-    time in rounds, s h_o (h_o = R × the control period)."""
+    the ideal network). Round s runs at period s R, round 0 at the start on the messages of
+    ŷ(0) the robots exchange before it; the threshold rules count time in rounds, s h_o
+    (h_o = R × the control period)."""
 
     def __init__(self, periods: int, observer_period: float) -> None:
         self.periods, self.h_o = max(1, int(periods)), observer_period
@@ -141,9 +142,9 @@ class Rounds:
         """Count a control period; True when the observers step in it."""
         k, big_r = self.period, self.periods
         self.period += 1
-        self.now = big_r == 1 or (k + 1) % big_r == 0
+        self.now = big_r == 1 or k % big_r == 0
         if self.now:
-            self.index = (k + 1) // big_r - 1
+            self.index = k // big_r
         return self.now
 
     def rule_time(self, t: float) -> float:
@@ -156,8 +157,8 @@ class Rounds:
         return self.content
 
     def restart_time(self, t: float) -> float:
-        """The rules' time of the first round at or after the current period (an exclusion
-        restarts them there)."""
+        """The rules' time of the first round at or after the period about to be stepped
+        (an exclusion restarts them there)."""
         if self.periods == 1:
             return t
-        return ((self.period + self.periods) // self.periods - 1) * self.h_o
+        return ((self.period + self.periods - 1) // self.periods) * self.h_o
