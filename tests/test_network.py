@@ -17,6 +17,7 @@ from dftc_mujoco.graph import ring_with_chords
 from dftc_mujoco.network import Channel, timing
 from dftc_mujoco.onboard.locality import check_locality, demo_team
 from dftc_mujoco.onboard.observer import Observer
+from dftc_mujoco.onboard.thresholds import L1
 from dftc_mujoco.scenario import Network
 
 LOSSY = {
@@ -61,7 +62,9 @@ def _pair(rounds: int, seed: int, adversarial: Network, periods: int):
     over ``adversarial`` (its delays and losses within the declared bounds), one whose
     links deliver every message at once; returns both histories."""
     g = ring_with_chords(6, (2,))  # in-degree 2: ko h_o (2 d + 1) = 2.0 × 0.11 × 5 = 1.1 < 2
-    team, x0 = demo_team(6, graph=g, networked=True, round_periods=rounds, ko=2.0)
+    team, x0 = demo_team(
+        6, {"thresholds": L1()}, graph=g, networked=True, round_periods=rounds, ko=2.0
+    )
     twin = copy.deepcopy(team)
     channel = Channel(adversarial, g, team.config.dt, np.random.default_rng(seed))
     # a channel that delivers every message in the next period (a range nobody leaves)
@@ -78,7 +81,9 @@ def _pair(rounds: int, seed: int, adversarial: Network, periods: int):
             d *= eta / np.linalg.norm(d, axis=1, keepdims=True)  # ‖η‖ = η̄
             tm.step(t, x + d, v * t, v)
             ch.send(k, tm.rounds.content, x)
-            hist.append((tm.u_bar.copy(), tm.r_norm.copy(), np.array(tm.flag), tm.missed))
+            hist.append(
+                (tm.u_bar.copy(), tm.r_norm.copy(), np.array(tm.flag), tm.missed, tm.mu.copy())
+            )
             x = x + tm.config.dt * tm.u_bar
         out.append((hist, ch))
     return out
@@ -108,7 +113,8 @@ def test_messages_within_the_bounds_give_exactly_the_synchronous_observer(net):
     """The identity every rule rests on holds over the network: with delays ≤ L and at most
     b losses in a row, each round's messages are all in by the round, so the team computes
     bit for bit what it computes when every link delivers every message at once (and the
-    rules, derived at h_o = R h, bound it); no healthy robot is flagged."""
+    rules, derived at h_o = R h, bound it: l1 holds at every round, noise at its bound); no
+    healthy robot is flagged."""
     rounds = timing(net, 0.01).round
     (adv, ch), (ref, _) = _pair(rounds, 3, net, 1500)
     for k, (a, b) in enumerate(zip(adv, ref, strict=True)):
@@ -116,6 +122,8 @@ def test_messages_within_the_bounds_give_exactly_the_synchronous_observer(net):
             assert np.array_equal(x, y, equal_nan=True), k
         assert a[3] == 0, f"period {k}: {a[3]} links missed the round's message"
     assert not np.any([h[2] for h in adv])  # no flag, noise at its bound
+    worst = max(float(np.max(h[1] / h[4])) for h in adv)  # the l1 rule at h_o holds
+    assert 0.05 < worst <= 1.0, worst
     s = ch.summary()
     b = net.max_consecutive_losses
     assert max(x["longest_loss_run"] for x in s["links"]) == b  # the bound was reached
