@@ -159,7 +159,9 @@ class Team:
         self._x_past = np.zeros((self._window, n, 2))
         self._k = 0
         # the network: the observers step in rounds of R periods (1: the ideal network)
-        self.rounds = Rounds(config.round_periods, config.observer_period)
+        self.rounds = Rounds(  # rounds only over a network (which the radios model)
+            config.round_periods if config.networked else 1, config.observer_period
+        )
         self.radios = Radios(self.observer, n) if config.networked else None
         self._resize()
 
@@ -304,22 +306,23 @@ class Team:
             if self.config.teammate_safe > 0:
                 np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
-        if self.rounds.tick():  # the observers step in this period
+        radios = self.radios
+        if radios is None:  # the paper's network: the observers step every period
+            self.mu = self.thresholds.mu(t)
+        elif self.rounds.tick():  # a round of the observers
             self.mu = self.thresholds.mu(self.rounds.rule_time(t))
-            if self.radios is not None:
-                found = self.radios.watch(t, self.rounds.index, self.members)
-                self.events += found
+            self.events += radios.watch(t, self.rounds.index, self.members)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
             code = self._general(x_m, c, c_dot, offsets, rates)
-        if self.rounds.now:
+        if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
         if code & RAISED:
             self._report(t, self._raised)
-        if self.radios is not None and self.rounds.now and self.config.fdir:
+        if radios is not None and self.rounds.now and self.config.fdir:
             mf = self.config.max_faults  # corrupted messages flag every column at once
-            self.events += self.radios.message_faults(t, self.flag, self.members, mf)
+            self.events += radios.message_faults(t, self.flag, self.members, mf)
         if code & RAISED or self.recovery.anomaly is not None:
             self._hypothesis(t)
         if code & SWITCHED:
