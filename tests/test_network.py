@@ -264,3 +264,16 @@ def test_corrupted_messages_are_diagnosed_as_a_message_fault_and_exclude_nobody(
     assert 30.0 < found[0]["t"] < 30.5
     assert not [e for e in r.events.items if e["kind"] == "exclusion"]
     assert not any(e["kind"] == "detection" and e["t"] < 30.0 for e in r.events.items)
+
+
+def test_a_range_limited_team_whose_links_drop_and_come_back_flags_nobody():
+    """scenarios/network_range.toml: 16 robots, 0.9 m radios, a cylinder that bends the grid;
+    links leave the range and come back (each time the premise 'network' is broken and said
+    so). Measured, not proven (no rule over a changing graph is derived): nobody is flagged
+    and the healthy residuals stay below their thresholds."""
+    r = simulate(load_scenario("network_range"), progress=False)
+    kinds = [e["kind"] for e in r.events.items]
+    assert kinds.count("link_silent") >= 4 and kinds.count("link_heard") >= 4
+    assert "detection" not in kinds and "exclusion" not in kinds
+    assert not r.summary["premises"]["network"]["held"]
+    assert r.summary["margin"] < 1.0
