@@ -293,10 +293,13 @@ class Simulation:
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
         self.left: str | None = None  # a robot left the arena: the mission is over
-        self._x = np.empty((n, 2))
-        self._x_m = np.empty((n, 2))
+        self._x = np.array(x0, dtype=float)  # what a snapshot before the first step shows
+        self._x_m = np.array(x_m0, dtype=float)
         self._cmd = np.empty((n, 2))
         self._seen = 0  # events already handed out by step()
+        self._override = np.zeros((n, 2))  # drive(): commands from outside the team
+        self._driven = np.zeros(n, bool)
+        self._any_driven = False
         self._build = self._build_time + (time.perf_counter() - wall0)
         self._wall = self._build
         self._build_time = 0.0
@@ -340,6 +343,24 @@ class Simulation:
             or self.stopped is not None
             or self.left is not None
         )
+
+    def drive(self, robot: int, velocity: np.ndarray | None) -> None:
+        """Command robot ``robot`` (0-based) from outside the team from the next period on:
+        its drive is told ``velocity`` (planar, m/s) instead of the team's ū (the plant's
+        disturbance ξ still adds to it); None gives it back to the team. Its onboard blocks
+        run on as before, so what they see is a robot that does not follow its own commands
+        (the environments of :mod:`dftc_mujoco.envs` drive robots this way)."""
+        if not 0 <= int(robot) < self.n:
+            raise ValueError(f"drive(robot): expected a robot in 0..{self.n - 1}, got {robot!r}")
+        if velocity is None:
+            self._driven[robot] = False
+        else:
+            v = np.asarray(velocity, dtype=float).reshape(2)
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"drive(velocity): expected finite numbers, got {v.tolist()}")
+            self._override[robot] = v
+            self._driven[robot] = True
+        self._any_driven = bool(self._driven.any())
 
     def request_stop(self, reason: str) -> None:
         """Stop stepping before the next control period (safe from a signal handler):
@@ -479,7 +500,10 @@ class Simulation:
                         )
                     if team.events:
                         self._take_team_events(t)
-                    ctrl = adapter.command(np.add(team.u_bar, xi, out=cmd))
+                    np.add(team.u_bar, xi, out=cmd)
+                    if self._any_driven:  # robots an outside policy drives (drive())
+                        cmd[self._driven] = self._override[self._driven] + xi[self._driven]
+                    ctrl = adapter.command(cmd)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
                         self._sample(t, x, cmd, position[j])
                         if np.abs(x).max() > checks.ARENA_HALF:

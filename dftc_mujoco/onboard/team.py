@@ -164,6 +164,9 @@ class Team:
         )
         self.radios = Radios(self.observer, n) if config.networked else None
         self._resize()
+        # what the team shows before its first period: the robots' first estimates and slots
+        np.copyto(self.x_hat, self.observer.estimate())
+        self.x_d[:] = prior
 
     def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
         """Δt_d,max: the scenario's, or (``"auto"``) eq. 46 for the reference fault on the
