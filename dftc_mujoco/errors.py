@@ -62,6 +62,11 @@ class SimulationError(DftcError):
 PhysicsError = SimulationError
 
 
+class BlockError(SimulationError):
+    """An onboard block raised during a run: the run stops there and keeps its records
+    (exit code 3, like physics trouble: the run itself went wrong, not its input)."""
+
+
 class RenderError(DftcError):
     """No offscreen OpenGL context can be created (or rendering failed)."""
 

@@ -33,7 +33,7 @@ from .assembly import (
     make_blocks,
     team_config,
 )
-from .errors import SimulationError
+from .errors import BlockError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team
 from .record import Events, Log, matrix_every
@@ -43,6 +43,28 @@ from .sim import faults as sim_faults
 from .sim import robots, scene
 from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
+
+
+def _block_error(exc: BaseException, t: float) -> BlockError:
+    """One line for an exception raised inside the team's step: the innermost onboard
+    block it came from (by the frames' ``self``), the exception and the time."""
+    found = None
+    tb = exc.__traceback__
+    while tb is not None:
+        me = tb.tb_frame.f_locals.get("self")
+        if isinstance(me, Block):
+            found = me
+        tb = tb.tb_next
+    where = (
+        f"onboard block {found.kind} ({type(found).__module__}:{type(found).__qualname__})"
+        if found is not None
+        else "the team's step"
+    )
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return BlockError(
+        f"{where} raised {type(exc).__name__}{': ' + text if text else ''} at t = {t:.2f} s; "
+        "the run stopped there and its records are kept"
+    )
 
 
 @dataclass(frozen=True)
@@ -478,7 +500,12 @@ class Simulation:
                     j = k if k < last else last
                     if channel is not None:
                         self._radio(t, k, channel)
-                    team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
+                    try:
+                        team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
+                    except (SimulationError, KeyboardInterrupt):
+                        raise
+                    except Exception as exc:  # a (plug-in) block raised: stop, keep records
+                        raise _block_error(exc, t) from exc
                     if channel is not None:
                         channel.send(k, team.rounds.content, x)
                         if team.missed and watch:  # since the last round

@@ -242,3 +242,32 @@ def test_run_folders_get_the_users_umask(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE(out.stat().st_mode) == 0o755  # mkdtemp's 0700 before
+
+
+def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(tmp_path, capsys):
+    """A plug-in controller raising at 1 s gave exit 1, a long traceback and no records."""
+    (tmp_path / "boom.py").write_text(
+        "from dftc_mujoco.blocks.paper import Controller\n\n"
+        "class Boom(Controller):\n"
+        "    calls = 0\n\n"
+        "    def own_input(self, u_hat_g):\n"
+        "        Boom.calls += 1\n"
+        "        if Boom.calls > 100:\n"
+        "            raise ZeroDivisionError('the gain went to zero')\n"
+        "        return super().own_input(u_hat_g)\n"
+    )
+    scen = tmp_path / "s.toml"
+    text = (Path(__file__).resolve().parent.parent / "scenarios" / "paper_case.toml").read_text()
+    scen.write_text(text.replace("[fdir]", '[onboard]\ncontroller = "boom:Boom"\n\n[fdir]'))
+    out = tmp_path / "out"
+    code = run.main([str(scen), "--out", str(out), "--no-video", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 3
+    assert (
+        "onboard block controller (boom:Boom) raised ZeroDivisionError: the gain went to "
+        "zero at t = 1.00 s" in err
+    )
+    assert "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert np.load(out / "log.npz")["t"][-1] >= 0.98
