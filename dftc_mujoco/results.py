@@ -176,6 +176,34 @@ def fault_masks(s: Scenario, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     return healthy, settled, bias_only & np.isfinite(start)
 
 
+def estimation_errors(log: dict[str, np.ndarray], transient: float) -> dict[str, Any]:
+    """How far the team's estimates are from the world: for every robot k, the RMS over the
+    logged samples after ``transient`` and over its teammates i of ‖ⁱx̂_k − x_k‖ (its true
+    position), and the largest. A controller whose estimates agree with each other but not
+    with the robots shows here, not in the residuals."""
+    rows = matrix_rows(log)
+    x_hat, x, t = log["x_hat"], log["x"], log["t"]
+    n = x.shape[1] if x.ndim == 3 else 0
+    keep = [j for j, r in enumerate(rows) if r < len(t) and t[r] >= transient]
+    if not keep or n == 0:
+        return {"per_robot_rms": [None] * n, "max": None}
+    total, count, worst = np.zeros(n), np.zeros(n), 0.0
+    for j in keep:  # one sample at a time: the N × N fields may be large
+        e = np.linalg.norm(x_hat[j].astype(float) - x[rows[j]][None], axis=-1)  # (i, k)
+        np.fill_diagonal(e, np.nan)  # a robot's estimate of itself is its own measurement
+        ok = np.isfinite(e)
+        total += np.where(ok, e**2, 0.0).sum(axis=0)
+        count += ok.sum(axis=0)
+        if ok.any():
+            worst = max(worst, float(np.nanmax(e)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(total / count)
+    return {
+        "per_robot_rms": [_finite_or_none(v) for v in rms],
+        "max": _finite_or_none(worst),
+    }
+
+
 def peak_ratio(residual: np.ndarray, threshold: np.ndarray, columns: np.ndarray) -> float:
     """max ‖ⁱr_k‖ / ⁱμ_k over samples and observers i, for the robots k selected per sample
     by ``columns`` (T, N); 0 when none is selected. Excluded robots (NaN) are skipped."""
@@ -333,6 +361,7 @@ def summarize(
         "min_obstacle_clearance": _finite_or_none(gap),
         "min_safe_distance_margin": _finite_or_none(margin_d),
     }
+    summary["estimation_error"] = estimation_errors(log, s.mission.transient)
     if s.fdir.enabled:
         healthy, settled, biased = fault_masks(s, t[matrix_rows(log)])
         summary["margin"] = peak_ratio(log["residual"], log["threshold"], healthy)

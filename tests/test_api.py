@@ -244,3 +244,13 @@ def test_the_last_period_is_logged_whatever_the_log_rate():
     r = simulate(s)
     assert r.log["t"][-1] == pytest.approx(3.0)  # the final errors are the final state's
     assert r.summary["simulated_time"] == pytest.approx(3.0)
+
+
+def test_the_summary_says_how_far_the_estimates_are_from_the_world():
+    """estimation_error: per robot, the RMS of its teammates' estimate errors after the
+    transient; the stopped robot 1 (estimated as moving until it is excluded) stands out."""
+    r = simulate(load_scenario("paper_case"), progress=False)
+    e = r.summary["estimation_error"]
+    rms = e["per_robot_rms"]
+    assert len(rms) == 4 and rms[1] < 0.005 and rms[0] > 5 * max(rms[1:])
+    assert e["max"] >= max(rms)
