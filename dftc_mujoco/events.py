@@ -15,6 +15,7 @@ from typing import Any
 #: kind -> the fields an event of that kind carries besides ``t`` and ``kind``
 KINDS: dict[str, tuple[str, ...]] = {
     "fault": ("robot", "fault", "command"),
+    "fault_ended": ("robot", "fault"),
     "reactive_on": ("robot", "obstacle"),
     "reactive_off": ("robot",),
     "detection": ("by", "robot", "premises"),
@@ -64,6 +65,8 @@ def describe(e: Mapping[str, Any]) -> str:
     r = e.get("robot", 0)
     if k == "fault":
         return f"fault: {e['fault']} on robot {r}"
+    if k == "fault_ended":
+        return f"fault over: {e['fault']} on robot {r}"
     if k == "reactive_on":
         return f"robot {r} switches to obstacle avoidance ({e.get('obstacle', '?')})"
     if k == "reactive_off":

@@ -43,6 +43,7 @@ from .sim import faults as sim_faults
 from .sim import robots, scene
 from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
+from .sim.sensors import SensorFaults
 
 
 def _block_error(exc: BaseException, t: float) -> BlockError:
@@ -202,6 +203,7 @@ class Simulation:
         self.faults: sim_faults.ActuatorFaults = sim_faults.ActuatorFaults(
             sc.model, s.faults, self.adapter
         )
+        self.sensors = SensorFaults(s.faults, s.team.robots)
         n = self.n = s.team.robots
         self.steps = round(s.duration / dt)
         self.log_every = max(1, round(1.0 / (s.physics.log_rate * dt)))
@@ -450,7 +452,7 @@ class Simulation:
         )
         assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
-        channel = self.channel
+        channel, sensors = self.channel, self.sensors
         watch = MONITOR_ALLOWED
         data = plant.data
         xpos, xmat = data.xpos, data.xmat
@@ -497,6 +499,8 @@ class Simulation:
                     plant.positions(out=x)
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)
+                    if t >= sensors.due:  # faults of the position sensors, on x_m (eq. 4)
+                        self._sensor_faults(t, x_m)
                     j = k if k < last else last
                     if channel is not None:
                         self._radio(t, k, channel)
@@ -553,6 +557,15 @@ class Simulation:
             self.k = k
             bar.close()
             self._wall += time.perf_counter() - wall0
+
+    def _sensor_faults(self, t: float, x_m: np.ndarray) -> None:
+        """Add the sensor faults' offsets to ``x_m``; their start and end are events."""
+        began, over = self.sensors.apply(t, x_m)
+        for f in began:
+            self.events.add(t, "fault", robot=f.robot + 1, fault=f.kind, command=None)
+            self.monitor.watched[f.robot] = False  # the fault is to be detected
+        for f in over:
+            self.events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
 
     def _radio(self, t: float, k: int, channel: network.Channel) -> None:
         """Before period ``k``'s step: radio faults that start now, and the messages that

@@ -28,7 +28,9 @@ from .model import (
     resolve,
 )
 from .parts import (
+    ACTUATOR_FAULTS,
     RADIO_FAULTS,
+    SENSOR_FAULTS,
     Fault,
     Fdir,
     Gains,
@@ -44,10 +46,12 @@ from .parts import (
 from .readers import NAME_PATTERN, name_problem
 
 __all__ = [
+    "ACTUATOR_FAULTS",
     "NAME_PATTERN",
     "N_DIM",
     "RADIO_FAULTS",
     "SCENARIOS",
+    "SENSOR_FAULTS",
     "CentroidPath",
     "Fault",
     "Fdir",

@@ -165,7 +165,7 @@ class Scenario:
                 "formation": _fields(mission.formation),
             },
             "obstacles": [_fields(o) for o in self.obstacles],
-            "faults": [{**_fields(f), "robot": _one_based(_plain(f.robot))} for f in self.faults]
+            "faults": [_fault(f) for f in self.faults]
             + [_radio_fault(f) for f in self.network.faults],
             "fdir": _fields(self.fdir),
             "supervisor": _fields(self.supervisor),
@@ -242,6 +242,14 @@ def _plain(v: Any) -> Any:
 
 def _fields(obj: Any) -> dict[str, Any]:
     return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+
+
+def _fault(f: Fault) -> dict[str, Any]:
+    """A fault as its ``[[faults]]`` table (robots numbered from 1; no end: absent)."""
+    d = {**_fields(f), "robot": _one_based(_plain(f.robot))}
+    if not math.isfinite(f.end):
+        del d["end"]
+    return d
 
 
 def _radio_fault(f: RadioFault) -> dict[str, Any]:

@@ -104,17 +104,26 @@ class Obstacle:
 
 @dataclass(frozen=True, eq=False)
 class Fault:
-    """An actuator fault on ``robot`` (0-based) starting at ``t``.
+    """A fault of ``robot`` (0-based) starting at ``t``: of its actuators (``"bias"``,
+    ``"stop"``) or of its position sensor (:data:`SENSOR_FAULTS`).
 
     ``value`` and ``time_constant`` describe a bias; a stop fault keeps them at
-    zero (a file may give them for a stop fault only as zeros).
+    zero (a file may give them for a stop fault only as zeros). A sensor fault adds to the
+    robot's measured position ``value`` [m] (``"sensor_bias"``) or ``value`` × (t − t_f)
+    (``"sensor_drift"``, ``value`` in m/s) until ``end`` (inf: to the end of the run).
     """
 
     robot: int
-    kind: str  # "bias" or "stop"
+    kind: str  # "bias", "stop", "sensor_bias" or "sensor_drift"
     t: float
     value: np.ndarray = field(default_factory=lambda: _ro([0.0, 0.0]))
     time_constant: float = 0.0
+    end: float = float("inf")
+
+
+#: the faults of a robot's position sensor (acting on its measurement, eq. 4)
+SENSOR_FAULTS = ("sensor_bias", "sensor_drift")
+ACTUATOR_FAULTS = ("bias", "stop")
 
 
 #: the kinds of radio fault ``[[faults]]`` may name (actuator faults: "bias", "stop")

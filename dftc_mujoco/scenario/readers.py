@@ -17,7 +17,9 @@ from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_of
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
 from .network import read_network
 from .parts import (
+    ACTUATOR_FAULTS,
     RADIO_FAULTS,
+    SENSOR_FAULTS,
     Fault,
     Fdir,
     Gains,
@@ -492,7 +494,7 @@ def _obstacle(t: Table) -> Obstacle:
 
 
 def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFault:
-    kind = t.string("kind", choices=("bias", "stop", *RADIO_FAULTS))
+    kind = t.string("kind", choices=(*ACTUATOR_FAULTS, *SENSOR_FAULTS, *RADIO_FAULTS))
     at = t.number("t", low=0.0, strict_low=False)
     if duration is not None and t.ok("t") and at >= duration:
         t.report("t", f"fault at {at:g} s is after the end of the run (duration = {duration:g} s)")
@@ -515,6 +517,19 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFaul
     if not t.ok("kind"):
         t.used.update(t.data)  # which keys belong here depends on the kind
         return Fault(robot - 1, kind, at)
+    if kind in SENSOR_FAULTS:
+        unit = "m" if kind == "sensor_bias" else "m/s"
+        value = t.array("value", (N_DIM,), what=f"an [x, y] pair in {unit}")
+        end = float("inf")
+        if "end" in t.data:
+            end = t.number("end", low=0.0)
+            if t.ok("t", "end") and end <= at:
+                t.report("end", f"expected a time after t = {at:g} s, got {end:g}")
+        t.finish()
+        return Fault(robot - 1, kind, at, value, 0.0, end)
+    if "end" in t.data:
+        t.report("end", f"only sensor faults end in this version ({', '.join(SENSOR_FAULTS)})")
+        t.used.add("end")
     if kind == "bias":
         value = t.array("value", (N_DIM,), what="an [x, y] pair in m/s")
         tau = t.number("time_constant", 0.0, low=0.0, strict_low=False)

@@ -28,7 +28,8 @@ class ActuatorFaults:
 
     def __init__(self, model: mujoco.MjModel, faults: tuple[Fault, ...], drive: Any) -> None:
         self.model = model
-        self.faults = faults
+        self.faults = tuple(f for f in faults if f.kind in ("bias", "stop"))  # the actuators'
+        faults = self.faults
         self.drive = drive
         self.actuation = drive.actuation
         self.actuator = drive.actuation.ids  # (N, A)
