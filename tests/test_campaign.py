@@ -515,3 +515,33 @@ def test_a_stop_is_in_eq46s_domain_only_where_eq46_promises_something():
     assert l1["detected_by"] == l1["teammates"] == 3 and l1["delay_last"] <= l1["dt_d_max"]
     assert not stop()["in_domain"]  # the paper rule: no finite prediction
     assert not stop(**{"onboard.thresholds": "l1", "duration": 42.0})["in_domain"]
+
+
+def test_methods_meet_the_same_draws_and_are_reported_side_by_side(tmp_path):
+    """[methods.NAME]: run i is draw i // M with method i % M; each draw's seed, faulty robot
+    and fault time are the same for every method, rows carry `method`, and the report puts
+    the methods side by side."""
+    path = tmp_path / "m.toml"
+    path.write_text(
+        'name = "m"\nscenario = "paper_case"\nruns = 4\nseed = 5\n[set]\nduration = 20.0\n'
+        '[vary]\nfault_kind = ["stop"]\nfaulty_robot = "any"\nfault_time = [10.0, 12.0]\n'
+        '[methods.paper]\n[methods.l1]\nthresholds = "l1"\n'
+    )
+    s = spec.load(path)
+    draws = [spec.draw(s, i) for i in range(4)]
+    assert [d["method"] for d in draws] == ["paper", "l1", "paper", "l1"]
+    for a, b in (draws[0:2], draws[2:4]):
+        assert {k: v for k, v in a.items() if k not in ("run", "method")} == {
+            k: v for k, v in b.items() if k not in ("run", "method")
+        }
+    assert spec.scenario_for(s, draws[1]).onboard.thresholds == "l1"
+    out = tmp_path / "out"
+    rows = runner.run(s, out, workers=1, progress=False).rows
+    assert sorted(r["method"] for r in rows) == ["l1", "l1", "paper", "paper"]
+    report.write(rows, out, "m")
+    text = (out / "report.md").read_text()
+    assert "Methods side by side" in text and "| l1 | 2 |" in text and "| paper | 2 |" in text
+    assert (out / "figures" / "methods.png").stat().st_size > 5_000
+    path.write_text(path.read_text().replace("runs = 4", "runs = 3"))
+    with pytest.raises(ScenarioError, match="runs: expected a multiple of the 2 methods"):
+        spec.load(path)

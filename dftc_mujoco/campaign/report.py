@@ -221,6 +221,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
     lines += _rule_table(ok)
     lines += _scale_table(ok, figs)
     lines += _network_table(ok, figs)
+    lines += _method_table(ok, figs)
     path = out / "report.md"
     write_text(path, "\n".join(lines) + "\n")
     return path
@@ -376,6 +377,57 @@ def _network_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     fig.suptitle("How much network DFTC takes: detection and false alarms against latency and loss")
     _save(fig, figs / "network.png")
     return [*lines, "", "![network](figures/network.png)", ""]
+
+
+def _method_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
+    """The campaign's ``[methods]`` side by side: each met the same draws (seeds, layouts,
+    faults), so their rows differ by the method only; with the figure."""
+    if not any("method" in r for r in ok):
+        return []
+    groups = _by(ok, "method")
+    lines = [
+        "Methods side by side (each on the same draws: seeds, start layouts and faults):",
+        "",
+        "| method | runs | stops detected | by all | first flag: median / p95 / max [s] | "
+        "last flag: max [s] | excluded: max [s] | biases detected | healthy flags: all / "
+        "premises held | by premise | healthy excluded | final formation error: median [m] | "
+        "estimation error: largest, median over runs [m] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (name,), rs in groups.items():
+        m = summarise(rs)
+        d = (
+            "n/a"
+            if m["delay_median"] is None
+            else f"{m['delay_median']:.2f} / {m['delay_p95']:.2f} / {m['delay_max']:.2f}"
+        )
+        formation = [r["final_formation"] for r in rs if r.get("final_formation") is not None]
+        est = [r["estimation_error_max"] for r in rs if r.get("estimation_error_max") is not None]
+        premise = ", ".join(f"{p} {n}" for p, n in m["false_flags_by_premise"].items()) or "none"
+        lines.append(
+            f"| {name} | {len(rs)} | {_pct(m['detection_rate'])} | "
+            f"{_pct(m['detected_by_all_rate'])} | {d} | {_num(m['delay_last_max'], 2)} | "
+            f"{_num(m['exclusion_delay_max'], 2)} | {_pct(m['bias_detection_rate'])} | "
+            f"{m['false_flags']} / {m['false_flags_premises_held']} | {premise} | "
+            f"{m['healthy_exclusions']} | "
+            f"{_num(float(np.median(formation)) if formation else None, 3)} | "
+            f"{_num(float(np.median(est)) if est else None, 3)} |"
+        )
+    fig, axes = new_figure(figsize=(9, 3.5), ncols=2)
+    names = [k[0] for k in groups]
+    delays = [
+        [r["delay_first"] for r in groups[(k,)] if r.get("delay_first") is not None] for k in names
+    ]
+    axes[0].boxplot([d or [np.nan] for d in delays], tick_labels=names)
+    axes[0].set_ylabel("first flag after the fault [s]")
+    axes[0].set_title("Detection delay")
+    flags = [summarise(groups[(k,)])["false_flags"] for k in names]
+    axes[1].bar(names, flags, color="tab:red")
+    axes[1].set_ylabel("flags on healthy robots")
+    axes[1].set_title("False flags")
+    fig.suptitle("Methods on the same draws")
+    _save(fig, figs / "methods.png")
+    return [*lines, "", "![methods](figures/methods.png)", ""]
 
 
 def _save(fig, path: Path) -> None:

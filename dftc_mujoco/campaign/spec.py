@@ -26,6 +26,10 @@ design = "random"                # or "grid": every combination of the lists abo
 chords = [2]
 in_degree = 2
 k = 2
+[methods.paper]                  # methods compared on the same draws: each an [onboard]
+[methods.tight]                  # table (blocks and [methods.NAME.params.BLOCK]); run i is
+thresholds = "l1"                # draw i // M with method i % M, so every method meets the
+                                 # same seeds, layouts and faults; rows carry `method`
 
 Dotted keys are drawn after every other parameter (so adding one does not
 change the other draws of a campaign), recorded in the run's parameters under
@@ -89,13 +93,30 @@ def load(path: str | Path) -> Spec:
     if not isinstance(overrides, dict):
         top.fail("set", f"expected a table of scenario keys, got {describe(overrides)}")
     vary = _vary(top.table("vary", {}))
+    methods = top.raw("methods", {})
+    if not isinstance(methods, dict) or not all(isinstance(m, dict) for m in methods.values()):
+        top.fail("methods", f"expected tables [methods.NAME], got {describe(methods)}")
+    for m in methods:
+        problem = scenario_mod.name_problem(m)
+        if problem:
+            top.fail(f"methods.{m}", problem)
+    if methods:
+        if len(methods) < 2:
+            top.fail("methods", "expected at least two methods to compare")
+        if runs % len(methods):
+            top.fail(
+                "runs",
+                f"expected a multiple of the {len(methods)} methods (each draw runs "
+                f"once per method), got {runs}",
+            )
+        vary["methods"] = dict(methods)
     top.finish()
     _check_faulty_robots(path, vary, base)
     spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
     scenario_for(spec, draw(spec, 0))  # the scenarios it makes must be valid
     _check_variety(spec)
     _check_choices(spec)
-    for i in range(1, min(runs, 3)):
+    for i in range(1, min(runs, max(3, len(methods)))):  # every method's scenario is valid
         scenario_for(spec, draw(spec, i))
     return spec
 
@@ -229,10 +250,14 @@ def grid_choice(vary: dict[str, Any], index: int) -> dict[str, Any]:
 
 
 def draw(spec: Spec, index: int) -> dict[str, Any]:
-    """The parameters of run ``index`` (0-based): drawn from (campaign seed, index) only."""
-    rng = np.random.default_rng([spec.seed, index])
+    """The parameters of run ``index`` (0-based): drawn from (campaign seed, index) only; with
+    ``[methods]`` from draw ``index // M``, method ``index % M`` (the same draws for every
+    method)."""
     v = spec.vary
-    grid = grid_choice(v, index)
+    methods = list(v.get("methods", {}))
+    drawn = index // len(methods) if methods else index
+    rng = np.random.default_rng([spec.seed, drawn])
+    grid = grid_choice(v, drawn)
 
     def pick(key: str) -> Any:
         return grid[key] if key in grid else rng.choice(v[key])
@@ -240,6 +265,8 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
     base_team = spec.base.get("team", {})
     n = int(pick("robots")) if "robots" in v else int(base_team.get("robots", 4))
     p: dict[str, Any] = {"run": index, "robots": n}
+    if methods:
+        p["method"], p["draw"] = methods[index % len(methods)], drawn
     p["seed"] = (
         int(rng.integers(0, 2**31 - 1)) if v.get("seed", True) else int(spec.base.get("seed", 0))
     )
@@ -352,6 +379,8 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
     for key in ("eta_bar", "xi_bar"):
         if key in p:
             noise[key] = p[key]
+    if "method" in p:  # the method's blocks over the scenario's own
+        _merge(d.setdefault("onboard", {}), spec.vary["methods"][p["method"]])
     dotted = {key: p[key] for key in spec.vary.get("scenario_keys", {}) if key in p}
     if dotted:
         d = scenario_mod.apply_overrides(

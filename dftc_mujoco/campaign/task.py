@@ -151,6 +151,7 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
         "silent_report_delay": delay,
         "silent_stop_self_flag_delay": self_seen,
         "round_periods": net.get("round_periods", 1),
+        "estimation_error_max": (summary.get("estimation_error") or {}).get("max"),
         "loss_measured": sum(x["lost"] for x in links) / sent if sent else None,
         "delay_max_measured": max(delays) if delays else None,
     }
