@@ -163,6 +163,7 @@ def team_config(
         postpone_on_contact=f.postpone_on_contact,
         excluded_relay=f.excluded_relay,
         networked=not s.network.ideal,
+        seed=s.seed,
         round_periods=network.timing(s.network, s.physics.control_period).round,
     )
 

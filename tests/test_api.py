@@ -254,3 +254,26 @@ def test_the_summary_says_how_far_the_estimates_are_from_the_world():
     rms = e["per_robot_rms"]
     assert len(rms) == 4 and rms[1] < 0.005 and rms[0] > 5 * max(rms[1:])
     assert e["max"] >= max(rms)
+
+
+def test_every_block_has_its_own_random_stream_and_plug_ins_know_the_time():
+    """Blocks receive self.rng (from the scenario's seed and the block's place: the same on
+    every run of that seed, different between blocks) and, for plug-ins, self.t."""
+    from dftc_mujoco.blocks.paper import Controller
+
+    class Noisy(Controller):
+        def own_input(self, u_hat_g):
+            self.seen = getattr(self, "seen", [])
+            self.seen.append((self.t, float(self.rng.random())))
+            return super().own_input(u_hat_g)
+
+    def run(seed: int) -> list:
+        c = Noisy()
+        s = load_scenario("paper_case", {"duration": 0.05, "seed": seed})
+        with Simulation(s, blocks={"controller": c}) as sim:
+            sim.run(progress=False)
+            return c.seen
+
+    a, b, c = run(1), run(1), run(2)
+    assert a == b and [x for _, x in a] != [x for _, x in c]
+    assert [round(t, 6) for t, _ in a][:3] == [0.0, 0.01, 0.02]

@@ -66,6 +66,7 @@ class TeamConfig:
     # periods, on the last message each link delivered; False/1: the paper's ideal network
     networked: bool = False
     round_periods: int = 1
+    seed: int = 0  # the scenario's seed: each block's own random stream derives from it
 
     @property
     def observer_period(self) -> float:
@@ -84,6 +85,11 @@ class Block:
     """
 
     kind: str = ""  # which of the six plug-in points this block fills
+    #: the time [s] of the control period being stepped (set by the team before each period)
+    t: float = 0.0
+    #: the block's own random stream, from the scenario's seed and the block's kind (set by
+    #: the team at the start of a run): reproducible, and independent of the other blocks'
+    rng: np.random.Generator | None = None
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Start a run: ``config`` of the team, members' first measurements ``x_m0`` (N, n)

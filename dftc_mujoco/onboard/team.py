@@ -122,8 +122,12 @@ class Team:
         self.plan = FormationPlan.fixed(offsets)
         x_m0 = np.asarray(x_m0, dtype=float)
         prior = centroid0 + offsets  # every robot starts believing its teammates are at their slots
-        for b in chosen.values():
-            b.reset(config, x_m0, prior)
+        for slot, block in enumerate(chosen.values()):
+            block.rng = np.random.default_rng([int(config.seed), 97, slot])  # one per block
+            block.t = 0.0
+            block.reset(config, x_m0, prior)
+        # plug-in blocks are told the time of each period (the paper's read none)
+        self._timed = [b for name, b in chosen.items() if type(b) is not PAPER_BLOCKS[name]]
         # the compiled period contains the paper's blocks, not subclasses of them
         self.compiled = bool(
             config.compiled
@@ -309,6 +313,8 @@ class Team:
             if self.config.teammate_safe > 0:
                 np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
+        for b in self._timed:
+            b.t = t
         radios = self.radios
         if radios is None:  # the paper's network: the observers step every period
             self.mu = self.thresholds.mu(t)
