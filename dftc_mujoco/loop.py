@@ -496,6 +496,8 @@ class Simulation:
                                     if np.isfinite(self.settle_time)
                                     else None,
                                 )
+                        for f in faults.just_ended:
+                            events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
                     plant.positions(out=x)
                     eta, xi = noise.next()
                     np.add(x, eta, out=x_m)

@@ -219,6 +219,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
             "",
         ]
     lines += _rule_table(ok)
+    lines += _kind_table(ok)
     lines += _scale_table(ok, figs)
     lines += _network_table(ok, figs)
     lines += _method_table(ok, figs)
@@ -258,6 +259,35 @@ def _rule_table(ok: list[dict[str, Any]]) -> list[str]:
             f"{_pct(m['detected_by_all_rate'])} | {d} | {_pct(m['bias_detection_rate'])} | "
             f"{_num(hit, 3)} / {_num(miss, 3)} | {_pct(m['false_alarm_rate_per_run'])} | "
             f"{_num(m['false_alarms_per_robot_hour'], 3)} | {_num(m['margin_max'], 3)} |"
+        )
+    return [*lines, ""]
+
+
+def _kind_table(ok: list[dict[str, Any]]) -> list[str]:
+    """Detection and isolation per fault kind drawn (per rule), when a campaign drew several:
+    what the FDI does with each kind of the fault zoo."""
+    rows = [{**r, "thresholds": r.get("thresholds") or "paper"} for r in ok]
+    groups = _by(rows, "fault_kind", "thresholds")
+    if len({k[0] for k in groups}) <= 1:
+        return []
+    lines = [
+        "| fault kind | rule | runs | faulty robot flagged by a teammate | by all | first "
+        "flag: median / max [s] | excluded | healthy flags: all / premises held | healthy "
+        "excluded |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (kind, rule), rs in groups.items():
+        faulty = [r for r in rs if r.get("main_fault_kind") not in (None, "none")]
+        delays = [r["delay_first"] for r in faulty if r.get("delay_first") is not None]
+        m = summarise(rs)
+        d = f"{np.median(delays):.2f} / {max(delays):.2f}" if delays else "n/a"
+        lines.append(
+            f"| {kind} | {rule} | {len(rs)} | "
+            f"{_pct(_rate([r['detected'] for r in faulty]))} | "
+            f"{_pct(_rate([r['detected_by'] >= r['robots'] - 1 for r in faulty]))} | {d} | "
+            f"{_pct(_rate([r['excluded_faulty'] for r in faulty]))} | "
+            f"{m['false_flags']} / {m['false_flags_premises_held']} | "
+            f"{m['healthy_exclusions']} |"
         )
     return [*lines, ""]
 

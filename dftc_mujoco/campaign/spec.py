@@ -9,7 +9,10 @@ duration = 60.0
 [vary]
 seed = true                      # a different scenario seed per run (default)
 fault_kind = ["stop"]            # choices among stop, bias, none, two_stops, silent (the
-                                 # robot's radio falls silent, it stops 5-15 s later)
+                                 # robot's radio falls silent, it stops 5-15 s later),
+                                 # loss_of_effectiveness (10-60 % left), intermittent (a stop
+                                 # half of every 1-4 s), sensor_bias (bias_magnitude m) and
+                                 # sensor_drift (bias_magnitude / 10 m/s)
 faulty_robot = "any"             # or a list of robot numbers
 fault_time = [15.0, 45.0]        # uniform range [s]
 bias_magnitude = [0.05, 1.5]     # uniform range [m/s], random direction
@@ -49,7 +52,9 @@ from .. import scenario as scenario_mod
 from ..errors import ScenarioError
 from ..tomlcheck import Table, describe, read_toml
 
-FAULT_KINDS = ("stop", "bias", "none", "two_stops", "silent")
+#: the fault zoo's kinds a campaign may draw (besides stop, bias, two stops and silent radios)
+ZOO_KINDS = ("loss_of_effectiveness", "intermittent", "sensor_bias", "sensor_drift")
+FAULT_KINDS = ("stop", "bias", "none", "two_stops", "silent", *ZOO_KINDS)
 FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
 
 
@@ -277,7 +282,7 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
     )
     kind = str(pick("fault_kind")) if "fault_kind" in v else "base"
     p["fault_kind"] = kind
-    if kind in ("stop", "bias", "two_stops", "silent"):
+    if kind in ("stop", "bias", "two_stops", "silent", *ZOO_KINDS):
         choices = (
             list(range(1, n + 1))
             if v["faulty_robot"] == "any"
@@ -286,7 +291,11 @@ def draw(spec: Spec, index: int) -> dict[str, Any]:
         p["faulty_robot"] = int(rng.choice(choices))
         lo, hi = v.get("fault_time", [10.0, 10.0])
         p["fault_t"] = round(float(rng.uniform(lo, hi)), 3)
-        if kind == "bias":
+        if kind == "loss_of_effectiveness":
+            p["remaining_gain"] = round(float(rng.uniform(0.1, 0.6)), 4)
+        if kind == "intermittent":
+            p["fault_period"] = round(float(rng.uniform(1.0, 4.0)), 3)
+        if kind in ("bias", "sensor_bias", "sensor_drift"):
             lo, hi = v.get("bias_magnitude", [0.3, 0.3])
             p["bias_magnitude"] = round(float(rng.uniform(lo, hi)), 4)
             p["bias_angle"] = round(float(rng.uniform(0, 2 * np.pi)), 4)
@@ -363,6 +372,36 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
         d["faults"] = [
             {"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]},
             {"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]},
+        ]
+    elif kind == "loss_of_effectiveness":
+        d["faults"] = [
+            {
+                "robot": p["faulty_robot"],
+                "kind": kind,
+                "t": p["fault_t"],
+                "value": p["remaining_gain"],
+            }
+        ]
+    elif kind == "intermittent":
+        d["faults"] = [
+            {
+                "robot": p["faulty_robot"],
+                "kind": kind,
+                "t": p["fault_t"],
+                "period": p["fault_period"],
+                "duty": 0.5,
+            }
+        ]
+    elif kind in ("sensor_bias", "sensor_drift"):
+        a = p["bias_angle"]
+        m = p["bias_magnitude"] / (10.0 if kind == "sensor_drift" else 1.0)
+        d["faults"] = [
+            {
+                "robot": p["faulty_robot"],
+                "kind": kind,
+                "t": p["fault_t"],
+                "value": [m * float(np.cos(a)), m * float(np.sin(a))],
+            }
         ]
     elif kind == "bias":
         a, m = p["bias_angle"], p["bias_magnitude"]

@@ -249,6 +249,13 @@ def _fault(f: Fault) -> dict[str, Any]:
     d = {**_fields(f), "robot": _one_based(_plain(f.robot))}
     if not math.isfinite(f.end):
         del d["end"]
+    if f.kind != "intermittent":
+        del d["period"], d["duty"]
+    if f.kind in ("loss_of_effectiveness", "intermittent"):
+        d.pop("time_constant")
+        d["value"] = _plain(float(f.value[0]))
+        if f.kind == "intermittent":
+            del d["value"]
     return d
 
 

@@ -108,9 +108,12 @@ class Fault:
     ``"stop"``) or of its position sensor (:data:`SENSOR_FAULTS`).
 
     ``value`` and ``time_constant`` describe a bias; a stop fault keeps them at
-    zero (a file may give them for a stop fault only as zeros). A sensor fault adds to the
-    robot's measured position ``value`` [m] (``"sensor_bias"``) or ``value`` × (t − t_f)
-    (``"sensor_drift"``, ``value`` in m/s) until ``end`` (inf: to the end of the run).
+    zero (a file may give them for a stop fault only as zeros).
+    ``"loss_of_effectiveness"``: the actuators deliver ``value[0]`` (0–1) of their command;
+    ``"intermittent"``: a stop during the first ``duty`` (0–1) of every ``period`` [s]. A
+    sensor fault adds to the robot's measured position ``value`` [m] (``"sensor_bias"``) or
+    ``value`` × (t − t_f) (``"sensor_drift"``, ``value`` in m/s). Every fault lasts until
+    ``end`` (inf: to the end of the run).
     """
 
     robot: int
@@ -119,11 +122,13 @@ class Fault:
     value: np.ndarray = field(default_factory=lambda: _ro([0.0, 0.0]))
     time_constant: float = 0.0
     end: float = float("inf")
+    period: float = 0.0  # intermittent
+    duty: float = 0.0
 
 
 #: the faults of a robot's position sensor (acting on its measurement, eq. 4)
 SENSOR_FAULTS = ("sensor_bias", "sensor_drift")
-ACTUATOR_FAULTS = ("bias", "stop")
+ACTUATOR_FAULTS = ("bias", "stop", "loss_of_effectiveness", "intermittent")
 
 
 #: the kinds of radio fault ``[[faults]]`` may name (actuator faults: "bias", "stop")

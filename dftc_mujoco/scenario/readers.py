@@ -520,20 +520,25 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFaul
     if kind in SENSOR_FAULTS:
         unit = "m" if kind == "sensor_bias" else "m/s"
         value = t.array("value", (N_DIM,), what=f"an [x, y] pair in {unit}")
-        end = float("inf")
-        if "end" in t.data:
-            end = t.number("end", low=0.0)
-            if t.ok("t", "end") and end <= at:
-                t.report("end", f"expected a time after t = {at:g} s, got {end:g}")
+        end = _fault_end(t, at)
         t.finish()
         return Fault(robot - 1, kind, at, value, 0.0, end)
-    if "end" in t.data:
-        t.report("end", f"only sensor faults end in this version ({', '.join(SENSOR_FAULTS)})")
-        t.used.add("end")
+    end = _fault_end(t, at)
+    if kind == "loss_of_effectiveness":
+        g = t.number("value", low=0.0, strict_low=False, high=1.0)
+        if t.ok("value") and g >= 1.0:
+            t.report("value", "expected the remaining effectiveness below 1 (1 is no fault)")
+        t.finish()
+        return Fault(robot - 1, kind, at, _ro([g, g]), 0.0, end)
+    if kind == "intermittent":
+        period = t.number("period", low=0.0)
+        duty = t.number("duty", low=0.0, high=1.0)
+        t.finish()
+        return Fault(robot - 1, kind, at, _ro([0.0, 0.0]), 0.0, end, period, duty)
     if kind == "bias":
         value = t.array("value", (N_DIM,), what="an [x, y] pair in m/s")
         tau = t.number("time_constant", 0.0, low=0.0, strict_low=False)
-        fault = Fault(robot - 1, kind, at, value, tau)
+        fault = Fault(robot - 1, kind, at, value, tau, end)
     else:  # a stop fault has no bias; zeros are accepted (Scenario.to_dict writes them)
         value = t.array("value", (N_DIM,), [0.0, 0.0], what="an [x, y] pair")
         if t.ok("value") and np.any(value != 0):
@@ -545,9 +550,19 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFaul
             t.report(
                 "time_constant", f"expected 0 or no time_constant for a stop fault, got {tau:g}"
             )
-        fault = Fault(robot - 1, kind, at)
+        fault = Fault(robot - 1, kind, at, end=end)
     t.finish()
     return fault
+
+
+def _fault_end(t: Table, at: float) -> float:
+    """A fault's optional ``end`` [s], after its start (inf: it lasts to the end)."""
+    if "end" not in t.data:
+        return float("inf")
+    end = t.number("end", low=0.0)
+    if t.ok("t", "end") and end <= at:
+        t.report("end", f"expected a time after t = {at:g} s, got {end:g}")
+    return end
 
 
 def _fdir(t: Table) -> Fdir:

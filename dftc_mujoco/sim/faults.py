@@ -16,7 +16,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..scenario import Fault
+from ..errors import InputError
+from ..scenario import ACTUATOR_FAULTS, Fault
 
 
 class ActuatorFaults:
@@ -28,7 +29,7 @@ class ActuatorFaults:
 
     def __init__(self, model: mujoco.MjModel, faults: tuple[Fault, ...], drive: Any) -> None:
         self.model = model
-        self.faults = tuple(f for f in faults if f.kind in ("bias", "stop"))  # the actuators'
+        self.faults = tuple(f for f in faults if f.kind in ACTUATOR_FAULTS)  # the actuators'
         faults = self.faults
         self.drive = drive
         self.actuation = drive.actuation
@@ -49,10 +50,52 @@ class ActuatorFaults:
         self._b_t = np.array([f.t for f in bias])
         self._b_tau = np.array([f.time_constant for f in bias])
         self._b_value = np.array([f.value for f in bias]).reshape(-1, 2)
+        self._b_end = np.array([f.end for f in bias])
         # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
         self._b_settled = self._b_t + 40.0 * self._b_tau
         self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
+        self.ended = [False] * len(faults)
+        self.just_ended: list[Fault] = []  # the faults that ended at the last apply()
+        self._gain = np.ones(n)  # each robot's remaining effectiveness (loss_of_effectiveness)
+        if self.actuation.any_position and any(f.kind == "loss_of_effectiveness" for f in faults):
+            raise InputError(
+                "faults: loss_of_effectiveness is modelled for velocity servos and motors; this "
+                "robot drives position servos (whose gain scales the position, not the speed)"
+            )
+
+    def _acting(self, f: Fault, t: float) -> bool:
+        """Fault ``f`` acts at ``t``: started, not ended, and (intermittent) in an on window."""
+        if t < f.t or t >= f.end:
+            return False
+        if f.kind == "intermittent":
+            return (t - f.t) % f.period < f.duty * f.period - 1e-12
+        return True
+
+    def _switch(self, t: float) -> None:
+        """Stops (and intermittent stops) that begin or end at ``t``, and the robots' remaining
+        effectiveness: the actuators of a robot no longer stopped get their healthy
+        parameters back (times its effectiveness)."""
+        m, (gain0, bias0, _) = self.model, self._saved
+        stopped = np.zeros_like(self.stopped)
+        gain = np.ones_like(self._gain)
+        for f in self.faults:
+            if self._acting(f, t):
+                if f.kind in ("stop", "intermittent"):
+                    stopped[f.robot] = True
+                elif f.kind == "loss_of_effectiveness":
+                    gain[f.robot] *= float(f.value[0])
+        for robot in np.flatnonzero(stopped & ~self.stopped):
+            self._stop_terms[int(robot)] = self.actuation.stop_terms(np.array([robot]))
+        for robot in np.flatnonzero((~stopped & self.stopped) | (gain != self._gain)):
+            ids = self.actuator[robot]
+            self._stop_terms.pop(int(robot), None)
+            if not stopped[robot]:  # healthy again, or working at ``gain``
+                m.actuator_gainprm[ids, 0] = gain0[ids] * gain[robot]
+                m.actuator_biasprm[ids, 0] = bias0[ids, 0]
+                m.actuator_biasprm[ids, 2] = bias0[ids, 2]
+                self._written = None  # the bias terms are written again
+        self.stopped, self._gain = stopped, gain
 
     def apply(self, t: float) -> list[Fault]:
         """Write the actuator parameters for time ``t``; returns the faults that start now.
@@ -60,14 +103,15 @@ class ActuatorFaults:
         Called every control period while a bias profile moves or while the drive maps a
         bias through the robot's pose or integrates it (position servos).
         """
-        new = []
+        new, self.just_ended = [], []
         for k, f in enumerate(self.faults):
             if not self.started[k] and t >= f.t:
                 self.started[k] = True
                 new.append(f)
-                if f.kind == "stop":
-                    self.stopped[f.robot] = True
-                    self._stop_terms[f.robot] = self.actuation.stop_terms(np.array([f.robot]))
+            if self.started[k] and not self.ended[k] and t >= f.end:
+                self.ended[k] = True
+                self.just_ended.append(f)
+        self._switch(t)
         m = self.model
         if len(self._bias_robots):
             phi = self.bias_phi(t)
@@ -91,7 +135,11 @@ class ActuatorFaults:
         profile moves (or while the drive maps a bias through the robot's pose or
         integrates it), else the next start."""
         pending = [f.t for k, f in enumerate(self.faults) if not self.started[k]]
-        started = self._b_t <= t
+        acting = [f for k, f in enumerate(self.faults) if self.started[k] and not self.ended[k]]
+        pending += [f.end for f in acting]
+        if any(f.kind == "intermittent" for f in acting):
+            return -np.inf  # its windows switch on and off
+        started = (self._b_t <= t) & (self._b_end > t)
         if started.any() and (
             self.drive.pose_dependent
             or self.actuation.any_position
@@ -106,7 +154,7 @@ class ActuatorFaults:
         phi[:] = 0.0
         for j, robot in enumerate(self._b_robot):
             age = t - self._b_t[j]
-            if age >= 0.0:
+            if age >= 0.0 and t < self._b_end[j]:
                 tau = self._b_tau[j]
                 phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * self._b_value[j]
         return phi
@@ -117,7 +165,7 @@ class ActuatorFaults:
             age = t[:, None] - self._b_t[None, :]
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 shape = np.where(self._b_tau > 0, 1.0 - np.exp(-age / self._b_tau), 1.0)
-            shape = np.where(age >= 0, shape, 0.0)
+            shape = np.where((age >= 0) & (t[:, None] < self._b_end[None, :]), shape, 0.0)
             for j, robot in enumerate(self._b_robot):
                 phi[:, robot] += shape[:, j, None] * self._b_value[j]
         return phi
@@ -128,9 +176,10 @@ class ActuatorFaults:
         derived after the run instead of inside it."""
         phi = self._bias_profile(t)
         for f in self.faults:
-            if f.kind == "stop":
-                rows = t >= f.t
-                phi[rows, f.robot] = -v_cmd[rows, f.robot]
+            if f.kind in ("stop", "intermittent", "loss_of_effectiveness"):
+                rows = np.array([self._acting(f, float(x)) for x in t], dtype=bool)
+                lost = 1.0 if f.kind != "loss_of_effectiveness" else 1.0 - float(f.value[0])
+                phi[rows, f.robot] = -lost * v_cmd[rows, f.robot]
         return phi
 
     def phi(self, t: float, v_cmd: np.ndarray) -> np.ndarray:
@@ -145,7 +194,9 @@ class ActuatorFaults:
         self.model.actuator_biasprm[:, :3] = bias
         self.model.actuator_biastype[:] = biastype
         self.stopped[:] = False
+        self._gain[:] = 1.0
         self.started = [False] * len(self.faults)
+        self.ended = [False] * len(self.faults)
         self._stop_terms.clear()
         self._written = None
         self.actuation.bias_integral[:] = 0.0

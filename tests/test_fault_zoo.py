@@ -1,0 +1,96 @@
+"""Actuator faults beyond bias and stop (sim/faults.py): loss of effectiveness, intermittent
+stops, and faults that end, each acting where it physically lives (the actuators'
+parameters), checked on the robot's motion."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.errors import InputError, ScenarioError
+
+DATA = Path(__file__).parent / "data" / "robots"
+
+
+def _run(faults: list[dict], duration: float = 20.0):
+    return simulate(load_scenario("paper_case", {"duration": duration, "faults": faults}))
+
+
+def _speed_ratio(r, robot: int, t0: float, t1: float) -> float:
+    """Robot's mean speed over its mean commanded speed between t0 and t1 (logged; a healthy
+    disk gives about 0.8: its servo does not reach the command within a period)."""
+    t, x, cmd = r.log["t"], r.log["x"][:, robot], r.log["v_cmd"][:, robot]
+    w = (t >= t0) & (t < t1)
+    v = np.linalg.norm(np.diff(x, axis=0) / np.diff(t)[:, None], axis=1)
+    return float(v[w[1:]].mean() / np.linalg.norm(cmd[w], axis=1).mean())
+
+
+def test_a_loss_of_effectiveness_delivers_that_share_of_the_command_and_ends():
+    r = _run([{"robot": 1, "kind": "loss_of_effectiveness", "t": 8.0, "value": 0.4, "end": 14.0}])
+    healthy = _speed_ratio(r, 0, 3.0, 8.0)
+    assert 0.3 < _speed_ratio(r, 0, 9.0, 14.0) / healthy < 0.6  # 0.4 of the command
+    assert 0.85 < _speed_ratio(r, 0, 15.0, 20.0) / healthy < 1.15
+    kinds = [(e["kind"], e["t"]) for e in r.events.items if e["kind"].startswith("fault")]
+    assert kinds == [("fault", 8.0), ("fault_ended", 14.0)]
+    phi = r.log["phi"][:, 0]
+    t = r.log["t"]
+    assert np.allclose(phi[(t > 9) & (t < 13)], -0.6 * r.log["v_cmd"][(t > 9) & (t < 13), 0])
+    assert np.all(phi[t > 14.5] == 0.0)
+
+
+def test_an_intermittent_stop_stops_the_robot_in_its_on_windows_only():
+    r = _run(
+        [{"robot": 2, "kind": "intermittent", "t": 8.0, "period": 2.0, "duty": 0.5, "end": 16.0}]
+    )
+    healthy = _speed_ratio(r, 1, 3.0, 8.0)
+    for a in (8.0, 10.0, 12.0, 14.0):  # on: [a, a + 1)
+        assert _speed_ratio(r, 1, a + 0.3, a + 0.9) < 0.05 * healthy
+        assert _speed_ratio(r, 1, a + 1.3, a + 1.9) > 0.6 * healthy  # off: it drives again
+    assert _speed_ratio(r, 1, 17.0, 20.0) > 0.85 * healthy
+
+
+def test_a_bias_and_a_stop_that_end_leave_the_robot_healthy():
+    r = _run(
+        [
+            {"robot": 3, "kind": "bias", "t": 6.0, "value": [0.05, 0.0], "end": 9.0},
+            {"robot": 4, "kind": "stop", "t": 6.0, "end": 9.0},
+        ]
+    )
+    t, phi = r.log["t"], r.log["phi"]
+    assert np.abs(phi[(t > 7) & (t < 8.9), 2, 0] - 0.05).max() < 1e-3
+    assert np.all(phi[t >= 9.0, 2] == 0.0) and np.all(phi[t >= 9.0, 3] == 0.0)
+    healthy = _speed_ratio(r, 3, 2.0, 6.0)
+    assert _speed_ratio(r, 3, 6.3, 8.9) < 0.05 * healthy
+    assert _speed_ratio(r, 3, 10.0, 20.0) > 0.85 * healthy
+
+
+def test_zoo_faults_are_checked_in_one_line():
+    def refused(fault: dict) -> str:
+        with pytest.raises(ScenarioError) as e:
+            load_scenario("paper_case", {"faults": [fault]})
+        return str(e.value)
+
+    assert "faults[1].value: expected the remaining effectiveness below 1" in refused(
+        {"robot": 1, "kind": "loss_of_effectiveness", "t": 5.0, "value": 1.0}
+    )
+    assert "faults[1].duty: expected a number <= 1" in refused(
+        {"robot": 1, "kind": "intermittent", "t": 5.0, "period": 1.0, "duty": 2.0}
+    )
+    assert "faults[1].end: expected a time after t = 5 s" in refused(
+        {"robot": 1, "kind": "stop", "t": 5.0, "end": 4.0}
+    )
+
+
+def test_a_loss_of_effectiveness_on_position_servos_is_refused():
+    s = load_scenario(
+        "paper_case",
+        {
+            "team.robot_model": str(DATA / "holobase.robot.toml"),
+            "faults": [{"robot": 1, "kind": "loss_of_effectiveness", "t": 5.0, "value": 0.5}],
+        },
+    )
+    with pytest.raises(InputError, match="loss_of_effectiveness is modelled for velocity servos"):
+        simulate(s)
