@@ -94,3 +94,20 @@ def test_a_loss_of_effectiveness_on_position_servos_is_refused():
     )
     with pytest.raises(InputError, match="loss_of_effectiveness is modelled for velocity servos"):
         simulate(s)
+
+
+def test_every_fault_kind_survives_the_scenario_written_out_and_read_back():
+    faults = [
+        {"robot": 1, "kind": "bias", "t": 5.0, "value": [0.1, 0.0], "end": 9.0},
+        {"robot": 2, "kind": "stop", "t": 6.0, "end": 8.0},
+        {"robot": 3, "kind": "loss_of_effectiveness", "t": 5.0, "value": 0.3},
+        {"robot": 4, "kind": "intermittent", "t": 5.0, "period": 2.0, "duty": 0.25, "end": 20.0},
+        {"robot": 1, "kind": "sensor_bias", "t": 7.0, "value": [0.1, 0.2]},
+        {"robot": 2, "kind": "sensor_drift", "t": 7.0, "value": [0.01, 0.0], "end": 30.0},
+    ]
+    s = load_scenario("paper_case", {"faults": faults})
+    again = type(s).from_dict(s.to_dict())
+    assert [(f.kind, f.t, f.end, f.period, f.duty, list(f.value)) for f in again.faults] == [
+        (f.kind, f.t, f.end, f.period, f.duty, list(f.value)) for f in s.faults
+    ]
+    assert s.with_overrides(duration=25.0).faults  # a shorter run keeps the earlier ones

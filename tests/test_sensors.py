@@ -42,5 +42,9 @@ def test_a_sensor_fault_is_checked_in_one_line():
             "paper_case",
             {"faults": [{"robot": 1, "kind": "sensor_bias", "t": 10.0, "value": [1, 0], "end": 5}]},
         )
-    with pytest.raises(ScenarioError, match=r"faults\[1\]\.end: only sensor faults end"):
-        load_scenario("paper_case", {"faults": [{"robot": 1, "kind": "stop", "t": 10, "end": 20}]})
+    with pytest.raises(
+        ScenarioError, match=r"faults\[1\]\.value: expected an \[x, y\] pair in m/s"
+    ):
+        load_scenario(
+            "paper_case", {"faults": [{"robot": 1, "kind": "sensor_drift", "t": 10, "value": 1}]}
+        )

@@ -245,17 +245,20 @@ def _fields(obj: Any) -> dict[str, Any]:
 
 
 def _fault(f: Fault) -> dict[str, Any]:
-    """A fault as its ``[[faults]]`` table (robots numbered from 1; no end: absent)."""
+    """A fault as its ``[[faults]]`` table (robots numbered from 1; only the keys its kind
+    reads; no end: absent)."""
     d = {**_fields(f), "robot": _one_based(_plain(f.robot))}
     if not math.isfinite(f.end):
         del d["end"]
     if f.kind != "intermittent":
         del d["period"], d["duty"]
-    if f.kind in ("loss_of_effectiveness", "intermittent"):
-        d.pop("time_constant")
+    if f.kind in ("bias", "stop"):
+        return d  # value and time_constant (zeros for a stop)
+    del d["time_constant"]
+    if f.kind == "intermittent":
+        del d["value"]
+    elif f.kind == "loss_of_effectiveness":
         d["value"] = _plain(float(f.value[0]))
-        if f.kind == "intermittent":
-            del d["value"]
     return d
 
 
