@@ -110,6 +110,13 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _delays(m: dict[str, Any]) -> str:
+    """A summary's first-flag delays as "median / p95 / max" (n/a without a detection)."""
+    if m["delay_median"] is None:
+        return "n/a"
+    return f"{m['delay_median']:.2f} / {m['delay_p95']:.2f} / {m['delay_max']:.2f}"
+
+
 def _kind(row: dict[str, Any]) -> str:
     """The kind of a run's main fault: from its own faults, else from what was drawn."""
     return str(row.get("main_fault_kind") or row["fault_kind"])
@@ -248,11 +255,7 @@ def _rule_table(ok: list[dict[str, Any]]) -> list[str]:
     ]
     for (rule,), rs in groups.items():
         m = summarise(rs)
-        d = (
-            "n/a"
-            if m["delay_median"] is None
-            else f"{m['delay_median']:.2f} / {m['delay_p95']:.2f} / {m['delay_max']:.2f}"
-        )
+        d = _delays(m)
         hit, miss = _bias_limits(rs)
         lines.append(
             f"| {rule} | {len(rs)} | {_pct(m['detection_rate'])} | "
@@ -307,11 +310,7 @@ def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     ]
     for (rule, n, fam), rs in groups.items():
         s = summarise(rs)
-        d = (
-            "n/a"
-            if s["delay_median"] is None
-            else f"{s['delay_median']:.2f} / {s['delay_p95']:.2f} / {s['delay_max']:.2f}"
-        )
+        d = _delays(s)
         lines.append(
             f"| {rule} | {n} | {fam} | {len(rs)} | {_pct(s['detection_rate'])} | "
             f"{_pct(s['detected_by_all_rate'])} | {d} | {_num(s['delay_last_max'], 2)} | "
@@ -426,11 +425,7 @@ def _method_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     ]
     for (name,), rs in groups.items():
         m = summarise(rs)
-        d = (
-            "n/a"
-            if m["delay_median"] is None
-            else f"{m['delay_median']:.2f} / {m['delay_p95']:.2f} / {m['delay_max']:.2f}"
-        )
+        d = _delays(m)
         formation = [r["final_formation"] for r in rs if r.get("final_formation") is not None]
         est = [r["estimation_error_max"] for r in rs if r.get("estimation_error_max") is not None]
         premise = ", ".join(f"{p} {n}" for p, n in m["false_flags_by_premise"].items()) or "none"
