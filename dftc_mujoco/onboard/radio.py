@@ -22,7 +22,7 @@ import numpy as np
 from ..events import make
 from .observer import Observer
 
-#: rounds in a row without the round's message after which a robot stops reading a link
+#: rounds in a row without the round's message after which a robot reports a link silent
 SILENT_ROUNDS = 2
 
 
