@@ -537,6 +537,8 @@ class Simulation:
                     if self._any_driven:  # robots an outside policy drives (drive())
                         cmd[self._driven] = self._override[self._driven] + xi[self._driven]
                     ctrl = adapter.command(cmd)
+                    if faults.stuck.any():  # stuck actuators keep their command of onset
+                        ctrl = faults.hold(ctrl)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
                         self._sample(t, x, cmd, position[j])
                         if np.abs(x).max() > checks.ARENA_HALF:

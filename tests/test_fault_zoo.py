@@ -104,6 +104,8 @@ def test_every_fault_kind_survives_the_scenario_written_out_and_read_back():
         {"robot": 4, "kind": "intermittent", "t": 5.0, "period": 2.0, "duty": 0.25, "end": 20.0},
         {"robot": 1, "kind": "sensor_bias", "t": 7.0, "value": [0.1, 0.2]},
         {"robot": 2, "kind": "sensor_drift", "t": 7.0, "value": [0.01, 0.0], "end": 30.0},
+        {"robot": 3, "kind": "drift", "t": 8.0, "value": [0.01, 0.02]},
+        {"robot": 4, "kind": "stuck", "t": 9.0, "end": 12.0},
     ]
     s = load_scenario("paper_case", {"faults": faults})
     again = type(s).from_dict(s.to_dict())
@@ -111,3 +113,24 @@ def test_every_fault_kind_survives_the_scenario_written_out_and_read_back():
         (f.kind, f.t, f.end, f.period, f.duty, list(f.value)) for f in s.faults
     ]
     assert s.with_overrides(duration=25.0).faults  # a shorter run keeps the earlier ones
+
+
+def test_an_actuator_drift_grows_and_a_stuck_robot_keeps_its_command():
+    from dftc_mujoco import Simulation
+
+    r = _run([{"robot": 2, "kind": "drift", "t": 6.0, "value": [0.02, 0.0], "end": 11.0}])
+    t, phi = r.log["t"], r.log["phi"][:, 1]
+    w = (t > 6.0) & (t < 11.0)
+    assert np.allclose(phi[w, 0], 0.02 * (t[w] - 6.0), atol=1e-9)
+    assert np.all(phi[t >= 11.0] == 0.0)
+    s = load_scenario(
+        "paper_case", {"duration": 12.0, "faults": [{"robot": 3, "kind": "stuck", "t": 8.0}]}
+    )
+    with Simulation(s) as sim:
+        ids = sim.adapter.actuation.ids
+        sim.step(801)  # through t = 8.0 s
+        held = sim.data.ctrl[ids[2]].copy()
+        others = sim.data.ctrl[ids[0]].copy()
+        sim.step(150)
+        assert np.array_equal(sim.data.ctrl[ids[2]], held)  # robot 3 keeps its command
+        assert not np.array_equal(sim.data.ctrl[ids[0]], others)  # robot 1 does not

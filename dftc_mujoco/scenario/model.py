@@ -255,7 +255,7 @@ def _fault(f: Fault) -> dict[str, Any]:
     if f.kind in ("bias", "stop"):
         return d  # value and time_constant (zeros for a stop)
     del d["time_constant"]
-    if f.kind == "intermittent":
+    if f.kind in ("intermittent", "stuck"):
         del d["value"]
     elif f.kind == "loss_of_effectiveness":
         d["value"] = _plain(float(f.value[0]))

@@ -110,7 +110,9 @@ class Fault:
     ``value`` and ``time_constant`` describe a bias; a stop fault keeps them at
     zero (a file may give them for a stop fault only as zeros).
     ``"loss_of_effectiveness"``: the actuators deliver ``value[0]`` (0–1) of their command;
-    ``"intermittent"``: a stop during the first ``duty`` (0–1) of every ``period`` [s]. A
+    ``"intermittent"``: a stop during the first ``duty`` (0–1) of every ``period`` [s];
+    ``"drift"``: a bias growing as ``value`` × (t − t_f) (``value`` in m/s²); ``"stuck"``: the
+    actuators keep the commands they had at ``t``. A
     sensor fault adds to the robot's measured position ``value`` [m] (``"sensor_bias"``) or
     ``value`` × (t − t_f) (``"sensor_drift"``, ``value`` in m/s). Every fault lasts until
     ``end`` (inf: to the end of the run).
@@ -128,7 +130,7 @@ class Fault:
 
 #: the faults of a robot's position sensor (acting on its measurement, eq. 4)
 SENSOR_FAULTS = ("sensor_bias", "sensor_drift")
-ACTUATOR_FAULTS = ("bias", "stop", "loss_of_effectiveness", "intermittent")
+ACTUATOR_FAULTS = ("bias", "stop", "loss_of_effectiveness", "intermittent", "drift", "stuck")
 
 
 #: the kinds of radio fault ``[[faults]]`` may name (actuator faults: "bias", "stop")

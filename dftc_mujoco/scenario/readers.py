@@ -530,6 +530,13 @@ def _fault(t: Table, n: int | None, duration: float | None) -> Fault | RadioFaul
             t.report("value", "expected the remaining effectiveness below 1 (1 is no fault)")
         t.finish()
         return Fault(robot - 1, kind, at, _ro([g, g]), 0.0, end)
+    if kind == "drift":
+        rate = t.array("value", (N_DIM,), what="an [x, y] pair in m/s²")
+        t.finish()
+        return Fault(robot - 1, kind, at, rate, 0.0, end)
+    if kind == "stuck":
+        t.finish()
+        return Fault(robot - 1, kind, at, _ro([0.0, 0.0]), 0.0, end)
     if kind == "intermittent":
         period = t.number("period", low=0.0)
         duty = t.number("duty", low=0.0, high=1.0)

@@ -44,20 +44,23 @@ class ActuatorFaults:
         self.started = [False] * len(faults)
         self._stop_terms: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._written: np.ndarray | None = None  # bias terms last written
-        bias = [f for f in faults if f.kind == "bias"]
+        bias = [f for f in faults if f.kind in ("bias", "drift")]  # drift: a growing bias
         self._bias_robots = np.array(sorted({f.robot for f in bias}), dtype=int)
         self._b_robot = np.array([f.robot for f in bias], dtype=int)
         self._b_t = np.array([f.t for f in bias])
         self._b_tau = np.array([f.time_constant for f in bias])
         self._b_value = np.array([f.value for f in bias]).reshape(-1, 2)
         self._b_end = np.array([f.end for f in bias])
+        self._b_ramp = np.array([f.kind == "drift" for f in bias], dtype=bool)
         # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
-        self._b_settled = self._b_t + 40.0 * self._b_tau
+        self._b_settled = np.where(self._b_ramp, np.inf, self._b_t + 40.0 * self._b_tau)
         self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
         self.ended = [False] * len(faults)
         self.just_ended: list[Fault] = []  # the faults that ended at the last apply()
         self._gain = np.ones(n)  # each robot's remaining effectiveness (loss_of_effectiveness)
+        self.stuck = np.zeros(n, bool)  # robots whose actuators keep the command of onset
+        self._stuck_ctrl: dict[int, np.ndarray] = {}
         if self.actuation.any_position and any(f.kind == "loss_of_effectiveness" for f in faults):
             raise InputError(
                 "faults: loss_of_effectiveness is modelled for velocity servos and motors; this "
@@ -79,12 +82,18 @@ class ActuatorFaults:
         m, (gain0, bias0, _) = self.model, self._saved
         stopped = np.zeros_like(self.stopped)
         gain = np.ones_like(self._gain)
+        stuck = np.zeros_like(self.stuck)
         for f in self.faults:
             if self._acting(f, t):
                 if f.kind in ("stop", "intermittent"):
                     stopped[f.robot] = True
                 elif f.kind == "loss_of_effectiveness":
                     gain[f.robot] *= float(f.value[0])
+                elif f.kind == "stuck":
+                    stuck[f.robot] = True
+        for robot in np.flatnonzero(self.stuck & ~stuck):
+            self._stuck_ctrl.pop(int(robot), None)
+        self.stuck = stuck
         for robot in np.flatnonzero(stopped & ~self.stopped):
             self._stop_terms[int(robot)] = self.actuation.stop_terms(np.array([robot]))
         for robot in np.flatnonzero((~stopped & self.stopped) | (gain != self._gain)):
@@ -130,6 +139,15 @@ class ActuatorFaults:
         self.due = self._next_due(t)
         return new
 
+    def hold(self, ctrl: np.ndarray) -> np.ndarray:
+        """The actuator commands (N, A + H) with the stuck robots' rows kept at the commands
+        they had when they got stuck (a copy: the caller's array is not touched)."""
+        out = np.array(ctrl, copy=True)
+        for robot in np.flatnonzero(self.stuck):
+            saved = self._stuck_ctrl.setdefault(int(robot), out[robot].copy())
+            out[robot] = saved
+        return out
+
     def _next_due(self, t: float) -> float:
         """When :meth:`apply` next has something to write: every period while a bias
         profile moves (or while the drive maps a bias through the robot's pose or
@@ -156,7 +174,10 @@ class ActuatorFaults:
             age = t - self._b_t[j]
             if age >= 0.0 and t < self._b_end[j]:
                 tau = self._b_tau[j]
-                phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * self._b_value[j]
+                if self._b_ramp[j]:  # a drift: value [m/s²] × age
+                    phi[robot] += age * self._b_value[j]
+                else:
+                    phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * self._b_value[j]
         return phi
 
     def _bias_profile(self, t: np.ndarray) -> np.ndarray:
@@ -165,6 +186,7 @@ class ActuatorFaults:
             age = t[:, None] - self._b_t[None, :]
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 shape = np.where(self._b_tau > 0, 1.0 - np.exp(-age / self._b_tau), 1.0)
+            shape = np.where(self._b_ramp[None, :], age, shape)  # a drift grows with age
             shape = np.where((age >= 0) & (t[:, None] < self._b_end[None, :]), shape, 0.0)
             for j, robot in enumerate(self._b_robot):
                 phi[:, robot] += shape[:, j, None] * self._b_value[j]
@@ -176,6 +198,11 @@ class ActuatorFaults:
         derived after the run instead of inside it."""
         phi = self._bias_profile(t)
         for f in self.faults:
+            if f.kind == "stuck":  # it keeps delivering the command of its onset
+                rows = np.array([self._acting(f, float(x)) for x in t], dtype=bool)
+                if rows.any():
+                    first = int(np.argmax(rows))
+                    phi[rows, f.robot] = v_cmd[first, f.robot] - v_cmd[rows, f.robot]
             if f.kind in ("stop", "intermittent", "loss_of_effectiveness"):
                 rows = np.array([self._acting(f, float(x)) for x in t], dtype=bool)
                 lost = 1.0 if f.kind != "loss_of_effectiveness" else 1.0 - float(f.value[0])
@@ -194,6 +221,8 @@ class ActuatorFaults:
         self.model.actuator_biasprm[:, :3] = bias
         self.model.actuator_biastype[:] = biastype
         self.stopped[:] = False
+        self.stuck[:] = False
+        self._stuck_ctrl.clear()
         self._gain[:] = 1.0
         self.started = [False] * len(self.faults)
         self.ended = [False] * len(self.faults)
