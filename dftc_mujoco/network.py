@@ -110,7 +110,11 @@ class Channel:
         self.delay_sum = np.zeros(e)  # [periods] of the messages delivered
         self.delay_max = np.zeros(e, dtype=np.int64)
         self.worst_run = np.zeros(e, dtype=np.int64)  # the longest run of losses seen
-        self._p_loss = net.loss
+        self._p_loss = np.full(e, net.loss)  # per link: ``loss`` unless [[network.links]] says
+        for link, p in net.link_loss:
+            k = self._index.get((int(link[0]), int(link[1])))
+            if k is not None:
+                self._p_loss[k] = p
         self._mean_periods = net.latency / control_period
 
     # ------------------------------------------------------------------ faults
@@ -182,7 +186,7 @@ class Channel:
                 self.bad = np.where(self.bad, flip >= net.p_good, flip < net.p_bad)
                 p = np.where(self.bad, net.loss_bad, self._p_loss)
             else:
-                p = np.full(e, self._p_loss)
+                p = self._p_loss
             lost = go & (u < p)
             if net.max_consecutive_losses is not None:  # the declared bound b is kept
                 lost &= self.in_a_row < net.max_consecutive_losses

@@ -277,3 +277,29 @@ def test_a_range_limited_team_whose_links_drop_and_come_back_flags_nobody():
     assert "detection" not in kinds and "exclusion" not in kinds
     assert not r.summary["premises"]["network"]["held"]
     assert r.summary["margin"] < 1.0
+
+
+def test_a_single_lossy_link_loses_its_share_and_the_paper_outcome_holds():
+    """[[network.links]]: link 4 -> 2 loses every message the bound allows (3 in a row, then
+    one through), the others none; the round fits the bound, robot 1's stop is isolated by
+    all four and nobody else is flagged."""
+    r = _run(
+        {
+            "network.latency": 0.02,
+            "network.max_consecutive_losses": 3,
+            "network.links": [{"link": [4, 2], "loss": 1.0}],
+            "gains.ko": 3.0,
+            "onboard.thresholds": "l1",
+        }
+    )
+    net = r.summary["network"]
+    assert net["round_periods"] == 2 + 4
+    rates = {tuple(x["link"]): x["loss_rate"] for x in net["links"]}
+    assert rates[(4, 2)] == pytest.approx(0.75, abs=0.01)
+    assert all(v == 0.0 for k, v in rates.items() if k != (4, 2))
+    found = _detections(r)
+    assert sorted(by for by, k in found if k == 1) == [1, 2, 3, 4]
+    assert all(k == 1 for _, k in found)
+    assert r.summary["premises"]["network"]["held"]
+    with pytest.raises(ScenarioError, match=r"network\.links\[1\]\.link: \[1, 3\] is not a link"):
+        load_scenario("paper_case", {"network.links": [{"link": [1, 3], "loss": 0.5}]})

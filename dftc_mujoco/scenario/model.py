@@ -291,6 +291,10 @@ def _network(net: Network) -> dict[str, Any]:
     if net.range is not None:
         d["range"] = _plain(net.range)
         d["range_hysteresis"] = _plain(net.range_hysteresis)
+    if net.link_loss:
+        d["links"] = [
+            {"link": [int(j) + 1, int(i) + 1], "loss": _plain(p)} for (j, i), p in net.link_loss
+        ]
     return d
 
 

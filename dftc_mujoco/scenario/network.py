@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..tomlcheck import Table
 from .parts import Network, Physics, RadioFault
 
@@ -49,6 +51,15 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         t.report("range_hysteresis", f"expected less than range = {reach:g} m, got {hysteresis:g}")
     if reach is None and "range_hysteresis" in t.data:
         t.report("range_hysteresis", "only with a range")
+    link_loss = []
+    for lt in t.tables("links"):  # [[network.links]]: link = [from, to], loss = p
+        link = lt.array("link", (2,), what="[from, to], robots numbered from 1")
+        p = lt.number("loss", low=0.0, strict_low=False, high=1.0)
+        lt.finish()
+        if lt.ok("link") and np.all(link == np.round(link)):
+            link_loss.append(((int(link[0]) - 1, int(link[1]) - 1), p))
+        elif lt.ok("link"):
+            lt.report("link", f"expected two robot numbers, got {link.tolist()}")
     t.finish()
     net = Network(
         latency=latency,
@@ -60,8 +71,11 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         range=reach,
         range_hysteresis=hysteresis,
         faults=faults,
+        link_loss=tuple(link_loss),
         **burst,
     )
+    if bound is None and any(p >= 1 for _, p in link_loss):
+        t.report("links", "a link that loses every message needs max_consecutive_losses")
     if (
         net.lossy
         and bound is None

@@ -162,8 +162,10 @@ class Network:
     probability ``loss`` (``loss_model`` "bernoulli", or "gilbert_elliott" with the bursts
     ``p_bad`` (good → bad), ``p_good`` (bad → good) and ``loss_bad`` in the bad state), but
     never more than ``max_consecutive_losses`` in a row on a link (the declared bound b;
-    None: no bound). ``range`` [m] limits a link to robots that close (None: no limit); a
-    link that left the range comes back within ``range − range_hysteresis``.
+    None: no bound). ``link_loss`` sets the loss probability of single links
+    (``[[network.links]]``, the rest keep ``loss``). ``range`` [m] limits a link to robots
+    that close (None: no limit); a link that left the range comes back within
+    ``range − range_hysteresis``.
     """
 
     latency: float = 0.0
@@ -178,6 +180,8 @@ class Network:
     range: float | None = None
     range_hysteresis: float = 0.0
     faults: tuple[RadioFault, ...] = ()
+    # per-link loss probabilities ((from, to), 0-based) replacing ``loss`` on those links
+    link_loss: tuple[tuple[tuple[int, int], float], ...] = ()
 
     @property
     def ideal(self) -> bool:
@@ -191,12 +195,17 @@ class Network:
             and (self.loss_model == "bernoulli" or self.p_bad == 0.0)
             and self.range is None
             and not self.faults
+            and not any(p > 0 for _, p in self.link_loss)
         )
 
     @property
     def lossy(self) -> bool:
         """Some message may be lost by the channel itself (radio faults aside)."""
-        return self.loss > 0.0 or (self.loss_model == "gilbert_elliott" and self.p_bad > 0.0)
+        return (
+            self.loss > 0.0
+            or (self.loss_model == "gilbert_elliott" and self.p_bad > 0.0)
+            or any(p > 0 for _, p in self.link_loss)
+        )
 
 
 @dataclass(frozen=True)

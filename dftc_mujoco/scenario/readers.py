@@ -95,8 +95,15 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
                 f"ko * control_period * (2 * max in-degree + 1) = {step_gain:g}, expected < 2; "
                 "lower ko or physics.control_period",
             )
-    if network is not None and team is not None and team.graph is not None and radio:
+    if network is not None and team is not None and team.graph is not None:
         edges = set(team.graph.edges)
+        for k, (link, _) in enumerate(network.link_loss):
+            if link not in edges:
+                doc.record(
+                    f"network.links[{k + 1}].link",
+                    f"[{link[0] + 1}, {link[1] + 1}] is not a link of team.graph "
+                    "([from, to], robots numbered from 1)",
+                )
         for k, f in enumerate(all_faults or ()):
             if isinstance(f, RadioFault) and f.kind == "link_down" and f.link not in edges:
                 doc.record(
