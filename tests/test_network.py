@@ -7,6 +7,7 @@ checks."""
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -303,3 +304,20 @@ def test_a_single_lossy_link_loses_its_share_and_the_paper_outcome_holds():
     assert r.summary["premises"]["network"]["held"]
     with pytest.raises(ScenarioError, match=r"network\.links\[1\]\.link: \[1, 3\] is not a link"):
         load_scenario("paper_case", {"network.links": [{"link": [1, 3], "loss": 0.5}]})
+
+
+def test_a_silent_robot_in_an_untuned_team_gets_no_healthy_teammate_excluded():
+    """Run 2 of campaigns/network_no_false_exclusion.toml (16 slow bases, random graph, 30 %
+    loss, robot 11 silent from 22.9 s, then stopped): receivers that dropped the silent
+    link from their residual moved robot 13's by 0.84 m at once and excluded it; keeping the
+    last message, nobody healthy is flagged while every premise held, nobody is excluded."""
+    from dftc_mujoco.campaign import spec as campaign_spec
+
+    root = Path(__file__).resolve().parent.parent
+    s = campaign_spec.load(root / "campaigns" / "network_no_false_exclusion.toml")
+    p = campaign_spec.draw(s, 2)
+    assert p["fault_kind"] == "silent" and p["robots"] == 16
+    r = simulate(campaign_spec.scenario_for(s, p), progress=False)
+    assert [e for e in r.events.items if e["kind"] == "exclusion"] == []
+    assert r.summary["healthy_flags_premises_held"] == 0
+    assert [e["robot"] for e in r.events.items if e["kind"] == "robot_silent"] == [11]
