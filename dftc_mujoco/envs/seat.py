@@ -32,7 +32,7 @@ def scenario_of(scenario: Any) -> Scenario:
 class Seats:
     """A run in which the robots ``driven`` (0-based) take their commands from a policy."""
 
-    def __init__(self, scenario: Any, driven: list[int], seed: int | None = None) -> None:
+    def __init__(self, scenario: Any, driven: list[int]) -> None:
         self.scenario = scenario_of(scenario)
         n = self.scenario.team.robots
         bad = [r + 1 for r in driven if not 0 <= r < n]
