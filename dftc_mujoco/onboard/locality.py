@@ -85,7 +85,7 @@ def deliver(team: Team) -> None:
 
 #: per-link arrays of the observer (rows are links, not robots): shown through the links
 #: into each robot instead
-_LINK_STATE = {"links", "link_round", "sent", "pick"}
+_LINK_STATE = {"links", "link_round", "sent"}
 
 
 def robot_view(team: Team, i: int) -> list[np.ndarray]:

@@ -38,19 +38,19 @@ def advance_one(y, r, ko, dt):  # pragma: no cover - compiled
 
 @njit(inline="always")
 def residual_row(
-    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, i, row
+    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, row
 ):  # pragma: no cover - compiled
     """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ); returns
     nothing. Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
     first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, docs/notes.md, 2). On a
     network (``networked``) the message of edge e is the last one its link delivered,
-    ``links[pick[e]]`` (M·n,), instead of the sender's current ŷ."""
+    ``links[e]`` (M·n,), instead of the sender's current ŷ."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     for a in range(m * n):
         row[a] = -in_degree[i] * y[i, a]
     for e in range(first_edge[i], first_edge[i + 1]):
-        msg = links[pick[e]] if networked else y[src[e]]
+        msg = links[e] if networked else y[src[e]]
         for a in range(m * n):
             row[a] += msg[a]
     for d in range(n):
@@ -77,15 +77,13 @@ def estimate(y_hat, int_u_hat, out):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def residual(
-    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, r, r_norm
+    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, r, r_norm
 ):  # pragma: no cover - compiled
     """ⁱr (eq. 35) of every robot into ``r`` (M, M, n), ‖ⁱr_k‖ into ``r_norm`` (M, M)."""
     m, _, n = y_hat.shape
     rr = r.reshape(m, m * n)
     for i in range(m):
-        residual_row(
-            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, pick, networked, i, rr[i]
-        )
+        residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, rr[i])
         row_norms(rr[i], i, n, r_norm)
 
 
@@ -146,7 +144,6 @@ class Messages:
             self.first_edge,
             self.in_degree,
             none,
-            self.src,
             False,
             r,
             r_norm,
@@ -165,7 +162,6 @@ class ObserverRecord(NamedTuple):
     first_edge: np.ndarray
     in_degree: np.ndarray
     links: np.ndarray  # (E, M·n) the last message each link delivered (a network)
-    pick: np.ndarray  # (edges,) the link each edge of the residual reads (the paper's: its own)
     networked: bool  # read ``links`` instead of the senders' current ŷ
     ko: float
     dt: float  # the control period: the integrals
@@ -226,7 +222,6 @@ class Observer(Block):
 
     def _connect(self, graph: Graph) -> None:
         self.messages = Messages(graph.edges, graph.n)
-        self.pick = np.arange(len(self.messages.src), dtype=np.intp)
         m = self.y_hat.shape[0]
         self.y_next = np.empty_like(self.y_hat)  # the compiled period writes ŷ⁺ here, then swaps
         self._x_hat = np.empty_like(self.y_hat)
@@ -245,7 +240,6 @@ class Observer(Block):
             msg.first_edge,
             msg.in_degree,
             self.links,
-            self.pick,
             self.networked,
             self.ko,
             self.dt,
@@ -315,7 +309,6 @@ class Observer(Block):
             msg.first_edge,
             msg.in_degree,
             self.links,
-            self.pick,
             self.networked,
             self._r,
             self._r_norm,

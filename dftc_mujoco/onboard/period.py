@@ -102,7 +102,6 @@ def _residuals(
     first_edge,
     in_degree,
     links,
-    pick,
     networked,
     rows,
     r_norm,
@@ -127,7 +126,6 @@ def _residuals(
                 first_edge,
                 in_degree,
                 links,
-                pick,
                 networked,
                 i,
                 row,
@@ -296,7 +294,6 @@ def team_period(
             ob.first_edge,
             ob.in_degree,
             ob.links,
-            ob.pick,
             ob.networked,
             out.row,
             out.r_norm,
@@ -360,7 +357,6 @@ def team_period_split(
             ob.first_edge,
             ob.in_degree,
             ob.links,
-            ob.pick,
             ob.networked,
             out.row,
             out.r_norm,
@@ -384,14 +380,14 @@ def team_period_flat(*a):  # pragma: no cover - compiled
     slices below are checked against the records' field counts (:data:`RECORDS`)."""
     return team_period(
         PeriodInputs(*a[0:8]),
-        ObserverRecord(*a[8:21]),
-        ControllerRecord(*a[21:22]),
-        SupervisorRecord(*a[22:27]),
-        Surroundings(*a[27:31]),
-        DriveRecord(*a[31:37]),
-        EstimatorRecord(*a[37:48]),
-        DecisionRecord(*a[48:57]),
-        PeriodBuffers(*a[57:68]),
+        ObserverRecord(*a[8:20]),
+        ControllerRecord(*a[20:21]),
+        SupervisorRecord(*a[21:26]),
+        Surroundings(*a[26:30]),
+        DriveRecord(*a[30:36]),
+        EstimatorRecord(*a[36:47]),
+        DecisionRecord(*a[47:56]),
+        PeriodBuffers(*a[56:67]),
     )
 
 
@@ -407,6 +403,6 @@ RECORDS = (
     DecisionRecord,
     PeriodBuffers,
 )
-_ENDS = (8, 21, 22, 27, 31, 37, 48, 57, 68)  # where each record ends in team_period_flat's a
+_ENDS = (8, 20, 21, 26, 30, 36, 47, 56, 67)  # where each record ends in team_period_flat's a
 if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
     raise ImportError("team_period_flat's slices no longer match the records' fields")
