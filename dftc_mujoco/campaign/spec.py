@@ -359,61 +359,27 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
         elif family == "line":
             team["graph"] = {"family": "line"}
     kind = p["fault_kind"]
-    if kind == "none":
+    if kind in ("stop", "two_stops", "silent", "bias", *ZOO_KINDS):
+        first: dict[str, Any] = {
+            "robot": p["faulty_robot"],
+            "kind": "stop" if kind == "two_stops" else kind,
+            "t": p["fault_t"],
+        }
+        if kind in ("bias", "sensor_bias", "sensor_drift"):  # a random direction
+            a = p["bias_angle"]
+            m = p["bias_magnitude"] / (10.0 if kind == "sensor_drift" else 1.0)
+            first["value"] = [m * float(np.cos(a)), m * float(np.sin(a))]
+        if kind == "bias":
+            first["time_constant"] = 0.45
+        elif kind == "loss_of_effectiveness":
+            first["value"] = p["remaining_gain"]
+        elif kind == "intermittent":
+            first.update(period=p["fault_period"], duty=0.5)
+        d["faults"] = [first]
+        if kind in ("two_stops", "silent"):  # then a stop (of the silent robot itself)
+            d["faults"].append({"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]})
+    elif kind == "none":
         d["faults"] = []
-    elif kind == "stop":
-        d["faults"] = [{"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]}]
-    elif kind == "silent":
-        d["faults"] = [
-            {"robot": p["faulty_robot"], "kind": "silent", "t": p["fault_t"]},
-            {"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]},
-        ]
-    elif kind == "two_stops":
-        d["faults"] = [
-            {"robot": p["faulty_robot"], "kind": "stop", "t": p["fault_t"]},
-            {"robot": p["second_robot"], "kind": "stop", "t": p["second_t"]},
-        ]
-    elif kind == "loss_of_effectiveness":
-        d["faults"] = [
-            {
-                "robot": p["faulty_robot"],
-                "kind": kind,
-                "t": p["fault_t"],
-                "value": p["remaining_gain"],
-            }
-        ]
-    elif kind == "intermittent":
-        d["faults"] = [
-            {
-                "robot": p["faulty_robot"],
-                "kind": kind,
-                "t": p["fault_t"],
-                "period": p["fault_period"],
-                "duty": 0.5,
-            }
-        ]
-    elif kind in ("sensor_bias", "sensor_drift"):
-        a = p["bias_angle"]
-        m = p["bias_magnitude"] / (10.0 if kind == "sensor_drift" else 1.0)
-        d["faults"] = [
-            {
-                "robot": p["faulty_robot"],
-                "kind": kind,
-                "t": p["fault_t"],
-                "value": [m * float(np.cos(a)), m * float(np.sin(a))],
-            }
-        ]
-    elif kind == "bias":
-        a, m = p["bias_angle"], p["bias_magnitude"]
-        d["faults"] = [
-            {
-                "robot": p["faulty_robot"],
-                "kind": "bias",
-                "t": p["fault_t"],
-                "value": [m * float(np.cos(a)), m * float(np.sin(a))],
-                "time_constant": 0.45,
-            }
-        ]
     noise = d.setdefault("noise", {})
     for key in ("eta_bar", "xi_bar"):
         if key in p:
