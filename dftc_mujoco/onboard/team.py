@@ -27,7 +27,6 @@ from typing import Any, cast
 
 import numba
 import numpy as np
-from numba import njit
 
 from ..events import make
 from ..graph import Graph
@@ -35,7 +34,7 @@ from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
 from .block import Block, TeamConfig
 from .controller import Controller, ControllerRecord
-from .decision import Decision
+from .decision import Decision, flagged_by_teammates
 from .fault_estimator import EstimatorRecord, FaultEstimator
 from .observer import Observer
 from .period import (
@@ -50,6 +49,7 @@ from .period import (
 )
 from .radio import Radios, Rounds
 from .recovery import Recovery, split_event
+from .sighting import Sighting
 from .supervisor import Supervisor, SupervisorRecord, Surroundings
 from .thresholds import Thresholds
 
@@ -167,6 +167,9 @@ class Team:
             config.round_periods if config.networked else 1, config.observer_period
         )
         self.radios = Radios(self.observer, n) if config.networked else None
+        tol, reach, wd = config.sighting_tolerance, config.sighting_range, config.detection_window
+        see = config.networked and config.fdir and tol > 0 and reach > 0
+        self.sighting = Sighting(n, tol, reach, wd, config.dt) if see else None  # silent robots
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
@@ -327,6 +330,8 @@ class Team:
             code = self._general(x_m, c, c_dot, offsets, rates)
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
+        if self.sighting is not None and sensed_bodies is not None:
+            self.events += self.sighting.watch(t, self, c, c_dot, (offsets, rates), sensed_bodies)
         if code & RAISED:
             self._report(t, self._raised)
         if radios is not None and self.rounds.now and self.config.fdir:
@@ -600,6 +605,8 @@ class Team:
         for robot in self.recovery.due(t):
             p = int(np.flatnonzero(self.members == robot)[0])
             flag = np.asarray(self.flag, bool)
+            if self.sighting is not None:  # flags raised by sight on a silent robot
+                flag = flag | self.sighting.flag[np.ix_(self.members, self.members)]
             flaggers = [int(self.members[i]) + 1 for i in np.flatnonzero(flag[:, p])]
             counted = [b for b in flaggers if self.recovery.counts(b - 1, robot)]
             if self.recovery.anomaly is not None:
@@ -643,6 +650,8 @@ class Team:
         keep = np.delete(np.arange(len(self.members)), p)
         if self.radios is not None:  # the links of the robot that leaves go with it
             self.radios.drop(p)
+        if self.sighting is not None:
+            self.sighting.forget(int(self.members[p]))
         old_offsets, _ = self.plan.at(t)
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
@@ -661,18 +670,6 @@ class Team:
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
-
-
-@njit(cache=True)
-def flagged_by_teammates(flag, out):  # pragma: no cover - compiled
-    """out[k] = some robot i ≠ k flags robot k (``flag`` read row by row, in memory order:
-    column by column was 12× slower at N = 1000)."""
-    for k in range(flag.shape[1]):
-        out[k] = False
-    for i in range(flag.shape[0]):
-        for k in range(flag.shape[1]):
-            if flag[i, k] and i != k:
-                out[k] = True
 
 
 def _obstacle_label(index: int, n_cylinders: int) -> str:

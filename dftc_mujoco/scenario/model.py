@@ -291,10 +291,16 @@ def _network(net: Network) -> dict[str, Any]:
     if net.range is not None:
         d["range"] = _plain(net.range)
         d["range_hysteresis"] = _plain(net.range_hysteresis)
-    if net.link_loss:
-        d["links"] = [
-            {"link": [int(j) + 1, int(i) + 1], "loss": _plain(p)} for (j, i), p in net.link_loss
-        ]
+    links: dict[tuple[int, int], dict[str, Any]] = {}
+    for items, name in ((net.link_loss, "loss"), (net.link_latency, "latency")):
+        for (j, i), v in items:
+            links.setdefault((j, i), {"link": [int(j) + 1, int(i) + 1]})[name] = _plain(v)
+    if links:
+        d["links"] = list(links.values())
+    if net.sighting_tolerance != "auto":
+        d["sighting_tolerance"] = _plain(net.sighting_tolerance)
+    if net.sighting_range is not None:
+        d["sighting_range"] = _plain(net.sighting_range)
     return d
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..tomlcheck import Table
+from ..tomlcheck import Table, number_or_word
 from .parts import Network, Physics, RadioFault
 
 
@@ -51,15 +51,28 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         t.report("range_hysteresis", f"expected less than range = {reach:g} m, got {hysteresis:g}")
     if reach is None and "range_hysteresis" in t.data:
         t.report("range_hysteresis", "only with a range")
-    link_loss = []
-    for lt in t.tables("links"):  # [[network.links]]: link = [from, to], loss = p
+    link_loss: list[tuple[tuple[int, int], float]] = []
+    link_latency: list[tuple[tuple[int, int], float]] = []
+    for lt in t.tables("links"):  # [[network.links]]: link = [from, to], loss = p, latency = s
         link = lt.array("link", (2,), what="[from, to], robots numbered from 1")
-        p = lt.number("loss", low=0.0, strict_low=False, high=1.0)
+        p = lt.number("loss", low=0.0, strict_low=False, high=1.0) if "loss" in lt.data else None
+        d = lt.number("latency", low=0.0, strict_low=False) if "latency" in lt.data else None
         lt.finish()
-        if lt.ok("link") and np.all(link == np.round(link)):
-            link_loss.append(((int(link[0]) - 1, int(link[1]) - 1), p))
+        if "loss" not in lt.data and "latency" not in lt.data:
+            lt.report("link", "expected a loss, a latency or both for the link")
+        elif lt.ok("link") and np.all(link == np.round(link)):
+            pair = (int(link[0]) - 1, int(link[1]) - 1)
+            if p is not None:
+                link_loss.append((pair, p))
+            if d is not None:
+                link_latency.append((pair, d))
         elif lt.ok("link"):
             lt.report("link", f"expected two robot numbers, got {link.tolist()}")
+    what = "a distance in m"
+    tolerance = number_or_word(t, "sighting_tolerance", "auto", what, strict_low=False)
+    sighting_range = None
+    if "sighting_range" in t.data:
+        sighting_range = t.number("sighting_range", low=0.0, strict_low=False)
     t.finish()
     net = Network(
         latency=latency,
@@ -72,6 +85,9 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         range_hysteresis=hysteresis,
         faults=faults,
         link_loss=tuple(link_loss),
+        link_latency=tuple(link_latency),
+        sighting_tolerance=tolerance,
+        sighting_range=sighting_range,
         **burst,
     )
     if bound is None and any(p >= 1 for _, p in link_loss):

@@ -165,7 +165,11 @@ class Network:
     None: no bound). ``link_loss`` sets the loss probability of single links
     (``[[network.links]]``, the rest keep ``loss``). ``range`` [m] limits a link to robots
     that close (None: no limit); a link that left the range comes back within
-    ``range − range_hysteresis``.
+    ``range − range_hysteresis``. ``link_latency`` sets a fixed latency [s] on single
+    links (``[[network.links]]``; the rest keep ``latency``). A silent robot's listeners
+    flag it when they see it farther than ``sighting_tolerance`` [m] from its slot ("auto":
+    half the smallest distance between two slots) within ``sighting_range`` [m] of them
+    (None: no limit; 0: no sightings; onboard/sighting.py).
     """
 
     latency: float = 0.0
@@ -182,6 +186,9 @@ class Network:
     faults: tuple[RadioFault, ...] = ()
     # per-link loss probabilities ((from, to), 0-based) replacing ``loss`` on those links
     link_loss: tuple[tuple[tuple[int, int], float], ...] = ()
+    link_latency: tuple[tuple[tuple[int, int], float], ...] = ()  # [s] per link, fixed
+    sighting_tolerance: float | str = "auto"
+    sighting_range: float | None = None
 
     @property
     def ideal(self) -> bool:
@@ -196,6 +203,7 @@ class Network:
             and self.range is None
             and not self.faults
             and not any(p > 0 for _, p in self.link_loss)
+            and not any(d > 0 for _, d in self.link_latency)
         )
 
     @property

@@ -15,6 +15,7 @@ from ..blocks import BLOCKS, check_name
 from ..graph import Graph
 from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
+from ..tomlcheck import number_or_word as _number_or_word
 from .faults import read_fault
 from .network import read_network
 from .parts import (
@@ -545,26 +546,6 @@ def _max_faults(t: Table) -> int | str:
         t.report("max_faults", f'expected a whole number of robots ≥ 1 or "auto", got {raw!r}')
         return "auto"
     return raw
-
-
-def _number_or_word(
-    t: Table,
-    name: str,
-    word: str,
-    what: str,
-    absent: float | None = None,
-    low: float = 0.0,
-    strict_low: bool = True,
-) -> float | str:
-    """Key ``name``: a number (at least ``low``), or the keyword ``word``; absent, ``absent``
-    (``word`` when None). A string other than ``word`` says it expected ``what``."""
-    raw = t.data.get(name, word if absent is None else absent)
-    if isinstance(raw, str):
-        t.raw(name, word)
-        if raw != word:
-            t.report(name, f'expected {what} or "{word}", got {raw!r}')
-        return word
-    return t.number(name, 0.0 if absent is None else absent, low=low, strict_low=strict_low)
 
 
 def _drive_lag(t: Table) -> float | str:
