@@ -231,10 +231,11 @@ def test_a_healthy_silent_robot_is_never_flagged_by_sight():
     assert r.summary["premises"]["slot"]["held"]
 
 
-def test_the_sighting_rule_flags_after_a_window_and_holds_near_obstacles():
+def test_the_sighting_rule_flags_after_a_window_and_widens_near_obstacles():
     """onboard/sighting.py on its own: robot 1 (silent, heard by robot 2) is judged only
     once seen within the tolerance; beyond it for a detection window it is flagged, back
-    within it the flag lowers; near an obstacle it is not judged for HOLD s."""
+    within it the flag lowers; near an obstacle the tolerance widens by the detour for
+    HOLD s."""
     from dftc_mujoco.onboard.sighting import HOLD, Sighting
 
     dt = 0.01
@@ -244,14 +245,13 @@ def test_the_sighting_rule_flags_after_a_window_and_holds_near_obstacles():
     members = np.arange(3)
     slots = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     seen = slots.copy()
-    far = np.zeros(3, bool)
+    free = np.zeros(3)
 
-    def period(t: float, off: float, near=far):
+    def period(t: float, off: float, detour=free):
         seen[0] = [off, 0.0]
-        return sg.step(t, silent, listeners, members, seen, slots, near)
+        return sg.step(t, silent, listeners, members, seen, slots, detour)
 
-    seen[0] = [0.5, 0.0]  # never seen on its slot yet: not judged
-    assert period(0.0, 0.5) == ([], []) and not sg.judged[0]
+    assert period(0.0, 0.5) == ([], []) and not sg.judged[0]  # never seen on its slot yet
     period(0.01, 0.0)  # on its slot: armed
     raised = [period(0.02 + k * dt, 0.15)[0] for k in range(25)]
     first = next(k for k, r in enumerate(raised) if r)
@@ -259,14 +259,13 @@ def test_the_sighting_rule_flags_after_a_window_and_holds_near_obstacles():
     assert sg.flag[1, 0] and sg.judged[0] and sg.error[0] == pytest.approx(0.15)
     period(0.3, 0.05)
     assert not sg.flag[1, 0]  # back within the tolerance
-    period(0.31, 0.5, near=np.array([True, False, False]))
-    assert not sg.judged[0]
+    period(0.31, 0.5, detour=np.array([0.6, 0.0, 0.0]))  # avoiding: 0.7 m tolerated
     t = 0.32
     while t < 0.31 + HOLD - 1e-9:
-        assert period(t, 0.5) == ([], []) and not sg.judged[0]
+        assert period(t, 0.5) == ([], []) and sg.judged[0]
         t += dt
-    period(t + dt, 0.5)
-    assert sg.judged[0]
+    later = [period(t + k * dt, 0.5)[1] for k in range(1, 25)]
+    assert [e["tolerance"] for ev in later for e in ev] == [0.1]
     sg.forget(0)
     assert not sg.flag.any() and not sg.armed[0]
 

@@ -120,12 +120,13 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
-    """The network's side of a run: radio faults, how soon a silent robot was reported, and
-    the channel's measured loss rate and largest delay."""
+    """The network's side of a run: radio faults, how soon a silent robot was reported, how
+    soon its stop was flagged by itself and seen by a listener, and the channel's measured
+    loss rate and largest delay."""
     events = summary.get("events", [])
     silent = [e for e in events if e["kind"] == "radio_fault" and e.get("fault") == "silent"]
     reported = [e for e in events if e["kind"] == "robot_silent"]
-    delay = self_seen = None
+    delay = self_seen = sighted = None
     if silent:
         robot = silent[0]["robot"]
         later = [e["t"] for e in reported if e["robot"] == robot]
@@ -141,6 +142,13 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
             and e["t"] >= stop[0]
         ]
         self_seen = min(own) if own else None
+        # and seen by a listener off its slot (onboard/sighting.py)
+        by_sight = [
+            e["t"] - stop[0]
+            for e in events
+            if stop and e["kind"] == "sighting" and e["robot"] == robot and e["t"] >= stop[0]
+        ]
+        sighted = min(by_sight) if by_sight else None
     net = summary.get("network") or {}
     links = net.get("links") or []
     sent = sum(x["sent"] for x in links)
@@ -150,6 +158,8 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
         "silent_reported": bool(silent) and delay is not None,
         "silent_report_delay": delay,
         "silent_stop_self_flag_delay": self_seen,
+        "silent_stop_sighted_delay": sighted,
+        "sightings": sum(e["kind"] == "sighting" for e in events),
         "round_periods": net.get("round_periods", 1),
         "estimation_error_max": (summary.get("estimation_error") or {}).get("max"),
         "loss_measured": sum(x["lost"] for x in links) / sent if sent else None,

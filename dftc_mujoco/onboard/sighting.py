@@ -13,9 +13,11 @@ detection window. The flag counts towards j's exclusion as a residual's flag doe
 
 The rule holds under the premise ``slot`` (premises.py): a silent robot without a fault
 stays within the tolerance of its slot while it is judged. It is not judged before it was
-once seen within the tolerance after falling silent (the start of a run, a re-plan), nor
-while it is where eq. 18 may move it off its slot (within an obstacle's or a teammate's
-activation distance and d + ‖u‖/θ, ‖u‖ at the command range), nor for :data:`HOLD` s after.
+once seen within the tolerance, away from obstacles, after falling silent (the start of a
+run, a re-plan). Where eq. 18 may move it off its slot (within an obstacle's or a
+teammate's activation distance and d + ‖σ̇₁,d + ḋ_j‖/θ, where avoidance can engage for a
+robot on its slot) and for :data:`HOLD` s after, the tolerance is wider by the detour
+avoidance may take: twice that obstacle's safe distance d.
 Only what robot i knows is used: its links, its range sensor, the mission and the plan.
 """
 
@@ -27,7 +29,7 @@ import numpy as np
 
 from ..events import make
 
-#: [s] a silent robot is not judged for this long after it was near an obstacle or teammate
+#: [s] a silent robot keeps the wider tolerance this long after it was near something
 HOLD = 2.0
 
 
@@ -40,7 +42,8 @@ class Sighting:
         self.flag = np.zeros((n, n), bool)  # [by, robot]: robot ``by`` flags ``robot`` by sight
         self.count = np.zeros((n, n), np.int64)  # periods each pair saw the robot off its slot
         self.armed = np.zeros(n, bool)  # seen within the tolerance since it fell silent
-        self.near_until = np.full(n, -np.inf)  # not judged before this instant
+        self.near_until = np.full(n, -np.inf)  # the wider tolerance holds until this instant
+        self.detour = np.zeros(n)  # [m] how much wider: what eq. 18 may move the robot by
         self.judged = np.zeros(n, bool)  # judged by some listener in the last period
         self.error = np.full(n, np.nan)  # how far each judged robot is from its slot [m]
         self.slots = np.zeros((n, 2))  # each member's slot σ₁,d + d_j at the last period
@@ -53,12 +56,13 @@ class Sighting:
         members: np.ndarray,
         seen: np.ndarray,
         slots: np.ndarray,
-        near: np.ndarray,
+        detour: np.ndarray,
     ) -> tuple[list[tuple[int, int]], list[dict[str, Any]]]:
         """One period. ``silent`` (N,) robots reported silent; ``listeners[p]`` the team
         positions that listen to the member at position ``p``; ``seen`` (N, 2) where the
         range sensors see every robot; ``slots`` (M, 2) the members' slots σ₁,d + d_j;
-        ``near`` (M,) members within an activation distance of an obstacle or teammate.
+        ``detour`` (M,) [m] how far eq. 18 may move each member off its slot where it is
+        (0 away from obstacles and teammates).
         Returns the (by, robot) pairs raised now (original axis) and their events."""
         self.judged[:] = False
         raised: list[tuple[int, int]] = []
@@ -68,16 +72,15 @@ class Sighting:
                 if self.armed[j] or self.flag[:, j].any():
                     self.forget(int(j))
                 continue
-            if near[p]:
-                self.near_until[j] = t + HOLD
+            if detour[p] > 0:
+                was = self.detour[j] if t < self.near_until[j] else 0.0
+                self.near_until[j], self.detour[j] = t + HOLD, max(was, detour[p])
             off = float(np.hypot(*(seen[j] - slots[p])))
-            within = off <= self.tolerance
-            if not self.armed[j]:
-                self.armed[j] = within and t >= self.near_until[j]
+            if not self.armed[j]:  # first seen on its slot, away from everything
+                self.armed[j] = off <= self.tolerance and t >= self.near_until[j]
                 continue
-            if t < self.near_until[j]:
-                self.count[:, j] = 0
-                continue
+            tol = self.tolerance + (self.detour[j] if t < self.near_until[j] else 0.0)
+            within = off <= tol
             by = members[listeners[p]]
             if np.isfinite(self.reach):
                 d = np.hypot(*(seen[by] - seen[j]).T)
@@ -101,7 +104,7 @@ class Sighting:
                         by=int(i) + 1,
                         robot=int(j) + 1,
                         distance=round(off, 4),
-                        tolerance=self.tolerance,
+                        tolerance=round(tol, 4),
                     )
                 )
         return raised, events
@@ -125,22 +128,25 @@ class Sighting:
         # eq. 18 engages only where r̂ᵀu_g < θ (d − ‖x − x_o‖): for a robot on its slot,
         # u_g is the slot's velocity, so within d + ‖σ̇₁,d + ḋ_j‖/θ
         step = np.hypot(*(c_dot + rates).T) / cfg.theta
-        near = np.zeros(len(members), bool)
+        # near something, eq. 18 moves it around it: at most the thing's safe diameter
+        detour = np.zeros(len(members))
         if len(cfg.obstacle_position):
             d = np.hypot(*(x[:, None, :] - cfg.obstacle_position[None]).transpose(2, 0, 1))
             reach = np.minimum(cfg.obstacle_activation[None], cfg.obstacle_safe + step[:, None])
-            near |= (d <= reach).any(axis=1)
+            detour = np.maximum(detour, np.where(d <= reach, 2 * cfg.obstacle_safe, 0).max(1))
         if len(team.gone):
             d = np.hypot(*(x[:, None, :] - seen[team.gone][None]).transpose(2, 0, 1))
             reach = np.minimum(cfg.excluded_activation, cfg.excluded_safe + step)
-            near |= (d <= reach[:, None]).any(axis=1)
+            hit = (d <= reach[:, None]).any(axis=1)
+            detour[hit] = np.maximum(detour[hit], 2 * cfg.excluded_safe)
         if cfg.teammate_safe > 0 and len(members) > 1:
             d = np.hypot(*(x[:, None, :] - x[None]).transpose(2, 0, 1))
             np.fill_diagonal(d, np.inf)
             reach = np.minimum(cfg.teammate_activation, cfg.teammate_safe + step)
-            near |= (d <= reach[:, None]).any(axis=1)
+            mate = (d <= reach[:, None]).any(axis=1)
+            detour[mate] = np.maximum(detour[mate], 2 * cfg.teammate_safe)
         self.slots[members] = c + offsets
-        raised, events = self.step(t, silent, listeners, members, seen, self.slots[members], near)
+        raised, events = self.step(t, silent, listeners, members, seen, self.slots[members], detour)
         if raised:
             events += team.recovery.flagged(t, raised)
         return events
