@@ -104,7 +104,7 @@ class Sighting:
                         by=int(i) + 1,
                         robot=int(j) + 1,
                         distance=round(off, 4),
-                        tolerance=round(tol, 4),
+                        tolerance=round(float(tol), 4),
                     )
                 )
         return raised, events
