@@ -1,4 +1,4 @@
-"""Plug-in points for the six onboard blocks of the paper's Fig. 1.
+"""Plug-in points for the onboard blocks of the paper's Fig. 1 (six, and the detector).
 
 A block is selected by a built-in name (``"paper"``) or by an import path
 ``"module:Class"`` naming a class derived from that block's class in
@@ -22,8 +22,16 @@ from typing import Any
 
 from ..errors import ScenarioError
 
-#: the six plug-in points, in the order a control period uses them
-BLOCKS = ("observer", "controller", "supervisor", "fault_estimator", "thresholds", "decision")
+#: the plug-in points, in the order a control period uses them
+BLOCKS = (
+    "observer",
+    "controller",
+    "supervisor",
+    "fault_estimator",
+    "thresholds",
+    "detector",
+    "decision",
+)
 
 #: built-in names per block -> "module:attribute"
 BUILTIN: dict[str, dict[str, str]] = {
@@ -38,6 +46,7 @@ BUILTIN: dict[str, dict[str, str]] = {
         "l1": "dftc_mujoco.onboard.thresholds.l1:L1",
     },
     "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
+    "detector": {"paper": "dftc_mujoco.blocks.paper:Detector"},
 }
 
 _IMPORT_PATH = re.compile(r"^[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*:[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*$")

@@ -23,6 +23,8 @@ Controller         collective_input(x_hat, x_d, xd_dot),        15-16
 Supervisor         step(x, u_g, obstacles, safe, activation)    8, 17-18, 22
 FaultEstimator     step(x_m, u) -> u_bar                        28-31
 Thresholds         mu(t) -> (M, M), restart(graph, y0, t0)      40-41
+Detector           judge(r_norm, mu, observer, x_m)             35, 39
+                   -> (score, bound) (M, M)
 Decision           update(r_norm, mu) -> raised (M, M)          39, Rem. 5.2
 =================  ==========================================  ===========
 
@@ -33,6 +35,7 @@ Every block also has ``reset(config, x_m0, prior)`` (start of a run) and
 from ..onboard.block import Block, TeamConfig
 from ..onboard.controller import Controller
 from ..onboard.decision import Decision
+from ..onboard.detector import Detector
 from ..onboard.fault_estimator import FaultEstimator
 from ..onboard.observer import Observer
 from ..onboard.supervisor import Supervisor
@@ -42,6 +45,7 @@ __all__ = [
     "Block",
     "Controller",
     "Decision",
+    "Detector",
     "FaultEstimator",
     "Observer",
     "Supervisor",

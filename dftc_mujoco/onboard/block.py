@@ -79,7 +79,7 @@ class TeamConfig:
 
 
 class Block:
-    """Base of the six onboard blocks.
+    """Base of the onboard blocks (the six of Fig. 1 and the detector).
 
     A block is created with its own keyword parameters (``[onboard.params.X]``
     in a scenario), then :meth:`reset` gives it the team (at the start of every
@@ -88,7 +88,7 @@ class Block:
     documented methods to try your own.
     """
 
-    kind: str = ""  # which of the six plug-in points this block fills
+    kind: str = ""  # which plug-in point this block fills
     #: the time [s] of the control period being stepped (set by the team before each period)
     t: float = 0.0
     #: the block's own random stream, from the scenario's seed and the block's kind (set by

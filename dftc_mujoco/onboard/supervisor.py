@@ -182,3 +182,10 @@ class Supervisor(Block):
     def reactive(self) -> np.ndarray:
         """Which robots are currently on a reactive behaviour, (M,) bool."""
         return self.active >= 0
+
+
+def obstacle_label(index: int, n_cylinders: int) -> str:
+    """'cylinder k' or 'robot k' (1-based) for what a robot's supervisor avoids."""
+    if index < n_cylinders:
+        return f"cylinder {index + 1}"
+    return f"robot {index - n_cylinders + 1}"

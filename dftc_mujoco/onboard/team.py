@@ -35,6 +35,7 @@ from .applied import DriveModel, DriveRecord
 from .block import Block, TeamConfig
 from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
+from .detector import Detector
 from .fault_estimator import EstimatorRecord, FaultEstimator
 from .observer import Observer
 from .period import (
@@ -50,7 +51,7 @@ from .period import (
 from .radio import Radios, Rounds
 from .recovery import Recovery, split_event
 from .sighting import Sighting
-from .supervisor import Supervisor, SupervisorRecord, Surroundings
+from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
 from .thresholds import Thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -63,9 +64,10 @@ PAPER_BLOCKS: dict[str, type[Block]] = {
     "fault_estimator": FaultEstimator,
     "thresholds": Thresholds,
     "decision": Decision,
+    "detector": Detector,  # last: the other blocks' random streams keep their slots
 }
 # the blocks the compiled period contains (thresholds enter it as an array)
-_COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision")
+_COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision", "detector")
 #: [s] a robot's fault estimator holds from its bumper's first touch until the bumper stayed
 #: off this long: a robot jammed against a teammate touches on and off, and each free period
 #: wound φ̂ up again (battery run 871: 5.7 m/s of compensation released at the jam's end)
@@ -115,6 +117,7 @@ class Team:
         self.estimator = cast(FaultEstimator, chosen["fault_estimator"])
         self.thresholds = cast(Thresholds, chosen["thresholds"])
         self.decision = cast(Decision, chosen["decision"])
+        self.detector = cast(Detector, chosen["detector"])
         self.members = np.arange(n)
         self.gone = np.zeros(0, dtype=np.int64)  # robots excluded so far
         self.graph = config.graph
@@ -450,6 +453,10 @@ class Team:
         if self.rounds.now:
             r = self.observer.residual(x_own)  # eq. 35
             self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
+            if cfg.fdir:  # what the detector judges by, on this period's messages (‖r‖ vs μ)
+                self.r_norm, self.mu = self.detector.judge(
+                    self.r_norm, self.mu, self.observer, x_own
+                )
         else:  # between two rounds of the network only the integrals move
             r = np.zeros_like(self.x_hat)
         self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
@@ -572,7 +579,7 @@ class Team:
                         t,
                         "reactive_on",
                         robot=int(i) + 1,
-                        obstacle=_obstacle_label(int(avoiding[i]), n_cyl),
+                        obstacle=obstacle_label(int(avoiding[i]), n_cyl),
                     )
                 )
             else:
@@ -658,7 +665,7 @@ class Team:
         self.members = self.members[keep]
         self.graph = self.graph.without(p, relay=self.config.excluded_relay)
         t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
-        for name in ("observer", "controller", "supervisor", "thresholds", "decision"):
+        for name in ("observer", "controller", "supervisor", "thresholds", "decision", "detector"):
             self.blocks[name].drop(p, self.graph, t_rule if name == "thresholds" else t)
         self._resize()
         cfg = self.config
@@ -670,13 +677,6 @@ class Team:
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
-
-
-def _obstacle_label(index: int, n_cylinders: int) -> str:
-    """'cylinder k' or 'robot k' (1-based) for what a robot's supervisor avoids."""
-    if index < n_cylinders:
-        return f"cylinder {index + 1}"
-    return f"robot {index - n_cylinders + 1}"
 
 
 def _expand(

@@ -281,6 +281,7 @@ class Onboard:
     supervisor: str = "paper"
     fault_estimator: str = "paper"
     thresholds: str = "paper"
+    detector: str = "paper"
     decision: str = "paper"
     params: Mapping[str, Mapping[str, Any]] = field(default_factory=_ReadOnlyMap)
 
