@@ -19,7 +19,7 @@ from . import blocks as blocks_mod
 from . import network
 from .checks import CLEARANCE
 from .errors import ScenarioError
-from .mission import formation_offsets
+from .mission import slot_spacing
 from .onboard.block import Block
 from .onboard.team import TeamConfig
 from .onboard.thresholds import estimator_gain
@@ -178,10 +178,8 @@ def sighting_tolerance(s: Scenario) -> float:
     tol = s.network.sighting_tolerance
     if tol != "auto":
         return float(tol)
-    offsets = formation_offsets(s.mission.formation, s.team.graph.n)
-    d = np.hypot(*(offsets[:, None, :] - offsets[None]).transpose(2, 0, 1))
-    np.fill_diagonal(d, np.inf)
-    return float(d.min()) / 2 if len(offsets) > 1 else 0.0
+    spacing = slot_spacing(s.mission.formation, s.team.graph.n)
+    return spacing / 2 if np.isfinite(spacing) else 0.0
 
 
 def max_faults(s: Scenario) -> int:

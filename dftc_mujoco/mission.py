@@ -155,6 +155,14 @@ class PathTable:
         return self.position[k], self.velocity[k]
 
 
+def slot_spacing(formation: Formation, n_robots: int) -> float:
+    """The smallest distance between two slots of ``formation`` [m] (inf for one robot)."""
+    offsets = formation_offsets(formation, n_robots)
+    d = np.hypot(*(offsets[:, None, :] - offsets[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    return float(d.min()) if n_robots > 1 else float("inf")
+
+
 def _filleted_path(waypoints: np.ndarray, corner_radius: float):
     """Polyline with circular fillets at interior corners: tangent-continuous.
 

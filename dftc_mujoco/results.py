@@ -21,6 +21,7 @@ import numpy as np
 
 from .errors import ScenarioError, SimulationError
 from .events import split_text
+from .mission import slot_spacing
 from .record import LOG_FIELDS, Events, matrix_rows, write_json, write_npz, write_text
 
 if TYPE_CHECKING:
@@ -362,6 +363,7 @@ def summarize(
         "min_safe_distance_margin": _finite_or_none(margin_d),
     }
     summary["estimation_error"] = estimation_errors(log, s.mission.transient)
+    summary["warnings"] += _estimates_off(s, summary["estimation_error"], events, simulated)
     if s.fdir.enabled:
         healthy, settled, biased = fault_masks(s, t[matrix_rows(log)])
         summary["margin"] = peak_ratio(log["residual"], log["threshold"], healthy)
@@ -383,6 +385,23 @@ def summarize(
     summary["systemic_anomalies"] = len(events.of_kind("systemic_anomaly"))
     summary["events"] = events.ordered()
     return summary
+
+
+def _estimates_off(s: Scenario, found: dict[str, Any], events: Events, end: float) -> list[str]:
+    """A warning for each robot without a fault whose teammates' estimates were, after the
+    transient, farther from it (RMS) than half the slots' spacing: estimates that agree with
+    each other but not with the world (the residuals cannot show it)."""
+    tol = slot_spacing(s.mission.formation, s.team.robots) / 2
+    out = []
+    for k, rms in enumerate(found["per_robot_rms"]):
+        if rms is not None and rms > tol and _healthy_at(events, k + 1, end):
+            out.append(
+                f"the team's estimates of robot {k + 1} were {rms:.3g} m (RMS after the "
+                f"transient) from where it was, more than half the slots' spacing "
+                f"({tol:.3g} m): they agree with each other, not with the world "
+                "(summary estimation_error; an observer or controller block that drifts?)"
+            )
+    return out
 
 
 def _healthy_at(events: Events, robot: int, t: float) -> bool:
