@@ -9,6 +9,7 @@ free-joint base carrying an arm); no third-party file is copied.
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -280,7 +281,6 @@ def test_bodies_outside_the_base_neither_widen_the_footprint_nor_shift_the_keyfr
     """A model with more than the robot at world level (here a dock on a slide, with the
     first actuator): only the base's subtree is attached, so only its geoms count for the
     footprint, and the arm's servos still hold their keyframe ctrl."""
-    import shutil
 
     folder = tmp_path / "mobilearm"
     shutil.copytree(MOBILEARM.parent / "mobilearm", folder)
@@ -644,3 +644,25 @@ def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
     # a bounded offset once started, the start-up larger (4.4 mm with the disk's 16 m/s²
     # acceleration, 7.6 mm unlimited)
     assert d.drift_bound < 0.003 < 0.004 < d.startup
+
+
+def test_a_diffdrive_whose_wheels_do_not_share_an_axle_is_refused(tmp_path):
+    """Issue 24: two wheels whose axes are 60° apart (an omni-wheel base) were accepted as a
+    differential drive, whose kinematics they do not follow; now refused in one line."""
+    folder = tmp_path / "mobilearm"
+    shutil.copytree(MOBILEARM.parent / "mobilearm", folder)
+    xml = folder / "mobilearm.xml"
+    text = xml.read_text()
+    straight = 'name="left_wheel_joint" class="wheel" axis="0 1 0"'
+    assert straight in text
+    turned = 'name="left_wheel_joint" class="wheel" axis="0.866 0.5 0"'  # 60° off the axle
+    xml.write_text(text.replace(straight, turned))
+    robot_file = tmp_path / "mobilearm.robot.toml"
+    robot_file.write_text(MOBILEARM.read_text())
+    with pytest.raises(ScenarioError) as e:
+        robots.get(str(robot_file))
+    msg = str(e.value)
+    assert "diffdrive.left" in msg and "60° from the line joining the two wheels" in msg
+    assert "\n" not in msg
+    xml.write_text(text)  # the original axles: accepted
+    assert robots.get(str(robot_file)).drive == "diffdrive"

@@ -62,6 +62,8 @@ CALIBRATION_KEYS = (
     "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
     "accel",  # a_max the robot holds its nominal input's change to (onboard/applied.py) [m/s²]
 )
+#: [°] how far a differential drive's wheel axis may be from the line joining its wheels
+AXLE_TOLERANCE_DEG = 5.0
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
@@ -579,6 +581,16 @@ def _wheel_geometry(model, data, body, infos, robot, fail, role_key, keys) -> di
     if width < 1e-3:
         fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
     g = lateral / width  # towards the left wheel
+    for role, axis in zip(("left", "right"), axes, strict=True):  # both turn about the axle
+        off_axle = math.degrees(math.acos(min(1.0, abs(float(axis @ g)) / np.linalg.norm(axis))))
+        if off_axle > AXLE_TOLERANCE_DEG:
+            fail(
+                role_key(role),
+                f"joint {infos[role].joint!r} turns about {np.round(axis, 3).tolist()} in the "
+                f"base frame, {off_axle:.0f}° from the line joining the two wheels; a "
+                "differential drive's wheels turn about that line (wheels at an angle to it "
+                "are an omni or mecanum base, which this drive cannot steer)",
+            )
     f = np.cross(g, [0.0, 0.0, 1.0])  # forward
     mid = (anchors[0] + anchors[1]) / 2
     cp = np.array([*robot.control_point, 0.0]) - mid
