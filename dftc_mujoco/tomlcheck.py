@@ -152,6 +152,12 @@ class Table:
         """True when none of these keys failed."""
         return self.doc is None or self.doc.ok(*(self.key(n) for n in names))
 
+    def given(self, name: str) -> bool:
+        """Whether optional key ``name`` is in the table (a known key either way: an unknown
+        key's message lists it)."""
+        self.used.add(name)
+        return name in self.data
+
     def raw(self, name: str, default: Any = _MISSING) -> Any:
         self.used.add(name)
         if name not in self.data:

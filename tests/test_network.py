@@ -313,6 +313,9 @@ def test_the_network_table_is_checked_in_one_line_per_problem():
     assert 'network.sighting_tolerance: expected a distance in m or "auto"' in problems(
         {"network.sighting_tolerance": "far"}
     )
+    known = problems({"network.rnage": 2.0})  # every key is listed, given or not
+    for key in ("range", "rate", "max_consecutive_losses", "sighting_range", "links"):
+        assert key in known.split("known keys here: ")[1]
     assert "network.sighting_range: expected a number >= 0" in problems(
         {"network.sighting_range": -1.0}
     )

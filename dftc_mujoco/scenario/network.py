@@ -25,7 +25,7 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         latency = t.number("latency", 0.0, low=0.0, strict_low=False)
     h = physics.control_period if physics is not None else None
     rate = None
-    if "rate" in t.data:
+    if t.given("rate"):
         rate = t.number("rate", low=0.0)
         if h is not None and t.ok("rate") and rate * h > 1 + 1e-9:
             t.report(
@@ -41,10 +41,10 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
             t.report(key, 'only with loss_model = "gilbert_elliott"')
         burst[key] = t.number(key, default, low=0.0, strict_low=False, high=1.0)
     bound = None
-    if "max_consecutive_losses" in t.data:
+    if t.given("max_consecutive_losses"):
         bound = t.integer("max_consecutive_losses", low=0, high=10**6)
     reach = None
-    if "range" in t.data:
+    if t.given("range"):
         reach = t.number("range", low=0.0)
     hysteresis = t.number("range_hysteresis", 0.0, low=0.0, strict_low=False)
     if reach is not None and t.ok("range", "range_hysteresis") and hysteresis >= reach:
@@ -55,8 +55,8 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
     link_latency: list[tuple[tuple[int, int], float]] = []
     for lt in t.tables("links"):  # [[network.links]]: link = [from, to], loss = p, latency = s
         link = lt.array("link", (2,), what="[from, to], robots numbered from 1")
-        p = lt.number("loss", low=0.0, strict_low=False, high=1.0) if "loss" in lt.data else None
-        d = lt.number("latency", low=0.0, strict_low=False) if "latency" in lt.data else None
+        p = lt.number("loss", low=0.0, strict_low=False, high=1.0) if lt.given("loss") else None
+        d = lt.number("latency", low=0.0, strict_low=False) if lt.given("latency") else None
         lt.finish()
         if "loss" not in lt.data and "latency" not in lt.data:
             lt.report("link", "expected a loss, a latency or both for the link")
@@ -71,7 +71,7 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
     what = "a distance in m"
     tolerance = number_or_word(t, "sighting_tolerance", "auto", what, strict_low=False)
     sighting_range = None
-    if "sighting_range" in t.data:
+    if t.given("sighting_range"):
         sighting_range = t.number("sighting_range", low=0.0, strict_low=False)
     t.finish()
     net = Network(

@@ -231,7 +231,7 @@ def _team(t: Table, mission: Mission | None, seed: int) -> Team:
     model = t.string("robot_model", "disk")
     x0 = t.doc.guard(_initial_positions, t, known_n, mission, seed)
     graph, family = t.doc.guard(_graph, t, known_n, x0, seed) or (None, None)
-    if "graph_family" in t.data:
+    if t.given("graph_family"):
         given = t.string("graph_family", choices=_FAMILIES)
         if family not in (None, "explicit") and t.ok("graph_family") and given != family:
             t.report(
