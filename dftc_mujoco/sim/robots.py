@@ -582,7 +582,8 @@ def _wheel_geometry(model, data, body, infos, robot, fail, role_key, keys) -> di
         fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
     g = lateral / width  # towards the left wheel
     for role, axis in zip(("left", "right"), axes, strict=True):  # both turn about the axle
-        off_axle = math.degrees(math.acos(min(1.0, abs(float(axis @ g)) / np.linalg.norm(axis))))
+        cosine = min(1.0, abs(float(axis @ g)) / float(np.linalg.norm(axis)))
+        off_axle = math.degrees(math.acos(cosine))
         if off_axle > AXLE_TOLERANCE_DEG:
             fail(
                 role_key(role),
