@@ -149,7 +149,9 @@ def preflight(
                 "mission.formation.side",
                 f"{which} puts two slots {spacing:.3f} m apart, but two {name} robots need "
                 f"{need:.3f} m (footprint radius {reach:.3f} m each, + {CLEARANCE:g} m): use "
-                f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}"
+                f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}, or "
+                f"mission.scale = {math.ceil(10 * need / max(spacing, 1e-9)) / 10:g} (the "
+                "whole mission that much bigger: path, cylinders, starts, times)"
                 + ("" if contacts else " (robot contacts are off: hulls will pass through)"),
                 refuse=contacts,
             )

@@ -35,6 +35,7 @@ from .parts import (
     Team,
 )
 from .readers import document
+from .scale import scale_problem, scaled
 from .writer import _dumps
 
 # True while this module builds a Scenario from data it has just validated:
@@ -524,7 +525,13 @@ def from_dict(data: dict[str, Any], source: str = "<memory>") -> Scenario:
 
 
 def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario:
+    problem = None
+    if isinstance(data, dict):  # mission.scale: the document's lengths and times, scaled
+        k, problem = scale_problem(data)
+        data = scaled(data, k)
     doc = Doc(source, data, overridden)
+    if problem:
+        doc.record("mission.scale", problem)
     try:
         fields = document(doc, data)
     except Abort:
