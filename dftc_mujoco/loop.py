@@ -516,6 +516,10 @@ class Simulation:
                         channel.send(k, team.rounds.content, x)
                         if team.missed and watch:  # since the last round
                             monitor.network(t, team.missed)
+                        if team.rounds.now and watch:  # the links that delivered, jointly
+                            monitor.joint_graph(
+                                t, channel.joint_components(team.rounds.index, team.members)
+                            )
                         seen = team.sighting
                         if seen is not None and watch and seen.judged.any():
                             monitor.slot(t, seen.judged, x, seen.slots, seen.tolerance)

@@ -33,8 +33,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .graph import Graph
+from .onboard.radio import SILENT_ROUNDS
 from .scenario import Network
 
 #: how many rounds of broadcasts a sender keeps (a message in flight carries the round it
@@ -129,6 +132,12 @@ class Channel:
             max(0, math.ceil(net.latency / control_period - 1e-9)),
         )
         self._own = self._own_delay >= 0
+        self._joint_key: tuple[bytes, bytes] | None = None
+        # network.connectivity_window in rounds (unset: the rounds after which a receiver
+        # reports a link silent)
+        given, h_o = net.connectivity_window, self.timing.round * control_period
+        self.window = SILENT_ROUNDS if given is None else max(1, math.ceil(given / h_o - 1e-9))
+        self._joint_parts = 1
 
     # ------------------------------------------------------------------ faults
 
@@ -222,6 +231,29 @@ class Channel:
         links, slot = links[newer], slot[newer]
         self._pending[links, slot] = content_round
         self._sent_at[links, slot] = period
+
+    # ------------------------------------------------------------------ the graph
+
+    def joint_components(self, s: int, members: np.ndarray) -> int:
+        """How many strongly connected parts the members' graph has when it is made of the
+        links that delivered a message of the last :attr:`window` rounds, at round ``s`` (1:
+        the graph over that window is strongly connected, the consensus's premise)."""
+        fresh = self.newest >= s - self.window + 1
+        key = (fresh.tobytes(), members.tobytes())
+        if key != self._joint_key:
+            inside = np.zeros(self.graph.n, bool)
+            inside[members] = True
+            keep = fresh & inside[self.src] & inside[self.dst]
+            index = np.full(self.graph.n, -1)
+            index[members] = np.arange(len(members))
+            m = len(members)
+            adj = csr_matrix(
+                (np.ones(int(keep.sum())), (index[self.src[keep]], index[self.dst[keep]])),
+                shape=(m, m),
+            )
+            parts, _ = connected_components(adj, directed=True, connection="strong")
+            self._joint_key, self._joint_parts = key, int(parts)
+        return self._joint_parts
 
     # ------------------------------------------------------------------ records
 

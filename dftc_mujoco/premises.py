@@ -41,7 +41,8 @@ PREMISES: dict[str, str] = {
     "robot's command range (no saturation, ∫e never skipped)",
     "contact": "no contact between a robot and a teammate or a cylinder",
     "planar": "the base stays on the floor, level, inside the arena",
-    "connectivity": "the members' graph is strongly connected",
+    "connectivity": "the members' graph is strongly connected (over a network: the links "
+    "that delivered within network.connectivity_window)",
     "network": "every round's message arrives on every link in time and intact (delays and "
     "consecutive losses within the network's declared bounds; no radio fault)",
     "slot": "a silent robot without a fault, judged by sight, stays within the sighting "
@@ -290,6 +291,7 @@ class Monitor:
         self.slow = np.zeros((n, 2))
         self.value = np.zeros((5, n))
         self.watched = np.ones(n, bool)
+        self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
         self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
         # premise -> (value, robot 1-based)
@@ -373,7 +375,14 @@ class Monitor:
         """After an exclusion: a graph that is not strongly connected violates the premise
         of every rule from now on (its thresholds are unbounded)."""
         if not strongly_connected:
+            self.split = True
             self._violate("connectivity", None, 1.0, t)
+
+    def joint_graph(self, t: float, parts: int) -> None:
+        """At a round: the links that delivered within the window leave the members' graph in
+        ``parts`` strongly connected parts (more than 1 breaks the premise)."""
+        if parts > 1:
+            self._violate("connectivity", None, float(parts), t)
 
     def network(self, t: float, links: int) -> None:
         """At a round of the observers, ``links`` links lacked the round's message or carried
@@ -413,8 +422,8 @@ class Monitor:
             t0, worst, last = self.spans[key]
             if final or t - last >= GAP - 1e-9:
                 name, robot = key
-                if name == "connectivity" and not final:
-                    continue  # lasts until the end
+                if name == "connectivity" and self.split and not final:
+                    continue  # an exclusion split the graph: lasts until the end
                 del self.spans[key]
                 self.count[name] += 1
                 self.events.add(

@@ -381,6 +381,9 @@ def test_a_range_limited_team_whose_links_drop_and_come_back_flags_nobody():
     assert kinds.count("link_silent") >= 4 and kinds.count("link_heard") >= 4
     assert "detection" not in kinds and "exclusion" not in kinds
     assert not r.summary["premises"]["network"]["held"]
+    # the links that delivered kept the team connected over every window (the monitored
+    # premise of the issue's "while the graph stays connected over the stated window")
+    assert r.summary["premises"]["connectivity"]["held"]
     assert r.summary["margin"] < 1.0
 
 
@@ -425,3 +428,30 @@ def test_a_silent_robot_in_an_untuned_team_gets_no_healthy_teammate_excluded():
     assert [e for e in r.events.items if e["kind"] == "exclusion"] == []
     assert r.summary["healthy_flags_premises_held"] == 0
     assert [e["robot"] for e in r.events.items if e["kind"] == "robot_silent"] == [11]
+
+
+def test_the_links_that_deliver_must_keep_the_team_connected_over_the_window():
+    """The consensus's premise over a changing graph: at every round the links that delivered
+    within network.connectivity_window must keep the members strongly connected. Cutting
+    the chord 4 -> 2 breaks the network premise but not that one (the ring remains);
+    cutting 1 -> 2, robot 1's only listener, splits the team: a 'connectivity' span from
+    two rounds after the cut."""
+    over = {"network.latency": 0.02, "gains.ko": 3.0, "onboard.thresholds": "l1"}
+    for link, split in (([4, 2], False), ([1, 2], True)):
+        r = _run({**over, "faults": [{"kind": "link_down", "link": link, "t": 20.0}]}, 30.0)
+        premises = r.summary["premises"]
+        assert not premises["network"]["held"]
+        assert premises["connectivity"]["held"] is not split
+        spans = [
+            e
+            for e in r.events.items
+            if e["kind"] == "premise_violated" and e["premise"] == "connectivity"
+        ]
+        if split:
+            h_o = r.summary["network"]["round_periods"] * 0.01
+            assert len(spans) == 1 and spans[0]["value"] == 2.0
+            assert 20.0 < spans[0]["t"] <= 20.0 + 3 * h_o + 1e-9
+        else:
+            assert spans == []
+    with pytest.raises(ScenarioError, match=r"network\.connectivity_window: expected a number > 0"):
+        load_scenario("paper_case", {"network.connectivity_window": 0.0})

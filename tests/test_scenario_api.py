@@ -214,13 +214,13 @@ def test_onboard_errors():
         "x.toml: onboard.params.controller.not-a-name: expected a keyword argument name, "
         "got 'not-a-name'",
         "x.toml: onboard.params.estimator: unknown block (blocks: observer, controller, "
-        "supervisor, fault_estimator, thresholds, decision)",
+        "supervisor, fault_estimator, thresholds, detector, decision)",
         "x.toml: onboard.params.supervisor: expected a table, got int 4",
         "x.toml: onboard.observer: expected a built-in name ('paper') or an import path "
         "\"module:Class\", got 'not a path'",
         "x.toml: onboard.decision: expected a string, got int 3",
         "x.toml: onboard.colour: unknown key (known keys here: controller, decision, "
-        "fault_estimator, observer, params, supervisor, thresholds)",
+        "detector, fault_estimator, observer, params, supervisor, thresholds)",
     ]
 
 

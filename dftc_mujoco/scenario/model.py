@@ -302,6 +302,8 @@ def _network(net: Network) -> dict[str, Any]:
         d["sighting_tolerance"] = _plain(net.sighting_tolerance)
     if net.sighting_range is not None:
         d["sighting_range"] = _plain(net.sighting_range)
+    if net.connectivity_window is not None:
+        d["connectivity_window"] = _plain(net.connectivity_window)
     return d
 
 

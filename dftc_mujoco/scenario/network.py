@@ -70,6 +70,9 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
             lt.report("link", f"expected two robot numbers, got {link.tolist()}")
     what = "a distance in m"
     tolerance = number_or_word(t, "sighting_tolerance", "auto", what, strict_low=False)
+    window = None
+    if t.given("connectivity_window"):
+        window = t.number("connectivity_window", low=0.0)
     sighting_range = None
     if t.given("sighting_range"):
         sighting_range = t.number("sighting_range", low=0.0, strict_low=False)
@@ -88,6 +91,7 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         link_latency=tuple(link_latency),
         sighting_tolerance=tolerance,
         sighting_range=sighting_range,
+        connectivity_window=window,
         **burst,
     )
     if bound is None and any(p >= 1 for _, p in link_loss):

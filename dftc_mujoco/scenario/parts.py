@@ -189,6 +189,9 @@ class Network:
     link_latency: tuple[tuple[tuple[int, int], float], ...] = ()  # [s] per link, fixed
     sighting_tolerance: float | str = "auto"
     sighting_range: float | None = None
+    # [s] the window over which the links that delivered must keep the graph strongly
+    # connected (premise "connectivity"; None: the 2 rounds after which a link is silent)
+    connectivity_window: float | None = None
 
     @property
     def ideal(self) -> bool:

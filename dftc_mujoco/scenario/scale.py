@@ -35,6 +35,7 @@ TIMES: tuple[tuple[tuple[str, ...], str, float | None], ...] = (
     (("mission",), "transient", None),  # its default depends on the duration: set below
     (("mission", "centroid"), "ramp_time", 2.0),
     (("fdir",), "replan_time", 4.0),
+    (("network",), "connectivity_window", None),
 )
 
 
