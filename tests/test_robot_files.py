@@ -9,6 +9,7 @@ free-joint base carrying an arm); no third-party file is copied.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -666,3 +667,85 @@ def test_a_diffdrive_whose_wheels_do_not_share_an_axle_is_refused(tmp_path):
     assert "\n" not in msg
     xml.write_text(text)  # the original axles: accepted
     assert robots.get(str(robot_file)).drive == "diffdrive"
+
+
+OMNIBASE = DATA / "omnibase.robot.toml"
+
+
+def test_an_omni_base_is_read_from_its_wheels():
+    """Issue 24: drive = "omni" classifies each wheel from the compiled model: its position
+    from the base, the direction a positive turn rolls the base (axle × z), its radius (the
+    rollers' envelope)."""
+    r = robots.get(str(OMNIBASE))
+    p = r.params
+    assert r.drive == "omni" and r.root == "free" and p["wheels"] == 3
+    for k in range(3):
+        theta = np.pi / 2 + 2 * np.pi * k / 3
+        np.testing.assert_allclose(
+            [p[f"wheel{k}_x"], p[f"wheel{k}_y"]],
+            0.09 * np.array([np.cos(theta), np.sin(theta)]),
+            atol=1e-6,
+        )
+        # the axle is radial: the wheel rolls the base along the tangent
+        np.testing.assert_allclose(
+            [p[f"wheel{k}_dx"], p[f"wheel{k}_dy"]], [np.sin(theta), -np.cos(theta)], atol=1e-6
+        )
+        assert p[f"wheel{k}_r"] == pytest.approx(0.0356, abs=5e-4)
+
+
+def test_an_omni_base_goes_where_it_is_told_and_keeps_its_heading():
+    """Physics: 0.2 m/s along x for 2 s, then along y for 2 s; the base moves 0.4 m each way
+    (within its start-up) without turning."""
+    r = robots.get(str(OMNIBASE))
+    sc = scene.compose(r, np.zeros((1, 2)))
+    data = Plant.initial_data(sc)
+    d = r.adapter(sc, data)
+    x0 = data.site_xpos[sc.site[0], :2].copy()
+    yaw = []
+    for _ in range(400):
+        u = np.array([[0.2, 0.0]]) if data.time < 2.0 else np.array([[0.0, 0.2]])
+        data.ctrl[d.controlled()[0]] = d.command(u)[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+        mat = data.xmat[sc.body[0]]
+        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
+    moved = data.site_xpos[sc.site[0], :2] - x0
+    np.testing.assert_allclose(moved, [0.4, 0.4], atol=0.03)
+    assert max(abs(a) for a in yaw) < 1.0
+
+
+def test_omni_wheels_that_cannot_move_the_base_everywhere_are_refused(tmp_path):
+    """Three wheels whose axles are all parallel roll the base along one line only: refused
+    in one line, as are fewer than three wheels."""
+    folder = tmp_path / "omnibase"
+    shutil.copytree(OMNIBASE.parent / "omnibase", folder)
+    xml = folder / "omnibase.xml"
+    text = xml.read_text()
+    xml.write_text(re.sub(r'euler="0 0 [-0-9.]+"', 'euler="0 0 90"', text))
+    robot_file = tmp_path / "omnibase.robot.toml"
+    robot_file.write_text(OMNIBASE.read_text())
+    with pytest.raises(ScenarioError) as e:
+        robots.get(str(robot_file))
+    assert "omni.wheels: these wheels cannot move the base in every planar direction" in str(
+        e.value
+    )
+    xml.write_text(text)
+    two = OMNIBASE.read_text().replace('["wheel0", "wheel1", "wheel2"]', '["wheel0", "wheel1"]')
+    robot_file.write_text(two)
+    with pytest.raises(ScenarioError, match=r"omni\.wheels: expected three or more wheels, got 2"):
+        robots.get(str(robot_file))
+
+
+def test_the_paper_case_on_omni_wheels():
+    """paper_case on the omni base (its calibration in the robot file) with block_row:
+    robot 1's stop is flagged by all four and robot 1 alone is excluded; nobody else is
+    flagged and every premise holds."""
+    s = scenario.load_scenario(
+        "paper_case",
+        overrides={"team.robot_model": str(OMNIBASE), "onboard.thresholds": "block_row"},
+    )
+    r = loop.simulate(s, progress=False)
+    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
+    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
+    assert all(41.8 < t < 41.8 + 2.5 for _, _, t in flags)
+    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())

@@ -7,6 +7,8 @@ servo, torque motor). The same mapping shifts a planar bias fault φ into joint 
 
 * :class:`Holonomic`: x / y slide joints of the base, driven directly; an optional yaw
   hinge is held at its initial angle.
+* :class:`Omni`: three or more omni wheels on a base with a free joint, the heading held
+  (the map from the base's planar velocity and turn rate to each wheel).
 * :class:`DiffDrive`: offset-point feedback linearisation of a differential drive. The
   controlled point p lies b ahead of the axle centre c (and l to its left) on the
   robot's heading θ: ṗ = (v − lω) f + bω g with f = (cos θ, sin θ), g = (−sin θ, cos θ),
@@ -77,13 +79,19 @@ class Drive:
         """Driven joint velocities (N, A) for planar velocities ``u`` (N, 2)."""
         raise NotImplementedError
 
+    def wheel_speeds(self, u: np.ndarray) -> np.ndarray:
+        """The driven joints' velocities :meth:`command` sends for ``u``: the linear map of
+        :meth:`joint_velocity` (which a bias fault also goes through), plus what the drive
+        adds of its own (an omni base's heading hold)."""
+        return self.joint_velocity(u)
+
     def command(self, u: np.ndarray) -> np.ndarray:
         """Actuator commands (N, A + H): driven joints for ``u`` (N, 2), then held joints."""
         if self._identity:
             return u
         if self._clip:
             u = np.clip(u, -self.command_limit, self.command_limit)
-        driven = self.actuation.command(self.joint_velocity(u))
+        driven = self.actuation.command(self.wheel_speeds(u))
         if self.held is None or self.hold_target is None:
             return driven  # no held joint: the driven commands are all of them
         a = driven.shape[1]
@@ -157,4 +165,62 @@ class DiffDrive(Drive):
         return rim * (self.sign / self.r)
 
 
-DRIVES: dict[str, type[Drive]] = {"holonomic": Holonomic, "diffdrive": DiffDrive}
+class Omni(Drive):
+    """Omni wheels (free rollers along the rim) on a base with a free joint.
+
+    Wheel k sits at p_k in the base frame (from the base's origin), rolls the base along
+    d_k (a positive turn) and has radius r_k (read from the model, ``wheels.omni``). For a
+    velocity ū of the control point c and a turn rate ω, the base's origin moves at
+    v = Rᵀū − ω ẑ × c (base frame) and wheel k turns at (d_k · (v + ω ẑ × p_k)) / r_k.
+    The heading is held: ω = −:data:`YAW_GAIN` (ψ − ψ₀), ψ₀ the heading at the start (the
+    robot's own compass or odometry, read from its base body); a bias fault φ goes through
+    the same map with ω = 0.
+    """
+
+    pose_dependent = True
+
+    def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
+        p = robot.params
+        k = range(int(p["wheels"]))
+        self.pos = np.array([[p[f"wheel{i}_x"], p[f"wheel{i}_y"]] for i in k])
+        self.roll = np.array([[p[f"wheel{i}_dx"], p[f"wheel{i}_dy"]] for i in k])
+        self.radius = np.array([p[f"wheel{i}_r"] for i in k])
+        self.point = np.asarray(robot.control_point, float)
+        self.body = scene.body
+        self.data = data
+        self.yaw0 = self._yaw()
+        super().__init__(robot, scene, data, dt)
+
+    def _planar_limit(self, joint_limit: float) -> float:
+        # |d_k · v| <= ‖v‖ <= sqrt(2) × the per-axis bound; a tenth kept for the heading hold
+        return 0.9 * joint_limit * float(self.radius.min()) / np.sqrt(2)
+
+    def _yaw(self) -> np.ndarray:
+        mat = self.data.xmat[self.body]
+        return np.arctan2(mat[:, 3], mat[:, 0])  # all zero before the kinematics: heading 0
+
+    def reset(self) -> None:
+        super().reset()
+        self.yaw0 = self._yaw()
+
+    def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        return self._speeds(u, np.zeros(len(u)), self._yaw() if heading is None else heading)
+
+    def wheel_speeds(self, u: np.ndarray) -> np.ndarray:
+        yaw = self._yaw()
+        turn = -YAW_GAIN * np.angle(np.exp(1j * (yaw - self.yaw0)))  # wrapped to ±π
+        return self._speeds(u, turn, yaw)
+
+    def _speeds(self, u: np.ndarray, w: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+        c, s = np.cos(yaw), np.sin(yaw)
+        ub = np.stack([c * u[:, 0] + s * u[:, 1], -s * u[:, 0] + c * u[:, 1]], axis=1)  # Rᵀū
+        v = ub - w[:, None] * np.array([-self.point[1], self.point[0]])  # the origin's
+        spin = np.stack([-self.pos[:, 1], self.pos[:, 0]], axis=1)  # ẑ × p_k
+        contact = v[:, None, :] + w[:, None, None] * spin[None]
+        return np.einsum("nkd,kd->nk", contact, self.roll) / self.radius
+
+
+#: [1/s] how fast an omni base turns back to its initial heading
+YAW_GAIN = 5.0
+
+DRIVES: dict[str, type[Drive]] = {"holonomic": Holonomic, "diffdrive": DiffDrive, "omni": Omni}

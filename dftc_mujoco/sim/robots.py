@@ -32,10 +32,10 @@ import numpy as np
 from ..errors import ScenarioError
 from ..paths import MODELS
 from . import actuators as act
+from . import wheels
 from .actuators import ActuatorInfo
 from .tree import (
     _footprint,
-    _wheel_radius,
     attached_actuators,
     qpos_addresses,
     subtree,
@@ -44,8 +44,13 @@ from .tree import (
 ROBOTS = MODELS / "robots"
 ROBOT_SUFFIX = ".robot.toml"
 CONTROL_SITE = "dftc_control_point"  # the site added (in memory) at the control point
-DRIVE_ROLES = {"holonomic": ("x", "y"), "diffdrive": ("left", "right")}
-HELD_ROLES = {"holonomic": ("yaw",), "diffdrive": ()}
+# the actuators each drive names (omni: a list ``wheels``, roles wheel0, wheel1, ...)
+DRIVE_ROLES: dict[str, tuple[str, ...]] = {
+    "holonomic": ("x", "y"),
+    "diffdrive": ("left", "right"),
+    "omni": (),
+}
+HELD_ROLES: dict[str, tuple[str, ...]] = {"holonomic": ("yaw",), "diffdrive": (), "omni": ()}
 LEGACY_ACTUATORS = {"holonomic": ("vx", "vy"), "diffdrive": ("wheel_l", "wheel_r")}
 CALIBRATION_KEYS = (
     "xi_bar",  # recommended ξ̄ [m/s]
@@ -62,8 +67,6 @@ CALIBRATION_KEYS = (
     "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
     "accel",  # a_max the robot holds its nominal input's change to (onboard/applied.py) [m/s²]
 )
-#: [°] how far a differential drive's wheel axis may be from the line joining its wheels
-AXLE_TOLERANCE_DEG = 5.0
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
@@ -219,6 +222,14 @@ def _load_robot_file(path: Path) -> RobotModel:
             continue
         for role in DRIVE_ROLES[kind]:
             roles[role] = sub.string(role)
+        if kind == "omni":  # wheels = ["w0", "w1", "w2", ...]: the wheels' actuators
+            listed = sub.raw("wheels")
+            if not isinstance(listed, list) or not all(isinstance(w, str) for w in listed):
+                sub.report("wheels", f"expected a list of actuator names, got {listed!r}")
+            elif len(listed) < 3:
+                sub.report("wheels", f"expected three or more wheels, got {len(listed)}")
+            else:
+                roles.update({f"wheel{k}": w for k, w in enumerate(listed)})
         for role in HELD_ROLES[kind]:
             if role in sub.data:
                 held[role] = sub.string(role)
@@ -289,9 +300,9 @@ def _load_legacy(path: Path) -> RobotModel:
             "actuators; README 'Swap the robot')"
         )
     drive = texts.get("dftc_adapter", "holonomic")
-    if drive not in DRIVE_ROLES:
+    if drive not in LEGACY_ACTUATORS:
         raise ScenarioError(
-            f"{path}: dftc_adapter: expected one of {', '.join(DRIVE_ROLES)}, got {drive!r}"
+            f"{path}: dftc_adapter: expected one of {', '.join(LEGACY_ACTUATORS)}, got {drive!r}"
         )
     site = spec.site("center")
     if site is None:
@@ -466,9 +477,11 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
         if root != "free":
             fail(
                 "drive",
-                f"a diffdrive robot moves through its wheels: {robot.base!r} needs a free joint",
+                f"a {robot.drive} robot moves through its wheels: {robot.base!r} needs a "
+                "free joint",
             )
-        params.update(_wheel_geometry(model, data, body, infos, robot, fail, role_key, keys))
+        geometry = wheels.diffdrive if robot.drive == "diffdrive" else wheels.omni
+        params.update(geometry(model, data, body, infos, robot, fail, role_key, keys))
     driven = tuple(infos[r] for r in robot.actuators)
     held = tuple(infos[r] for r in robot.held)
     site = model.site(CONTROL_SITE).id
@@ -547,80 +560,6 @@ def _option_settings(spec: mujoco.MjSpec) -> tuple[tuple[str, str], ...]:
         for name in OPTION_NAMES
         if option_value(spec.option, name) != option_value(default, name)
     )
-
-
-def _wheel_geometry(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, float]:
-    """Wheel radius, axle width, the control point's offset from the axle, the forward axis
-    and each wheel's sense of rotation, in the base body's frame, from the model."""
-    rot = data.xmat[body].reshape(3, 3)  # base frame -> world
-    origin = data.xpos[body]
-    anchors, axes, radii = [], [], []
-    for role in ("left", "right"):
-        info = infos[role]
-        j = info.joint_id
-        wheel = int(model.jnt_bodyid[j])
-        if info.joint_type != "hinge" or not subtree(model, body)[wheel] or wheel == body:
-            fail(
-                role_key(role),
-                f"actuator {info.name!r} must drive a wheel: a hinge of a body "
-                f"inside {robot.base!r} (it drives {info.joint!r})",
-            )
-        axis = rot.T @ data.xaxis[j]
-        if abs(axis[2]) > 0.2:
-            fail(
-                role_key(role),
-                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} "
-                "in the base frame; a wheel's axle must be horizontal",
-            )
-        anchors.append(rot.T @ (data.xanchor[j] - origin))
-        axes.append(axis)
-        radii.append(_wheel_radius(model, data, wheel, data.xanchor[j], data.xaxis[j]))
-    lateral = anchors[0] - anchors[1]
-    lateral[2] = 0.0
-    width = float(np.linalg.norm(lateral))
-    if width < 1e-3:
-        fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
-    g = lateral / width  # towards the left wheel
-    for role, axis in zip(("left", "right"), axes, strict=True):  # both turn about the axle
-        cosine = min(1.0, abs(float(axis @ g)) / float(np.linalg.norm(axis)))
-        off_axle = math.degrees(math.acos(cosine))
-        if off_axle > AXLE_TOLERANCE_DEG:
-            fail(
-                role_key(role),
-                f"joint {infos[role].joint!r} turns about {np.round(axis, 3).tolist()} in the "
-                f"base frame, {off_axle:.0f}° from the line joining the two wheels; a "
-                "differential drive's wheels turn about that line (wheels at an angle to it "
-                "are an omni or mecanum base, which this drive cannot steer)",
-            )
-    f = np.cross(g, [0.0, 0.0, 1.0])  # forward
-    mid = (anchors[0] + anchors[1]) / 2
-    cp = np.array([*robot.control_point, 0.0]) - mid
-    offset, lateral_offset = float(cp @ f), float(cp @ g)
-    key = "control_point" if keys else "site center"
-    if abs(offset) < 0.01:
-        fail(
-            key,
-            f"the controlled point is {offset:+.3f} m from the axle along the heading; "
-            "a differential drive can steer a point only ahead of or behind its axle "
-            "(|offset| >= 0.01 m)",
-        )
-    out = {
-        "axle_width": robot.params.get("axle_width", width),
-        "wheel_radius": robot.params.get("wheel_radius", float(min(radii))),
-        "offset": robot.params.get("offset", offset),
-        "lateral": lateral_offset,
-        "forward_angle": float(math.atan2(f[1], f[0])),
-    }
-    for role, axis in zip(("left", "right"), axes, strict=True):
-        # a positive turn about axis a rolls the wheel along a × z
-        out[f"sign_{role}"] = float(np.sign(np.cross(axis, [0.0, 0.0, 1.0]) @ f))
-    if out["wheel_radius"] <= 0:
-        fail(
-            role_key("left"),
-            "the wheel has no colliding geom to take its radius from; give "
-            "[diffdrive] wheel_radius",
-        )
-    return out
 
 
 def _mesh_properties(spec: mujoco.MjSpec, robot: RobotModel, density: float) -> dict[str, Any]:

@@ -1,0 +1,152 @@
+"""Wheeled drives' geometry, read from the compiled model (robots.py calls these).
+
+* :func:`diffdrive`: two wheels turning about the line joining them: wheel radius, axle
+  width, the control point's offset from the axle, the forward axis, each wheel's sense.
+* :func:`omni`: three or more omni wheels (free rollers along the rim) on a base with a
+  free joint: each wheel's contact position, rolling direction and radius in the base
+  frame; the wheels must move the base in x, y and yaw (the map has rank 3).
+
+A positive turn of a wheel about its joint axis a rolls the base along a × z.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .tree import _wheel_radius, subtree
+
+#: [°] how far a differential drive's wheel axis may be from the line joining its wheels
+AXLE_TOLERANCE_DEG = 5.0
+
+
+def diffdrive(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, float]:
+    """Wheel radius, axle width, the control point's offset from the axle, the forward axis
+    and each wheel's sense of rotation, in the base body's frame, from the model."""
+    rot = data.xmat[body].reshape(3, 3)  # base frame -> world
+    origin = data.xpos[body]
+    anchors, axes, radii = [], [], []
+    for role in ("left", "right"):
+        info = infos[role]
+        j = info.joint_id
+        wheel = int(model.jnt_bodyid[j])
+        if info.joint_type != "hinge" or not subtree(model, body)[wheel] or wheel == body:
+            fail(
+                role_key(role),
+                f"actuator {info.name!r} must drive a wheel: a hinge of a body "
+                f"inside {robot.base!r} (it drives {info.joint!r})",
+            )
+        axis = rot.T @ data.xaxis[j]
+        if abs(axis[2]) > 0.2:
+            fail(
+                role_key(role),
+                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} "
+                "in the base frame; a wheel's axle must be horizontal",
+            )
+        anchors.append(rot.T @ (data.xanchor[j] - origin))
+        axes.append(axis)
+        radii.append(_wheel_radius(model, data, wheel, data.xanchor[j], data.xaxis[j]))
+    lateral = anchors[0] - anchors[1]
+    lateral[2] = 0.0
+    width = float(np.linalg.norm(lateral))
+    if width < 1e-3:
+        fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
+    g = lateral / width  # towards the left wheel
+    for role, axis in zip(("left", "right"), axes, strict=True):  # both turn about the axle
+        cosine = min(1.0, abs(float(axis @ g)) / float(np.linalg.norm(axis)))
+        off_axle = math.degrees(math.acos(cosine))
+        if off_axle > AXLE_TOLERANCE_DEG:
+            fail(
+                role_key(role),
+                f"joint {infos[role].joint!r} turns about {np.round(axis, 3).tolist()} in the "
+                f"base frame, {off_axle:.0f}° from the line joining the two wheels; a "
+                "differential drive's wheels turn about that line (wheels at an angle to it "
+                "are an omni or mecanum base, which this drive cannot steer)",
+            )
+    f = np.cross(g, [0.0, 0.0, 1.0])  # forward
+    mid = (anchors[0] + anchors[1]) / 2
+    cp = np.array([*robot.control_point, 0.0]) - mid
+    offset, lateral_offset = float(cp @ f), float(cp @ g)
+    key = "control_point" if keys else "site center"
+    if abs(offset) < 0.01:
+        fail(
+            key,
+            f"the controlled point is {offset:+.3f} m from the axle along the heading; "
+            "a differential drive can steer a point only ahead of or behind its axle "
+            "(|offset| >= 0.01 m)",
+        )
+    out = {
+        "axle_width": robot.params.get("axle_width", width),
+        "wheel_radius": robot.params.get("wheel_radius", float(min(radii))),
+        "offset": robot.params.get("offset", offset),
+        "lateral": lateral_offset,
+        "forward_angle": float(math.atan2(f[1], f[0])),
+    }
+    for role, axis in zip(("left", "right"), axes, strict=True):
+        # a positive turn about axis a rolls the wheel along a × z
+        out[f"sign_{role}"] = float(np.sign(np.cross(axis, [0.0, 0.0, 1.0]) @ f))
+    if out["wheel_radius"] <= 0:
+        fail(
+            role_key("left"),
+            "the wheel has no colliding geom to take its radius from; give "
+            "[diffdrive] wheel_radius",
+        )
+    return out
+
+
+def omni(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, Any]:
+    """Each omni wheel's position (from the base's origin), rolling direction and radius in
+    the base frame, as the flat parameters ``wheel{k}_x``, ``_y``, ``_dx``, ``_dy``, ``_r``
+    (and ``wheels``), checking that the wheels move the base in every planar direction."""
+    rot = data.xmat[body].reshape(3, 3)  # base frame -> world
+    origin = data.xpos[body]
+    inside = subtree(model, body)
+    out: dict[str, Any] = {"wheels": float(len(infos))}
+    rows = []
+    for k, role in enumerate(sorted(infos, key=lambda r: int(r.removeprefix("wheel")))):
+        info = infos[role]
+        j = info.joint_id
+        wheel = int(model.jnt_bodyid[j])
+        if info.joint_type != "hinge" or not inside[wheel] or wheel == body:
+            fail(
+                role_key("wheels"),
+                f"actuator {info.name!r} must drive a wheel: a hinge of a body inside "
+                f"{robot.base!r} (it drives {info.joint!r})",
+            )
+        axis = rot.T @ data.xaxis[j]
+        if abs(axis[2]) > 0.2:
+            fail(
+                role_key("wheels"),
+                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} in the base "
+                "frame; a wheel's axle must be horizontal",
+            )
+        axis[2] = 0.0
+        axis /= np.linalg.norm(axis)
+        roll = np.cross(axis, [0.0, 0.0, 1.0])[:2]
+        pos = (rot.T @ (data.xanchor[j] - origin))[:2]
+        parts = np.flatnonzero(subtree(model, wheel))  # the wheel and its rollers
+        radius = max(
+            _wheel_radius(model, data, int(b), data.xanchor[j], data.xaxis[j]) for b in parts
+        )
+        if radius <= 0:
+            fail(role_key("wheels"), f"wheel {info.joint!r} has no colliding geom to roll on")
+        out.update(
+            {
+                f"wheel{k}_x": float(pos[0]),
+                f"wheel{k}_y": float(pos[1]),
+                f"wheel{k}_dx": float(roll[0]),
+                f"wheel{k}_dy": float(roll[1]),
+                f"wheel{k}_r": float(radius),
+            }
+        )
+        rows.append([roll[0], roll[1], pos[0] * roll[1] - pos[1] * roll[0]])
+    if np.linalg.matrix_rank(np.array(rows), tol=1e-6) < 3:
+        fail(
+            role_key("wheels"),
+            "these wheels cannot move the base in every planar direction and turn it (their "
+            "rolling directions and positions span less than x, y and yaw): an omni base "
+            "needs three or more wheels at different angles",
+        )
+    return out
