@@ -39,8 +39,7 @@ from .onboard.team import Team
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
-from .sim import faults as sim_faults
-from .sim import robots, scene
+from .sim import fleet, scene
 from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
@@ -120,6 +119,8 @@ class Simulation:
     the log up to that instant is kept.
     """
 
+    faults: fleet.ActuatorFaults | fleet.MixedFaults  # the robots' actuator faults
+
     def __init__(
         self,
         scenario: Scenario,
@@ -135,12 +136,10 @@ class Simulation:
         self._search = [Path(p) for p in search]
         self._given = dict(blocks or {})
         self.block_names = block_names(scenario, self._given)
-        name = scenario.team.robot_model
-        path = robots.resolve(name, f"{scenario.source}: team.robot_model", scenario.directory)
-        self.robot = robots.load(path)
-        if name not in robots.available():  # a file: recorded by its absolute path
-            self.scenario = scenario = scenario.with_overrides(robot_model=str(path))
-        self.scene = scene.build(scenario, self.robot)
+        # each robot's model; files are recorded by their absolute paths
+        self.scenario, self.fleet = scenario, team = fleet.for_scenario(scenario)
+        self.robot = team.envelope  # the team's bounds (one model: that model)
+        self.scene = scene.build(scenario, team if team.mixed else self.robot)
         self._build_time = time.perf_counter() - wall0
         self.plant: Plant | None = None
         self.reset()
@@ -199,10 +198,8 @@ class Simulation:
         self.plant = plant = Plant(
             sc, s.noise, dt, self.rng, xi_bar=max(xi_bar - model.mismatch, 0.0)
         )
-        self.adapter = model.adapter(sc, plant.data, dt)
-        self.faults: sim_faults.ActuatorFaults = sim_faults.ActuatorFaults(
-            sc.model, s.faults, self.adapter
-        )
+        # the robots' drives and their actuator faults (a mixed team: each model's own)
+        self.adapter, self.faults = fleet.actuation(self.fleet, sc, plant.data, dt, s.faults)
         self.sensors = SensorFaults(s.faults, s.team.robots)
         n = self.n = s.team.robots
         self.steps = round(s.duration / dt)

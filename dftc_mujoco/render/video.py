@@ -25,7 +25,7 @@ from ..display import LINKS, STATES, link_state, robot_state
 from ..errors import RenderError
 from ..events import describe
 from ..scenario import Scenario
-from ..sim import robots as robot_models
+from ..sim import fleet
 from ..sim import scene as scene_mod
 from . import gl
 from .options import VideoOptions, frame_times
@@ -53,9 +53,9 @@ class FrameRenderer:
         self.t = log["t"]
         if len(self.t) < 2:
             raise RenderError("the log has fewer than two samples: nothing to render")
-        model = robot_models.get(scenario.team.robot_model, base=scenario.directory)
-        self.footprint = model.footprint_radius
-        self.scene = scene_mod.build(scenario, model)
+        team = fleet.load(scenario.team.models, "team.robot_model", scenario.directory)
+        self.footprint = team.envelope.footprint_radius
+        self.scene = scene_mod.build(scenario, team if team.mixed else team.envelope)
         m = self.scene.model
         m.vis.global_.offwidth = max(m.vis.global_.offwidth, options.width)
         m.vis.global_.offheight = max(m.vis.global_.offheight, options.height)

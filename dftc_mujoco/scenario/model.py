@@ -187,7 +187,7 @@ class Scenario:
         *,
         seed: int | None = None,
         duration: float | None = None,
-        robot_model: str | None = None,
+        robot_model: str | tuple[str, ...] | None = None,
     ) -> Scenario:
         """A copy with CLI overrides applied and checked.
 

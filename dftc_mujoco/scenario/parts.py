@@ -64,10 +64,17 @@ class Team:
     """The robots, their model, initial positions and communication graph."""
 
     robots: int
-    robot_model: str
+    robot_model: str | tuple[str, ...]  # one model, or one per robot (a mixed team)
     initial_positions: np.ndarray  # (N, 2)
     graph: Graph
     graph_family: str = "explicit"  # or ring_chords, random, knn when generated
+
+    @property
+    def models(self) -> tuple[str, ...]:
+        """Each robot's model name or file (N,)."""
+        if isinstance(self.robot_model, str):
+            return (self.robot_model,) * self.robots
+        return tuple(self.robot_model)
 
 
 @dataclass(frozen=True, eq=False)

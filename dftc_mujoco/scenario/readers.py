@@ -223,12 +223,32 @@ def _off_the_floor(t: Table, key: str, points: np.ndarray, what: str) -> None:
 _FAMILIES = ("explicit", "ring_chords", "random", "knn", "line")
 
 
+def _robot_model(t: Table, n: int | None) -> str | tuple[str, ...]:
+    """``team.robot_model``: one model for the whole team, or a list of one per robot (a
+    mixed team); a list of one name is that name."""
+    raw = t.data.get("robot_model", "disk")
+    if not isinstance(raw, list):
+        return t.string("robot_model", "disk")
+    t.raw("robot_model")
+    names = tuple(raw)
+    if not names or not all(isinstance(x, str) and x for x in names):
+        t.report("robot_model", f"expected a model name or a list of names, got {describe(raw)}")
+        return "disk"
+    if n is not None and len(names) != n:
+        t.report(
+            "robot_model",
+            f"expected one model per robot (team.robots = {n}) or a single name, got {len(names)}",
+        )
+        return "disk"
+    return names[0] if len(set(names)) == 1 else names
+
+
 def _team(t: Table, mission: Mission | None, seed: int) -> Team:
     """The team; its graph is None when a problem (recorded) left it unknown."""
     assert t.doc is not None
     n = t.integer("robots", low=2, high=MAX_ROBOTS)
     known_n = n if t.ok("robots") else None
-    model = t.string("robot_model", "disk")
+    model = _robot_model(t, known_n)
     x0 = t.doc.guard(_initial_positions, t, known_n, mission, seed)
     graph, family = t.doc.guard(_graph, t, known_n, x0, seed) or (None, None)
     if t.given("graph_family"):

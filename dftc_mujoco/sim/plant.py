@@ -136,8 +136,13 @@ class Plant:
         self.xi_bar = xi_bar if xi_bar is not None else (noise.xi_bar or 0.0)
         self._alpha = float(np.exp(-control_period / noise.xi_time_constant))
         self._xi_state = _disk_sample(rng, self.n, self.xi_bar, False)
-        # the drive writes the driven and the held actuators, in this order (drives.Drive)
-        self._ctrl_index = np.hstack([scene.actuator, scene.held]).ravel()
+        # the drive writes the driven and the held actuators, in this order (drives.Drive;
+        # a mixed team: each model's robots in turn, fleet.MixedDrive)
+        self._ctrl_index = (
+            scene.ctrl_index
+            if len(scene.ctrl_index)
+            else np.hstack([scene.actuator, scene.held]).ravel()
+        )
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
         self._site_xpos = self.data.site_xpos
         self._xpos = self.data.xpos

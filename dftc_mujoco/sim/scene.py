@@ -23,6 +23,7 @@ own keyframe pose. What the scene adds:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -30,6 +31,7 @@ import numpy as np
 
 from ..paths import MODELS
 from ..scenario import Obstacle, Scenario
+from .fleet import Fleet, Group
 from .robots import CONTROL_SITE, OPTION_NAMES, RobotModel, option_value
 from .tree import actuator_bodies, owners, qpos_addresses
 
@@ -55,10 +57,13 @@ class Scene:
     qpos_init: np.ndarray  # (nq,) the initial state: keyframes, robots at their positions
     ctrl_init: np.ndarray  # (nu,) keyframe commands of every actuator
     notes: tuple[str, ...] = field(default_factory=tuple)  # warnings about the composition
+    groups: tuple[Group, ...] = ()  # the robots of each model (one group: a single model)
+    ctrl_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (Σ A + H,)
 
 
 PREFIX = "robot"  # every robot's names start with it (robot_prefix)
 GROUP = 32  # robots attached into one small spec before it joins the arena
+FREE_ROW = -2  # root_qpos of a base on a free joint beside slide-jointed ones (mixed team)
 
 
 def robot_prefix(i: int) -> str:
@@ -66,10 +71,11 @@ def robot_prefix(i: int) -> str:
     return f"{PREFIX}{i + 1}/"
 
 
-def build(scenario: Scenario, robot: RobotModel) -> Scene:
-    """Compose and compile the scene for ``scenario`` with ``robot`` as every team member."""
+def build(scenario: Scenario, robot: RobotModel | Fleet) -> Scene:
+    """Compose and compile the scene for ``scenario`` with ``robot`` as every team member,
+    or each robot with its own model (a :class:`~.fleet.Fleet`)."""
     return compose(
-        robot,
+        robot.models if isinstance(robot, Fleet) else robot,
         np.asarray(scenario.team.initial_positions),
         scenario.obstacles,
         scenario.physics.timestep,
@@ -78,39 +84,45 @@ def build(scenario: Scenario, robot: RobotModel) -> Scene:
 
 
 def compose(
-    robot: RobotModel,
+    robot: RobotModel | Sequence[RobotModel],
     positions: np.ndarray,
     obstacles: tuple[Obstacle, ...] = (),
     timestep: float = 0.002,
     robot_contacts: bool = True,
 ) -> Scene:
-    """Arena + one ``robot`` per row of ``positions`` (N, 2) (where each control point
-    starts) + cylinders, compiled."""
+    """Arena + one robot per row of ``positions`` (N, 2) (where each control point starts)
+    + cylinders, compiled: ``robot`` for every row, or each row's own model (a sequence)."""
+    n = len(positions)
+    models = [robot] * n if isinstance(robot, RobotModel) else list(robot)
     spec = mujoco.MjSpec.from_file(str(MODELS / "arena.xml"))
     spec.copy_during_attach = True
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     floor = spec.geom("floor")
     floor.contype, floor.conaffinity = FLOOR, FLOOR
-    robot_spec = robot.spec()
-    for name in OPTION_NAMES:  # the arena's options apply; differences are in Scene.notes
-        setattr(robot_spec.option, name, getattr(spec.option, name))
-    base = robot_spec.body(robot.base)
-    _filter(base, robot, robot_contacts)  # once: every attached copy carries the bits
-    shift = np.asarray(robot.init_point)  # the control point at the initial pose, own frame
+    kinds = {m.path: m for m in models}  # each model's spec, made once
+    bases, robot_specs = {}, []
+    for path, m in kinds.items():
+        robot_spec = m.spec()
+        for name in OPTION_NAMES:  # the arena's options apply; differences are in Scene.notes
+            setattr(robot_spec.option, name, getattr(spec.option, name))
+        bases[path] = robot_spec.body(m.base)
+        _filter(bases[path], m, robot_contacts)  # once: every attached copy carries the bits
+        robot_specs.append(robot_spec)
+    shift = np.array([m.init_point for m in models]).reshape(n, 2)  # control points, own frames
     # attach_body costs in proportion to the spec it attaches into (3.7 ms per robot at
     # N = 1000, 1.8 s in all): robots go into groups of GROUP small specs first, each group
     # then into the arena through a frame. Frames vanish at compilation and the prefixes
     # compose ("robot" + "7/"), so the model is the one robot-by-robot attaching gives.
-    for g0 in range(0, len(positions), GROUP):
+    for g0 in range(0, n, GROUP):
         group = mujoco.MjSpec()
         group.copy_during_attach = True
         for name in OPTION_NAMES:  # the arena's options throughout (nothing to reconcile)
             setattr(group.option, name, getattr(spec.option, name))
-        for i in range(g0, min(g0 + GROUP, len(positions))):
+        for i in range(g0, min(g0 + GROUP, n)):
             x, y = positions[i]
-            frame = group.worldbody.add_frame(pos=[x - shift[0], y - shift[1], 0.0])
-            frame.attach_body(base, robot_prefix(i).removeprefix(PREFIX), "")
+            frame = group.worldbody.add_frame(pos=[x - shift[i, 0], y - shift[i, 1], 0.0])
+            frame.attach_body(bases[models[i].path], robot_prefix(i).removeprefix(PREFIX), "")
         spec.attach(group, frame=spec.worldbody.add_frame(), prefix=PREFIX, suffix="")
     for k, ob in enumerate(obstacles):
         spec.worldbody.add_geom(
@@ -123,23 +135,54 @@ def compose(
             conaffinity=HULL,
         )
     model = spec.compile()
-    n = len(positions)
 
-    def ids(obj: mujoco.mjtObj, names: list[str]) -> np.ndarray:
-        return np.array(
-            [[mujoco.mj_name2id(model, obj, robot_prefix(i) + s) for s in names] for i in range(n)],
-            dtype=int,
-        ).reshape(n, len(names))
+    def ids(obj: mujoco.mjtObj, rows: Sequence[int], names: list[str]) -> np.ndarray:
+        found = [[mujoco.mj_name2id(model, obj, robot_prefix(i) + s) for s in names] for i in rows]
+        return np.array(found, dtype=np.int64).reshape(len(rows), len(names))
 
-    body = ids(mujoco.mjtObj.mjOBJ_BODY, [robot.base])[:, 0]
-    site = ids(mujoco.mjtObj.mjOBJ_SITE, [CONTROL_SITE])[:, 0]
-    act = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, list(robot.actuators.values()))
-    held = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, list(robot.held.values()))
+    every = list(range(n))
+    body = np.array(
+        [
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot_prefix(i) + models[i].base)
+            for i in every
+        ],
+        dtype=np.int64,
+    )
+    site = ids(mujoco.mjtObj.mjOBJ_SITE, every, [CONTROL_SITE])[:, 0]
+    groups = []
+    for m in kinds.values():
+        mine = [i for i in every if models[i].path == m.path]
+        act = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.actuators.values()))
+        held = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.held.values()))
+        rows = np.array(mine, dtype=np.int64)
+        groups.append(Group(model, rows, body[rows], act, held))
+    if len(groups) == 1:  # one model: the drive's columns, robot by robot
+        act, held = groups[0].actuator, groups[0].held
+        ctrl_index = np.hstack([act, held]).ravel()
+    else:  # a mixed team: each model's robots in turn (MixedDrive's order)
+        act = held = np.zeros((n, 0), dtype=int)
+        ctrl_index = np.concatenate([np.hstack([g.actuator, g.held]).ravel() for g in groups])
     obs = np.array([model.geom(f"obstacle{k + 1}").id for k in range(len(obstacles))], dtype=int)
-    qpos, ctrl = _initial_state(model, robot, body, positions - shift)
+    qpos, ctrl = _initial_state(model, models, body, positions - shift)
     root, origin = _roots(model, body)
+    notes = tuple(
+        line for m, rs in zip(kinds.values(), robot_specs, strict=True) for line in _notes(m, rs)
+    )
     return Scene(
-        model, robot, body, site, act, held, obs, root, origin, qpos, ctrl, _notes(robot, spec)
+        model,
+        models[0],
+        body,
+        site,
+        act,
+        held,
+        obs,
+        root,
+        origin,
+        qpos,
+        ctrl,
+        notes,
+        tuple(groups),
+        ctrl_index,
     )
 
 
@@ -159,7 +202,7 @@ def _filter(body: mujoco.MjsBody, robot: RobotModel, robot_contacts: bool) -> No
 
 
 def _initial_state(
-    model: mujoco.MjModel, robot: RobotModel, body: np.ndarray, frames: np.ndarray
+    model: mujoco.MjModel, robots: Sequence[RobotModel], body: np.ndarray, frames: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """qpos and ctrl of the whole scene with every robot at its own initial pose.
 
@@ -170,7 +213,6 @@ def _initial_state(
     """
     qpos = model.qpos0.copy()
     ctrl = np.zeros(model.nu)
-    key_q, key_c = np.asarray(robot.init_qpos), np.asarray(robot.init_ctrl)
     # which robot each body, joint and actuator belongs to: one pass, not one per robot
     owner = owners(model, body)
     joint_owner = owner[model.jnt_bodyid]
@@ -179,6 +221,7 @@ def _initial_state(
     by_joint = _group(joint_owner, len(body))
     by_actuator = _group(actuator_owner, len(body))
     for i in range(len(body)):
+        key_q, key_c = np.asarray(robots[i].init_qpos), np.asarray(robots[i].init_ctrl)
         joints = by_joint[i]
         adr = qpos_addresses(model, joints)
         if len(adr) != len(key_q):
@@ -216,7 +259,8 @@ def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndar
         joints = range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])
         free = [j for j in joints if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         if free:
-            root.append([model.jnt_qposadr[free[0]], -1, -1])
+            root.append([model.jnt_qposadr[free[0]], FREE_ROW, FREE_ROW])
+            origin_sense.append([1.0, 1.0, 1.0])
         else:
             slots, sense = [-1, -1, -1], [1.0, 1.0, 1.0]
             for j in joints:
@@ -235,7 +279,7 @@ def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndar
         mat = data.xmat[b]
         origin.append([*data.xpos[b], np.arctan2(mat[3], mat[0])])
     kinds = np.array(root, dtype=int)
-    if not origin_sense:  # free joints
+    if (kinds[:, 1] == FREE_ROW).all():  # free joints
         return kinds[:, :1], np.array(origin)
     return kinds, np.hstack([np.array(origin), np.array(origin_sense)])
 
@@ -272,12 +316,16 @@ def place(scene: Scene, data: mujoco.MjData, pose: np.ndarray) -> None:
     every other joint at the initial state."""
     data.qpos[:] = scene.qpos_init
     root, origin = scene.root_qpos, scene.origin
+    free = np.arange(len(root))
     if root.shape[1] == 3:  # slide joints (and a yaw hinge): offsets from the zero pose
+        slides = root[:, 1] != FREE_ROW  # a mixed team's free bases are placed below
         for col in range(3):
-            rows = np.flatnonzero(root[:, col] >= 0)
+            rows = np.flatnonzero(slides & (root[:, col] >= 0))
             zero = origin[rows, 3 if col == 2 else col]
             data.qpos[root[rows, col]] = (pose[rows, col] - zero) * origin[rows, 4 + col]
-        return
-    for (adr,), (x, y, yaw), z in zip(root, pose, scene.qpos_init[root[:, 0] + 2], strict=True):
+        free = np.flatnonzero(~slides)
+    for adr, (x, y, yaw), z in zip(
+        root[free, 0], pose[free], scene.qpos_init[root[free, 0] + 2], strict=True
+    ):
         data.qpos[adr : adr + 3] = [x, y, z]
         data.qpos[adr + 3 : adr + 7] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]

@@ -1,0 +1,67 @@
+"""Mixed teams (issue 24): one model per robot in ``team.robot_model``, composed in one
+scene with each robot's own drive and actuators; the onboard blocks take the team's
+envelope (sim/fleet.py)."""
+
+from pathlib import Path
+
+import pytest
+
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.sim import fleet
+
+DATA = Path(__file__).parent / "data" / "robots"
+HOLO, OMNI, SLOW = (str(DATA / f"{n}.robot.toml") for n in ("holobase", "omnibase", "slowbase"))
+#: holonomic slides, a differential drive, omni wheels and the disk
+MIXED = [HOLO, "diffdrive", OMNI, "disk"]
+
+
+def test_a_team_lists_one_model_per_robot():
+    s = load_scenario("paper_case", overrides={"team.robot_model": MIXED})
+    assert s.team.models == tuple(MIXED) and s.to_dict()["team"]["robot_model"] == MIXED
+    same = load_scenario("paper_case", overrides={"team.robot_model": ["disk"] * 4})
+    assert same.team.robot_model == "disk"  # one model after all
+    for bad, said in (
+        (["disk"] * 3, "expected one model per robot (team.robots = 4) or a single name, got 3"),
+        (["disk", 3, "disk", "disk"], "expected a model name or a list of names"),
+    ):
+        with pytest.raises(ScenarioError, match=r"team\.robot_model: " + said.split("(")[0]):
+            load_scenario("paper_case", overrides={"team.robot_model": bad})
+
+
+def test_the_envelope_is_the_team_s_worst_bounds():
+    team = fleet.load(tuple(MIXED), "team.robot_model", None)
+    assert team.mixed and [m.name for m, _ in team.groups()] == [
+        "holobase",
+        "diffdrive",
+        "omnibase",
+        "disk",
+    ]
+    env, models = team.envelope, team.models
+    assert env.xi_bar == max(m.xi_bar for m in models)
+    assert env.footprint_radius == max(m.footprint_radius for m in models)
+    assert env.drift_bound == max(m.drift_bound for m in models)
+    assert env.accel == min(m.accel for m in models)
+    assert env.calibration["compensation_G"] == max(
+        m.calibration.get("compensation_G", 0) for m in models
+    )
+    with pytest.raises(ScenarioError, match=r"must share the drive lag they model"):
+        fleet.load((SLOW, "disk", "disk", "disk"), "team.robot_model", None)
+
+
+def test_a_mixed_team_of_three_drives_gives_the_paper_outcome():
+    """Holonomic slides (the holonomic test base), a differential drive, omni wheels and the
+    disk in paper_case at mission.scale = 1.4 (the base's footprint asks for it) with l1:
+    robot 1's stop is flagged by all four within a second and robot 1 alone is excluded;
+    nobody else is flagged and every premise holds."""
+    over = {"team.robot_model": MIXED, "mission.scale": 1.4, "onboard.thresholds": "l1"}
+    r = simulate(load_scenario("paper_case", overrides=over), progress=False)
+    stop = next(e["t"] for e in r.events.items if e["kind"] == "fault" and e["robot"] == 1)
+    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
+    assert sorted(b for b, _, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
+    assert all(stop < t < stop + 1.0 for _, _, t in flags)
+    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())
+    assert r.summary["robot_model"][1] == "diffdrive" and r.summary["robot_model"][0].endswith(
+        "holobase.robot.toml"
+    )
