@@ -66,6 +66,10 @@ def head():
         "RAY_AUTH_MODE": "token",
         "RAY_AUTH_TOKEN": token,
         "RAY_USAGE_STATS_ENABLED": "0",
+        # the head's client proxy waits this long for the server process it starts per
+        # ray:// driver (30 s by default: "Initialization failure from server" on a loaded
+        # 2-core machine, once in a full suite)
+        "RAY_CLIENT_SERVER_CHECK_CHANNEL_TIMEOUT_S": "150",
     }
     env.pop("RAY_ADDRESS", None)
     proc = subprocess.Popen(
