@@ -749,3 +749,62 @@ def test_the_paper_case_on_omni_wheels():
     assert all(41.8 < t < 41.8 + 2.5 for _, _, t in flags)
     assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
     assert all(p["held"] for p in r.summary["premises"].values())
+
+
+MECANUM = DATA / "mecanumbase.robot.toml"
+
+
+def test_mecanum_wheels_are_read_with_their_rollers_and_drive_the_base_sideways():
+    """drive = "omni" covers mecanum wheels: the axis of the roller at the floor (45° from
+    the rim) is read from the model, and the map divides by ρ·d. Physics: 0.2 m/s along x,
+    then along y, then diagonally; the base follows and keeps its heading."""
+    r = robots.get(str(MECANUM))
+    p = r.params
+    for k in range(4):
+        assert [p[f"wheel{k}_dx"], p[f"wheel{k}_dy"]] == pytest.approx([1.0, 0.0], abs=1e-6)
+        assert abs(p[f"wheel{k}_rx"]) == pytest.approx(np.sqrt(0.5), abs=1e-3)
+        assert abs(p[f"wheel{k}_ry"]) == pytest.approx(np.sqrt(0.5), abs=1e-3)
+    assert p["wheel0_ry"] == pytest.approx(-p["wheel1_ry"])  # an X seen from above
+    sc = scene.compose(r, np.zeros((1, 2)))
+    data = Plant.initial_data(sc)
+    d = r.adapter(sc, data)
+    x0 = data.site_xpos[sc.site[0], :2].copy()
+    marks, yaw = {}, []
+    for _ in range(600):
+        t = data.time
+        u = [[0.2, 0.0]] if t < 2.0 else ([[0.0, 0.2]] if t < 4.0 else [[0.15, -0.15]])
+        data.ctrl[d.controlled()[0]] = d.command(np.array(u))[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+        mat = data.xmat[sc.body[0]]
+        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
+        marks[round(data.time, 2)] = data.site_xpos[sc.site[0], :2] - x0
+    np.testing.assert_allclose(marks[2.0], [0.4, 0.0], atol=0.02)
+    np.testing.assert_allclose(marks[4.0] - marks[2.0], [0.0, 0.4], atol=0.03)
+    np.testing.assert_allclose(marks[6.0] - marks[4.0], [0.3, -0.3], atol=0.03)
+    assert max(abs(a) for a in yaw) < 2.0  # degrees, at the command switches
+
+
+def test_plain_wheels_are_not_omni_wheels(tmp_path):
+    """Rollers welded to their wheel (no hinge) cannot slide along the axle: refused."""
+    folder = tmp_path / "omnibase"
+    shutil.copytree(OMNIBASE.parent / "omnibase", folder)
+    xml = folder / "omnibase.xml"
+    xml.write_text(re.sub(r'<joint name="wheel\d_roller\d+"[^>]*/>', "", xml.read_text()))
+    robot_file = tmp_path / "omnibase.robot.toml"
+    robot_file.write_text(OMNIBASE.read_text())
+    with pytest.raises(ScenarioError, match=r"omni\.wheels: wheel 'wheel0' has no free rollers"):
+        robots.get(str(robot_file))
+
+
+def test_the_paper_case_on_mecanum_wheels():
+    """paper_case on the mecanum base (its calibration in the robot file) with l1: robot
+    1's stop flagged by all four within a second, robot 1 alone excluded, premises held."""
+    s = scenario.load_scenario(
+        "paper_case", overrides={"team.robot_model": str(MECANUM), "onboard.thresholds": "l1"}
+    )
+    r = loop.simulate(s, progress=False)
+    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
+    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
+    assert all(41.8 < t < 41.8 + 1.0 for _, _, t in flags)
+    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())

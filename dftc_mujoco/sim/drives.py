@@ -169,9 +169,11 @@ class Omni(Drive):
     """Omni wheels (free rollers along the rim) on a base with a free joint.
 
     Wheel k sits at p_k in the base frame (from the base's origin), rolls the base along
-    d_k (a positive turn) and has radius r_k (read from the model, ``wheels.omni``). For a
-    velocity ū of the control point c and a turn rate ω, the base's origin moves at
-    v = Rᵀū − ω ẑ × c (base frame) and wheel k turns at (d_k · (v + ω ẑ × p_k)) / r_k.
+    d_k (a positive turn), has radius r_k and its roller at the floor turns about ρ_k
+    (omni: ρ_k = d_k; mecanum: 45° from it), all read from the model (``wheels.omni``).
+    The floor's velocity along a free roller's axis is the wheel's own, so for a velocity ū
+    of the control point c and a turn rate ω, the base's origin moves at v = Rᵀū − ω ẑ × c
+    (base frame) and wheel k turns at ρ_k · (v + ω ẑ × p_k) / (r_k ρ_k · d_k).
     The heading is held: ω = −:data:`YAW_GAIN` (ψ − ψ₀), ψ₀ the heading at the start (the
     robot's own compass or odometry, read from its base body); a bias fault φ goes through
     the same map with ω = 0.
@@ -184,7 +186,9 @@ class Omni(Drive):
         k = range(int(p["wheels"]))
         self.pos = np.array([[p[f"wheel{i}_x"], p[f"wheel{i}_y"]] for i in k])
         self.roll = np.array([[p[f"wheel{i}_dx"], p[f"wheel{i}_dy"]] for i in k])
-        self.radius = np.array([p[f"wheel{i}_r"] for i in k])
+        self.free = np.array([[p[f"wheel{i}_rx"], p[f"wheel{i}_ry"]] for i in k])  # ρ_k
+        # wheel k turns at ρ_k · (contact velocity) / (r_k ρ_k · d_k)
+        self.radius = np.array([p[f"wheel{i}_r"] for i in k]) * (self.free * self.roll).sum(1)
         self.point = np.asarray(robot.control_point, float)
         self.body = scene.body
         self.data = data
@@ -217,7 +221,7 @@ class Omni(Drive):
         v = ub - w[:, None] * np.array([-self.point[1], self.point[0]])  # the origin's
         spin = np.stack([-self.pos[:, 1], self.pos[:, 0]], axis=1)  # ẑ × p_k
         contact = v[:, None, :] + w[:, None, None] * spin[None]
-        return np.einsum("nkd,kd->nk", contact, self.roll) / self.radius
+        return np.einsum("nkd,kd->nk", contact, self.free) / self.radius
 
 
 #: [1/s] how fast an omni base turns back to its initial heading

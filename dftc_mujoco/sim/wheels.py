@@ -2,9 +2,10 @@
 
 * :func:`diffdrive`: two wheels turning about the line joining them: wheel radius, axle
   width, the control point's offset from the axle, the forward axis, each wheel's sense.
-* :func:`omni`: three or more omni wheels (free rollers along the rim) on a base with a
-  free joint: each wheel's contact position, rolling direction and radius in the base
-  frame; the wheels must move the base in x, y and yaw (the map has rank 3).
+* :func:`omni`: three or more omni or mecanum wheels (free rollers along the rim, at any
+  angle to it) on a base with a free joint: each wheel's position, rolling direction, the
+  axis of its rollers at the floor and its radius in the base frame; the wheels must move
+  the base in x, y and yaw (the map has rank 3).
 
 A positive turn of a wheel about its joint axis a rolls the base along a × z.
 """
@@ -14,12 +15,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from .tree import _wheel_radius, subtree
 
 #: [°] how far a differential drive's wheel axis may be from the line joining its wheels
 AXLE_TOLERANCE_DEG = 5.0
+#: rollers closer than this (cos of the angle) to the axle's direction cannot push the base
+MIN_ROLLER_COS = 0.2
 
 
 def diffdrive(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, float]:
@@ -132,16 +136,34 @@ def omni(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, Any
         )
         if radius <= 0:
             fail(role_key("wheels"), f"wheel {info.joint!r} has no colliding geom to roll on")
+        free = _roller_axis(model, data, rot, parts, wheel)
+        if free is None:
+            fail(
+                role_key("wheels"),
+                f"wheel {info.joint!r} has no free rollers (passive hinges of bodies inside "
+                "it): a plain wheel cannot slide along its axle, an omni or mecanum one can",
+            )
+        along = float(free @ roll)
+        if abs(along) < MIN_ROLLER_COS:
+            fail(
+                role_key("wheels"),
+                f"wheel {info.joint!r}'s rollers turn about its axle's direction: the wheel "
+                "cannot push the base",
+            )
+        free = free * np.sign(along)  # ρ·d > 0
         out.update(
             {
                 f"wheel{k}_x": float(pos[0]),
                 f"wheel{k}_y": float(pos[1]),
                 f"wheel{k}_dx": float(roll[0]),
                 f"wheel{k}_dy": float(roll[1]),
+                f"wheel{k}_rx": float(free[0]),
+                f"wheel{k}_ry": float(free[1]),
                 f"wheel{k}_r": float(radius),
             }
         )
-        rows.append([roll[0], roll[1], pos[0] * roll[1] - pos[1] * roll[0]])
+        cos = abs(along)  # wheel k turns at ρ·v / (r ρ·d): its row of the map, times r
+        rows.append([free[0] / cos, free[1] / cos, (pos[0] * free[1] - pos[1] * free[0]) / cos])
     if np.linalg.matrix_rank(np.array(rows), tol=1e-6) < 3:
         fail(
             role_key("wheels"),
@@ -150,3 +172,29 @@ def omni(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, Any
             "needs three or more wheels at different angles",
         )
     return out
+
+
+def _roller_axis(model, data, rot, parts: np.ndarray, wheel: int) -> np.ndarray | None:
+    """The horizontal axis ρ (base frame, unit) of the roller that touches the floor at the
+    initial pose (the lowest body with a passive hinge inside the wheel), or None. The
+    contact's velocity along ρ is the wheel's: an omni roller turns about the rim's tangent
+    (ρ = d), a mecanum roller at 45° to it."""
+    best, axis = np.inf, None
+    joint_trn = model.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT
+    actuated = set(model.actuator_trnid[joint_trn, 0].tolist())
+    for b in parts:
+        if b == wheel:
+            continue
+        for jnt in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
+            if model.jnt_type[jnt] != mujoco.mjtJoint.mjJNT_HINGE:
+                continue
+            if jnt in actuated:
+                continue
+            z = float(data.xpos[b][2])
+            if z < best:
+                best, axis = z, rot.T @ data.xaxis[jnt]
+    if axis is None:
+        return None
+    flat = np.array(axis[:2], dtype=float)
+    norm = float(np.linalg.norm(flat))
+    return flat / norm if norm > 1e-9 else None
