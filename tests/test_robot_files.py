@@ -808,3 +808,70 @@ def test_the_paper_case_on_mecanum_wheels():
     assert all(41.8 < t < 41.8 + 1.0 for _, _, t in flags)
     assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
     assert all(p["held"] for p in r.summary["premises"].values())
+
+
+SWERVE = DATA / "swervebase.robot.toml"
+
+
+def test_swerve_modules_are_read_from_the_model_and_steer_where_they_are_told():
+    """drive = "swerve": each module's steering axis, wheel direction and radius are read
+    from the model; the base goes along x, then y, then diagonally, without turning."""
+    r = robots.get(str(SWERVE))
+    p = r.params
+    assert r.drive == "swerve" and p["modules"] == 4
+    corners = {(p[f"module{k}_x"], p[f"module{k}_y"]) for k in range(4)}
+    assert corners == {(0.1, 0.1), (0.1, -0.1), (-0.1, 0.1), (-0.1, -0.1)}
+    assert all(p[f"module{k}_r"] == pytest.approx(0.035, abs=1e-4) for k in range(4))
+    sc = scene.compose(r, np.zeros((1, 2)))
+    data = Plant.initial_data(sc)
+    d = r.adapter(sc, data)
+    x0 = data.site_xpos[sc.site[0], :2].copy()
+    marks, yaw = {}, []
+    for _ in range(600):
+        t = data.time
+        u = [[0.2, 0.0]] if t < 2.0 else ([[0.0, 0.2]] if t < 4.0 else [[0.15, -0.15]])
+        data.ctrl[d.controlled()[0]] = d.command(np.array(u))[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+        mat = data.xmat[sc.body[0]]
+        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
+        marks[round(data.time, 2)] = data.site_xpos[sc.site[0], :2] - x0
+    # each leg loses a little while the modules turn to their new direction
+    np.testing.assert_allclose(marks[2.0], [0.4, 0.0], atol=0.03)
+    np.testing.assert_allclose(marks[4.0] - marks[2.0], [0.0, 0.4], atol=0.03)
+    np.testing.assert_allclose(marks[6.0] - marks[4.0], [0.3, -0.3], atol=0.03)
+    assert max(abs(a) for a in yaw) < 1.0
+
+
+def test_the_paper_case_on_swerve_modules():
+    """paper_case on the swerve base (its calibration in the robot file) with l1: robot 1's
+    stop flagged by all four within 1.5 s, robot 1 alone excluded, premises held."""
+    s = scenario.load_scenario(
+        "paper_case", overrides={"team.robot_model": str(SWERVE), "onboard.thresholds": "l1"}
+    )
+    r = loop.simulate(s, progress=False)
+    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
+    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
+    assert all(41.8 < t < 41.8 + 1.5 for _, _, t in flags)
+    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())
+
+
+def test_a_swerve_file_names_pairs_and_steers_about_the_vertical(tmp_path):
+    folder = tmp_path / "swervebase"
+    shutil.copytree(SWERVE.parent / "swervebase", folder)
+    robot_file = tmp_path / "swervebase.robot.toml"
+    robot_file.write_text(SWERVE.read_text().replace('["steer3", "drive3"]', '["steer3"]'))
+    with pytest.raises(
+        ScenarioError, match=r"swerve\.modules: expected a list of \[steer, drive\]"
+    ):
+        robots.get(str(robot_file))
+    xml = folder / "swervebase.xml"
+    xml.write_text(
+        xml.read_text().replace('axis="0 0 1" damping="0.02"', 'axis="1 0 0" damping="0.02"')
+    )
+    robot_file.write_text(SWERVE.read_text())
+    with pytest.raises(
+        ScenarioError,
+        match=r"swerve\.modules: joint 'steer0' turns about .* a module steers about the vertical",
+    ):
+        robots.get(str(robot_file))

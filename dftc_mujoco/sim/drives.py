@@ -9,6 +9,8 @@ servo, torque motor). The same mapping shifts a planar bias fault φ into joint 
   hinge is held at its initial angle.
 * :class:`Omni`: three or more omni wheels on a base with a free joint, the heading held
   (the map from the base's planar velocity and turn rate to each wheel).
+* :class:`Swerve`: two or more steered wheels on a base with a free joint, the heading
+  held (each module steers to its contact's velocity and drives along it).
 * :class:`DiffDrive`: offset-point feedback linearisation of a differential drive. The
   controlled point p lies b ahead of the axle centre c (and l to its left) on the
   robot's heading θ: ṗ = (v − lω) f + bω g with f = (cos θ, sin θ), g = (−sin θ, cos θ),
@@ -227,4 +229,85 @@ class Omni(Drive):
 #: [1/s] how fast an omni base turns back to its initial heading
 YAW_GAIN = 5.0
 
-DRIVES: dict[str, type[Drive]] = {"holonomic": Holonomic, "diffdrive": DiffDrive, "omni": Omni}
+
+class Swerve(Omni):
+    """Swerve modules on a base with a free joint: each module steers its wheel about a
+    vertical axis at p_k and drives it.
+
+    Module k's contact must move at v_k = v + ω ẑ × p_k (base frame; v and ω as for
+    :class:`Omni`, the heading held). Its wheel rolls along angle α_k + s_k q_k (q_k the
+    steering joint, s_k its sense about +z). It steers to the direction of v_k or its
+    opposite, whichever is nearer (turning at most 90°), and drives at ±‖v_k‖/r_k times
+    the cosine of what it has still to turn (no push sideways while it turns). A position
+    servo steers to the angle; a velocity servo at (angle error)/:data:`STEER_TIME`. A bias
+    fault φ goes through the wheels as they point (the drive speed along each wheel).
+    """
+
+    def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
+        p = robot.params
+        k = range(int(p["modules"]))
+        self.pos = np.array([[p[f"module{i}_x"], p[f"module{i}_y"]] for i in k])
+        self.alpha = np.array([p[f"module{i}_alpha"] for i in k])
+        self.sense = np.array([p[f"module{i}_sense"] for i in k])
+        self.radius = np.array([p[f"module{i}_r"] for i in k])
+        self.point = np.asarray(robot.control_point, float)
+        self.body = scene.body
+        self.data = data
+        self.yaw0 = self._yaw()
+        Drive.__init__(self, robot, scene, data, dt)
+        self.steer_cols = np.arange(0, 2 * len(self.alpha), 2)
+        self.steer_adr = self.actuation.qpos_adr[:, self.steer_cols]
+        self.steer_pos = self.actuation.pos[self.steer_cols]
+        self._out = np.zeros((self.n, 2 * len(self.alpha)))
+
+    def _planar_limit(self, joint_limit: float) -> float:
+        drive = min(i.velocity_limit for i in self.robot.driven_infos[1::2])
+        return 0.9 * drive * float(self.radius.min()) / np.sqrt(2)
+
+    def _contact(self, u: np.ndarray, w: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+        c, s = np.cos(yaw), np.sin(yaw)
+        ub = np.stack([c * u[:, 0] + s * u[:, 1], -s * u[:, 0] + c * u[:, 1]], axis=1)
+        v = ub - w[:, None] * np.array([-self.point[1], self.point[0]])
+        spin = np.stack([-self.pos[:, 1], self.pos[:, 0]], axis=1)
+        return v[:, None, :] + w[:, None, None] * spin[None]  # (N, K, 2)
+
+    def joint_velocity(self, u: np.ndarray, heading: np.ndarray | None = None) -> np.ndarray:
+        contact = self._contact(u, np.zeros(len(u)), self._yaw() if heading is None else heading)
+        angle = self.alpha + self.sense * self.data.qpos[self.steer_adr]
+        along = contact[..., 0] * np.cos(angle) + contact[..., 1] * np.sin(angle)
+        self._out[:] = 0.0
+        self._out[:, self.steer_cols + 1] = along / self.radius
+        return self._out.copy()
+
+    def wheel_speeds(self, u: np.ndarray) -> np.ndarray:
+        yaw = self._yaw()
+        turn = -YAW_GAIN * np.angle(np.exp(1j * (yaw - self.yaw0)))
+        contact = self._contact(u, turn, yaw)
+        q = self.data.qpos[self.steer_adr]
+        now = self.alpha + self.sense * q
+        want = np.arctan2(contact[..., 1], contact[..., 0])
+        err = np.angle(np.exp(1j * (want - now)))
+        back = np.abs(err) > np.pi / 2  # the opposite direction is nearer: drive backwards
+        err = np.where(back, err - np.pi * np.sign(err), err)
+        speed = np.hypot(contact[..., 0], contact[..., 1]) * np.where(back, -1.0, 1.0)
+        moving = np.abs(speed) > 1e-6
+        err = np.where(moving, err, 0.0)  # at rest a module keeps its angle
+        goal = q + self.sense * err
+        out = self._out
+        target = self.actuation.target[:, self.steer_cols]
+        out[:, self.steer_cols] = np.where(
+            self.steer_pos, (goal - target) / self.actuation.dt, (goal - q) / STEER_TIME
+        )
+        out[:, self.steer_cols + 1] = speed * np.maximum(np.cos(err), 0.0) / self.radius
+        return out
+
+
+#: [s] how fast a module steered by a velocity servo turns to its angle
+STEER_TIME = 0.05
+
+DRIVES: dict[str, type[Drive]] = {
+    "holonomic": Holonomic,
+    "diffdrive": DiffDrive,
+    "omni": Omni,
+    "swerve": Swerve,
+}

@@ -49,8 +49,14 @@ DRIVE_ROLES: dict[str, tuple[str, ...]] = {
     "holonomic": ("x", "y"),
     "diffdrive": ("left", "right"),
     "omni": (),
+    "swerve": (),
 }
-HELD_ROLES: dict[str, tuple[str, ...]] = {"holonomic": ("yaw",), "diffdrive": (), "omni": ()}
+HELD_ROLES: dict[str, tuple[str, ...]] = {
+    "holonomic": ("yaw",),
+    "diffdrive": (),
+    "omni": (),
+    "swerve": (),
+}
 LEGACY_ACTUATORS = {"holonomic": ("vx", "vy"), "diffdrive": ("wheel_l", "wheel_r")}
 CALIBRATION_KEYS = (
     "xi_bar",  # recommended ξ̄ [m/s]
@@ -222,6 +228,21 @@ def _load_robot_file(path: Path) -> RobotModel:
             continue
         for role in DRIVE_ROLES[kind]:
             roles[role] = sub.string(role)
+        if kind == "swerve":  # modules = [["steer0", "drive0"], ...]: each module's pair
+            listed = sub.raw("modules")
+            pairs = isinstance(listed, list) and all(
+                isinstance(m, list) and len(m) == 2 and all(isinstance(a, str) for a in m)
+                for m in listed
+            )
+            if not pairs:
+                sub.report(
+                    "modules", f"expected a list of [steer, drive] actuator names, got {listed!r}"
+                )
+            elif len(listed) < 2:
+                sub.report("modules", f"expected two or more modules, got {len(listed)}")
+            else:
+                for k, (steer, drive_name) in enumerate(listed):
+                    roles.update({f"steer{k}": steer, f"drive{k}": drive_name})
         if kind == "omni":  # wheels = ["w0", "w1", "w2", ...]: the wheels' actuators
             listed = sub.raw("wheels")
             if not isinstance(listed, list) or not all(isinstance(w, str) for w in listed):
@@ -480,7 +501,9 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
                 f"a {robot.drive} robot moves through its wheels: {robot.base!r} needs a "
                 "free joint",
             )
-        geometry = wheels.diffdrive if robot.drive == "diffdrive" else wheels.omni
+        geometry = {"diffdrive": wheels.diffdrive, "omni": wheels.omni}.get(
+            robot.drive, wheels.swerve
+        )
         params.update(geometry(model, data, body, infos, robot, fail, role_key, keys))
     driven = tuple(infos[r] for r in robot.actuators)
     held = tuple(infos[r] for r in robot.held)

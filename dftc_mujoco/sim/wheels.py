@@ -198,3 +198,74 @@ def _roller_axis(model, data, rot, parts: np.ndarray, wheel: int) -> np.ndarray 
     flat = np.array(axis[:2], dtype=float)
     norm = float(np.linalg.norm(flat))
     return flat / norm if norm > 1e-9 else None
+
+
+def swerve(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, Any]:
+    """Each swerve module's position (its steering axis, from the base's origin), the
+    direction its wheel rolls the base at steering angle 0 (α), the sense of its steering
+    joint about +z and the wheel's radius, in the base frame: ``module{k}_x``, ``_y``,
+    ``_alpha``, ``_sense``, ``_r`` (and ``modules``)."""
+    rot = data.xmat[body].reshape(3, 3)
+    origin = data.xpos[body]
+    inside = subtree(model, body)
+    count = len(infos) // 2
+    out: dict[str, Any] = {"modules": float(count)}
+    for k in range(count):
+        steer, drive = infos[f"steer{k}"], infos[f"drive{k}"]
+        js, jd = steer.joint_id, drive.joint_id
+        steer_body, wheel = int(model.jnt_bodyid[js]), int(model.jnt_bodyid[jd])
+        up = rot.T @ data.xaxis[js]
+        if steer.joint_type != "hinge" or not inside[steer_body] or steer_body == body:
+            fail(
+                role_key("modules"),
+                f"actuator {steer.name!r} must steer a module: a hinge of "
+                f"a body inside {robot.base!r} (it drives {steer.joint!r})",
+            )
+        if abs(up[2]) < 0.98:
+            fail(
+                role_key("modules"),
+                f"joint {steer.joint!r} turns about "
+                f"{np.round(up, 3).tolist()} in the base frame; a module steers about the vertical",
+            )
+        if (
+            drive.joint_type != "hinge"
+            or not subtree(model, steer_body)[wheel]
+            or wheel == steer_body
+        ):
+            fail(
+                role_key("modules"),
+                f"actuator {drive.name!r} must drive the wheel of module "
+                f"{k}: a hinge of a body inside {steer.joint!r}'s (it drives {drive.joint!r})",
+            )
+        axle = rot.T @ data.xaxis[jd]
+        if abs(axle[2]) > 0.2:
+            fail(
+                role_key("modules"),
+                f"joint {drive.joint!r} turns about "
+                f"{np.round(axle, 3).tolist()} in the base frame; a wheel's axle must be "
+                "horizontal",
+            )
+        roll = np.cross(axle, [0.0, 0.0, 1.0])[:2]
+        pos = (rot.T @ (data.xanchor[js] - origin))[:2]
+        parts = np.flatnonzero(subtree(model, wheel))
+        anchor, axis = data.xanchor[jd], data.xaxis[jd]
+        radius = max(_wheel_radius(model, data, int(b), anchor, axis) for b in parts)
+        if radius <= 0:
+            fail(role_key("modules"), f"wheel {drive.joint!r} has no colliding geom to roll on")
+        out.update(
+            {
+                f"module{k}_x": float(pos[0]),
+                f"module{k}_y": float(pos[1]),
+                f"module{k}_alpha": float(math.atan2(roll[1], roll[0])),
+                f"module{k}_sense": float(np.sign(up[2])),
+                f"module{k}_r": float(radius),
+            }
+        )
+    if count >= 2:
+        pts = np.array([[out[f"module{k}_x"], out[f"module{k}_y"]] for k in range(count)])
+        if np.ptp(pts, axis=0).max() < 1e-6:
+            fail(
+                role_key("modules"),
+                "the modules share one steering axis: they cannot turn the base",
+            )
+    return out
