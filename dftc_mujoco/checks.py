@@ -122,13 +122,15 @@ def preflight(
     input_limit: float = math.inf,
     xi_bar: float = 0.0,
     G: np.ndarray | None = None,
+    footprints: np.ndarray | None = None,
 ) -> Findings:
     """Check scenario ``s`` with robot model ``robot`` (footprint, drive) whose planar
     command range is ``command_limit`` per axis; ``safe`` and ``activation`` are the
     cylinders' distances after they were raised for the robot's footprint; ``path`` (T, 2)
     the desired centroid every ``path_dt`` seconds; ``input_limit`` the applied input's
     range per axis (``assembly.input_limit``); ``xi_bar`` and ``G`` the run's ξ̄ and G (the
-    scenario's or the robot's)."""
+    scenario's or the robot's); ``footprints`` (N,) each robot's own footprint radius (a
+    mixed team: the starts are checked robot by robot; None: the model's for every one)."""
     out = Findings()
     src = s.source
     reach = robot.footprint_radius
@@ -158,13 +160,14 @@ def preflight(
             break
     # where the robots start: not inside a cylinder, not inside each other
     x0 = np.asarray(s.team.initial_positions, float)
+    own = np.full(len(x0), reach) if footprints is None else np.asarray(footprints, float)
     for k, ob in enumerate(s.obstacles):
-        gap = np.linalg.norm(x0 - ob.position, axis=1) - ob.radius - reach
+        gap = np.linalg.norm(x0 - ob.position, axis=1) - ob.radius - own
         for i in np.flatnonzero(gap < 0):
             finding(
                 "team.initial_positions",
                 f"robot {i + 1} starts with its hull {-gap[i]:.3f} m inside cylinder {k + 1} "
-                f"(its {name} footprint radius is {reach:.3f} m); move it or the cylinder",
+                f"(its footprint radius is {own[i]:.3f} m); move it or the cylinder",
                 refuse=True,
             )
         inside = np.flatnonzero((gap >= 0) & (np.linalg.norm(x0 - ob.position, axis=1) < safe[k]))
@@ -175,13 +178,14 @@ def preflight(
                 f"({safe[k]:.3f} m): its first command is to get out",
                 refuse=False,
             )
-    pairs = sorted(cKDTree(x0).query_pairs(2 * reach)) if reach > 0 else []
+    near = sorted(cKDTree(x0).query_pairs(2 * reach)) if reach > 0 else []
+    pairs = [(i, j) for i, j in near if np.linalg.norm(x0[i] - x0[j]) < own[i] + own[j]]
     for i, j in pairs[:3]:
         d = float(np.linalg.norm(x0[i] - x0[j]))
         finding(
             "team.initial_positions",
             f"robots {i + 1} and {j + 1} start {d:.3f} m apart: their hulls overlap "
-            f"(footprint radius {reach:.3f} m)"
+            f"(footprint radii {own[i]:.3f} m and {own[j]:.3f} m)"
             + ("" if contacts else " (robot contacts are off: they pass through)"),
             refuse=contacts,
         )

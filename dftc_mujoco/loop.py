@@ -274,6 +274,7 @@ class Simulation:
             input_limit=config.input_limit,
             xi_bar=xi_bar,
             G=effective_G(s, model),
+            footprints=np.array([m.footprint_radius for m in self.fleet.models]),
         )
         if refusal:
             found.refusals.append(refusal)

@@ -65,3 +65,27 @@ def test_a_mixed_team_of_three_drives_gives_the_paper_outcome():
     assert r.summary["robot_model"][1] == "diffdrive" and r.summary["robot_model"][0].endswith(
         "holobase.robot.toml"
     )
+
+
+def test_a_mixed_team_s_starts_are_checked_robot_by_robot():
+    """Two disks 0.3 m apart overlap nobody (0.1 m footprints), though the holonomic base
+    beside them has a 0.32 m one: only a pair that really overlaps is refused."""
+    from dftc_mujoco.loop import Simulation
+
+    starts = [[-0.9, -0.9], [0.2, 0.0], [0.5, 0.0], [0.35, 0.6]]
+    over = {
+        "team.robot_model": [HOLO, "disk", "disk", "disk"],
+        "team.initial_positions": starts,
+        "mission.formation.side": 0.7,
+        "fdir.initial_error_bound": "auto",
+    }
+    Simulation(load_scenario("paper_case", overrides=over)).close()  # not refused
+    starts[1] = [-0.6, -0.7]  # a disk 0.36 m from the base: 0.1 + 0.32 overlap
+    with pytest.raises(
+        ScenarioError,
+        match=r"robots 1 and 2 start 0\.361 m apart: their hulls overlap "
+        r"\(footprint radii 0\.321 m and 0\.100 m\)",
+    ):
+        Simulation(
+            load_scenario("paper_case", overrides={**over, "team.initial_positions": starts})
+        )

@@ -531,7 +531,7 @@ def test_impossible_set_ups_are_refused_before_simulating():
     )
     assert inside == [
         f"{scenario.resolve('paper_case')}: team.initial_positions: robot 1 starts with its hull "
-        "0.170 m inside cylinder 1 (its disk footprint radius is 0.100 m); move it or the cylinder"
+        "0.170 m inside cylinder 1 (its footprint radius is 0.100 m); move it or the cylinder"
     ]
     assert (
         "beyond the disk robots' command range" in _refusals({"mission.centroid.speed": 100.0})[0]
