@@ -52,3 +52,12 @@ def fault_free_run() -> RunResult:
     d["faults"] = []
     d["duration"] = 28.0
     return simulate(make(d))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Run tests/test_ray.py first (the rest keeps its order). Its `ray://` test has the
+    head node start a server process per driver; at the end of a full suite on the 2-core
+    machine that process twice failed to come up (once within Ray's own 30 s, once within
+    150 s), while the same tests pass alone, after test_campaign or test_platform, and
+    after every module between them (one cause not found: each subset passed)."""
+    items.sort(key=lambda item: item.path.name != "test_ray.py")
