@@ -52,22 +52,26 @@ class Sighting:
         self,
         t: float,
         silent: np.ndarray,
-        listeners: list[np.ndarray],
+        listeners: Any,
         members: np.ndarray,
         seen: np.ndarray,
         slots: np.ndarray,
         detour: np.ndarray,
+        rows: np.ndarray | None = None,
     ) -> tuple[list[tuple[int, int]], list[dict[str, Any]]]:
         """One period. ``silent`` (N,) robots reported silent; ``listeners[p]`` the team
-        positions that listen to the member at position ``p``; ``seen`` (N, 2) where the
-        range sensors see every robot; ``slots`` (M, 2) the members' slots σ₁,d + d_j;
+        positions that listen to the member at position ``p`` (a list, or a dict by ``p``);
+        ``seen`` (N, 2) where the range sensors see every robot; ``slots`` (M, 2) the
+        members' slots σ₁,d + d_j;
         ``detour`` (M,) [m] how far eq. 18 may move each member off its slot where it is
-        (0 away from obstacles and teammates).
+        (0 away from obstacles and teammates); ``rows``: the team positions to look at
+        (None: all; the others are neither silent nor watched).
         Returns the (by, robot) pairs raised now (original axis) and their events."""
         self.judged[:] = False
         raised: list[tuple[int, int]] = []
         events: list[dict[str, Any]] = []
-        for p, j in enumerate(members):
+        for p in range(len(members)) if rows is None else rows:
+            j = members[p]
             if not silent[j]:
                 if self.armed[j] or self.flag[:, j].any():
                     self.forget(int(j))
@@ -123,30 +127,35 @@ class Sighting:
         cfg, members = team.config, team.members
         obs = team.observer
         src, dst = obs.allowed.src, obs.link_dst()
-        listeners = [dst[src == p] for p in range(len(members))]
-        x = seen[members]
+        rows = np.flatnonzero(silent[members] | self.armed[members])  # the silent, watched
+        listeners = {int(p): dst[src == p] for p in rows}
+        x, mine = seen[members], seen[members[rows]]
         # eq. 18 engages only where r̂ᵀu_g < θ (d − ‖x − x_o‖): for a robot on its slot,
         # u_g is the slot's velocity, so within d + ‖σ̇₁,d + ḋ_j‖/θ
-        step = np.hypot(*(c_dot + rates).T) / cfg.theta
+        step = np.hypot(*(c_dot + rates[rows]).T) / cfg.theta
         # near something, eq. 18 moves it around it: at most the thing's safe diameter
-        detour = np.zeros(len(members))
+        near = np.zeros(len(rows))
         if len(cfg.obstacle_position):
-            d = np.hypot(*(x[:, None, :] - cfg.obstacle_position[None]).transpose(2, 0, 1))
+            d = np.hypot(*(mine[:, None, :] - cfg.obstacle_position[None]).transpose(2, 0, 1))
             reach = np.minimum(cfg.obstacle_activation[None], cfg.obstacle_safe + step[:, None])
-            detour = np.maximum(detour, np.where(d <= reach, 2 * cfg.obstacle_safe, 0).max(1))
+            near = np.maximum(near, np.where(d <= reach, 2 * cfg.obstacle_safe, 0).max(1))
         if len(team.gone):
-            d = np.hypot(*(x[:, None, :] - seen[team.gone][None]).transpose(2, 0, 1))
+            d = np.hypot(*(mine[:, None, :] - seen[team.gone][None]).transpose(2, 0, 1))
             reach = np.minimum(cfg.excluded_activation, cfg.excluded_safe + step)
             hit = (d <= reach[:, None]).any(axis=1)
-            detour[hit] = np.maximum(detour[hit], 2 * cfg.excluded_safe)
+            near[hit] = np.maximum(near[hit], 2 * cfg.excluded_safe)
         if cfg.teammate_safe > 0 and len(members) > 1:
-            d = np.hypot(*(x[:, None, :] - x[None]).transpose(2, 0, 1))
-            np.fill_diagonal(d, np.inf)
+            d = np.hypot(*(mine[:, None, :] - x[None]).transpose(2, 0, 1))
+            d[np.arange(len(rows)), rows] = np.inf  # not itself
             reach = np.minimum(cfg.teammate_activation, cfg.teammate_safe + step)
             mate = (d <= reach[:, None]).any(axis=1)
-            detour[mate] = np.maximum(detour[mate], 2 * cfg.teammate_safe)
+            near[mate] = np.maximum(near[mate], 2 * cfg.teammate_safe)
+        detour = np.zeros(len(members))
+        detour[rows] = near
         self.slots[members] = c + offsets
-        raised, events = self.step(t, silent, listeners, members, seen, self.slots[members], detour)
+        raised, events = self.step(
+            t, silent, listeners, members, seen, self.slots[members], detour, rows
+        )
         if raised:
             events += team.recovery.flagged(t, raised)
         return events
