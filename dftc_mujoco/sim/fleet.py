@@ -137,8 +137,8 @@ class MixedDrive:
     def __init__(self, fleet: Fleet, scene: Any, data: mujoco.MjData, dt: float) -> None:
         self.parts = []  # (robots, drive, slice of the flat command)
         start = 0
-        for model, group in zip(fleet.groups(), scene.groups, strict=True):
-            drive = model[0].adapter(group, data, dt)
+        for (robot, _), group in zip(fleet.groups(), scene.groups, strict=True):
+            drive = robot.adapter(group, data, dt)
             width = group.actuator.shape[1] + group.held.shape[1]
             self.parts.append(
                 (group.robots, drive, slice(start, start + width * len(group.robots)))
@@ -149,6 +149,7 @@ class MixedDrive:
         self.pose_dependent = any(d.pose_dependent for _, d, _ in self.parts)
 
     def reset(self) -> None:
+        """Every model's drive at the start of a run."""
         for _, drive, _ in self.parts:
             drive.reset()
 
@@ -182,6 +183,7 @@ class MixedFaults:
         self.due = min(p.due for _, p, _ in self.parts)
 
     def apply(self, t: float) -> list[Any]:
+        """Each model's faults at ``t``; returns the scenario's faults that start now."""
         new, self.just_ended = [], []
         for robots_, part, _ in self.parts:
             if t >= part.due:
@@ -192,6 +194,7 @@ class MixedFaults:
         return new
 
     def hold(self, ctrl: np.ndarray) -> np.ndarray:
+        """The flat commands with each stuck robot's kept at those of its onset (a copy)."""
         out = np.array(ctrl, copy=True)
         for robots_, part, cut in self.parts:
             if part.stuck.any():
@@ -200,11 +203,13 @@ class MixedFaults:
         return out
 
     def phi_series(self, t: np.ndarray, v_cmd: np.ndarray) -> np.ndarray:
+        """The additive fault φ of eq. 1 (T, N, 2) each robot suffered, from the log."""
         phi = np.zeros((len(t), v_cmd.shape[1], 2))
         for robots_, part, _ in self.parts:
             phi[:, robots_] = part.phi_series(t, v_cmd[:, robots_])
         return phi
 
     def clear(self) -> None:
+        """Every actuator back to its healthy parameters."""
         for _, part, _ in self.parts:
             part.clear()
