@@ -35,20 +35,8 @@ def diffdrive(model, data, body, infos, robot, fail, role_key, keys) -> dict[str
     for role in ("left", "right"):
         info = infos[role]
         j = info.joint_id
-        wheel = int(model.jnt_bodyid[j])
-        if info.joint_type != "hinge" or not subtree(model, body)[wheel] or wheel == body:
-            fail(
-                role_key(role),
-                f"actuator {info.name!r} must drive a wheel: a hinge of a body "
-                f"inside {robot.base!r} (it drives {info.joint!r})",
-            )
-        axis = rot.T @ data.xaxis[j]
-        if abs(axis[2]) > 0.2:
-            fail(
-                role_key(role),
-                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} "
-                "in the base frame; a wheel's axle must be horizontal",
-            )
+        owner = f"a wheel: a hinge of a body inside {robot.base!r}"
+        wheel, axis = _wheel_joint(model, data, rot, info, body, fail, role_key(role), owner)
         anchors.append(rot.T @ (data.xanchor[j] - origin))
         axes.append(axis)
         radii.append(_wheel_radius(model, data, wheel, data.xanchor[j], data.xaxis[j]))
@@ -106,34 +94,19 @@ def omni(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, Any
     (and ``wheels``), checking that the wheels move the base in every planar direction."""
     rot = data.xmat[body].reshape(3, 3)  # base frame -> world
     origin = data.xpos[body]
-    inside = subtree(model, body)
     out: dict[str, Any] = {"wheels": float(len(infos))}
     rows = []
     for k, role in enumerate(sorted(infos, key=lambda r: int(r.removeprefix("wheel")))):
         info = infos[role]
         j = info.joint_id
-        wheel = int(model.jnt_bodyid[j])
-        if info.joint_type != "hinge" or not inside[wheel] or wheel == body:
-            fail(
-                role_key("wheels"),
-                f"actuator {info.name!r} must drive a wheel: a hinge of a body inside "
-                f"{robot.base!r} (it drives {info.joint!r})",
-            )
-        axis = rot.T @ data.xaxis[j]
-        if abs(axis[2]) > 0.2:
-            fail(
-                role_key("wheels"),
-                f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} in the base "
-                "frame; a wheel's axle must be horizontal",
-            )
+        owner = f"a wheel: a hinge of a body inside {robot.base!r}"
+        wheel, axis = _wheel_joint(model, data, rot, info, body, fail, role_key("wheels"), owner)
         axis[2] = 0.0
         axis /= np.linalg.norm(axis)
         roll = np.cross(axis, [0.0, 0.0, 1.0])[:2]
         pos = (rot.T @ (data.xanchor[j] - origin))[:2]
         parts = np.flatnonzero(subtree(model, wheel))  # the wheel and its rollers
-        radius = max(
-            _wheel_radius(model, data, int(b), data.xanchor[j], data.xaxis[j]) for b in parts
-        )
+        radius = _rim(model, data, parts, j)
         if radius <= 0:
             fail(role_key("wheels"), f"wheel {info.joint!r} has no colliding geom to roll on")
         free = _roller_axis(model, data, rot, parts, wheel)
@@ -213,7 +186,7 @@ def swerve(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, A
     for k in range(count):
         steer, drive = infos[f"steer{k}"], infos[f"drive{k}"]
         js, jd = steer.joint_id, drive.joint_id
-        steer_body, wheel = int(model.jnt_bodyid[js]), int(model.jnt_bodyid[jd])
+        steer_body = int(model.jnt_bodyid[js])
         up = rot.T @ data.xaxis[js]
         if steer.joint_type != "hinge" or not inside[steer_body] or steer_body == body:
             fail(
@@ -227,29 +200,13 @@ def swerve(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, A
                 f"joint {steer.joint!r} turns about "
                 f"{np.round(up, 3).tolist()} in the base frame; a module steers about the vertical",
             )
-        if (
-            drive.joint_type != "hinge"
-            or not subtree(model, steer_body)[wheel]
-            or wheel == steer_body
-        ):
-            fail(
-                role_key("modules"),
-                f"actuator {drive.name!r} must drive the wheel of module "
-                f"{k}: a hinge of a body inside {steer.joint!r}'s (it drives {drive.joint!r})",
-            )
-        axle = rot.T @ data.xaxis[jd]
-        if abs(axle[2]) > 0.2:
-            fail(
-                role_key("modules"),
-                f"joint {drive.joint!r} turns about "
-                f"{np.round(axle, 3).tolist()} in the base frame; a wheel's axle must be "
-                "horizontal",
-            )
+        owner = f"the wheel of module {k}: a hinge of a body inside {steer.joint!r}'s"
+        wheel, axle = _wheel_joint(
+            model, data, rot, drive, steer_body, fail, role_key("modules"), owner
+        )
         roll = np.cross(axle, [0.0, 0.0, 1.0])[:2]
         pos = (rot.T @ (data.xanchor[js] - origin))[:2]
-        parts = np.flatnonzero(subtree(model, wheel))
-        anchor, axis = data.xanchor[jd], data.xaxis[jd]
-        radius = max(_wheel_radius(model, data, int(b), anchor, axis) for b in parts)
+        radius = _rim(model, data, np.flatnonzero(subtree(model, wheel)), jd)
         if radius <= 0:
             fail(role_key("modules"), f"wheel {drive.joint!r} has no colliding geom to roll on")
         out.update(
@@ -269,3 +226,28 @@ def swerve(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, A
                 "the modules share one steering axis: they cannot turn the base",
             )
     return out
+
+
+def _wheel_joint(model, data, rot, info, parent: int, fail, key: str, owner: str):
+    """The body a wheel actuator turns and its axle in the base frame, after checking that
+    it drives a hinge of a body inside ``parent`` (``owner`` says what it must drive) whose
+    axle is horizontal."""
+    j = info.joint_id
+    wheel = int(model.jnt_bodyid[j])
+    if info.joint_type != "hinge" or not subtree(model, parent)[wheel] or wheel == parent:
+        fail(key, f"actuator {info.name!r} must drive {owner} (it drives {info.joint!r})")
+    axis = rot.T @ data.xaxis[j]
+    if abs(axis[2]) > 0.2:
+        fail(
+            key,
+            f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} in the base frame; "
+            "a wheel's axle must be horizontal",
+        )
+    return wheel, axis
+
+
+def _rim(model, data, parts: np.ndarray, j: int) -> float:
+    """The largest distance of the colliding geoms of bodies ``parts`` (a wheel and its
+    rollers) from the axle of joint ``j``."""
+    anchor, axis = data.xanchor[j], data.xaxis[j]
+    return max(_wheel_radius(model, data, int(b), anchor, axis) for b in parts)
