@@ -672,6 +672,39 @@ def test_a_diffdrive_whose_wheels_do_not_share_an_axle_is_refused(tmp_path):
 OMNIBASE = DATA / "omnibase.robot.toml"
 
 
+def _legs(robot: robots.RobotModel, seconds: float) -> tuple[dict[float, np.ndarray], float]:
+    """Drive one robot alone at 0.2 m/s along x for 2 s, along y for 2 s, then diagonally
+    (0.15, -0.15): where its control point is every period (from its start) and how far it
+    turned at most [°]."""
+    sc = scene.compose(robot, np.zeros((1, 2)))
+    data = Plant.initial_data(sc)
+    d = robot.adapter(sc, data)
+    x0 = data.site_xpos[sc.site[0], :2].copy()
+    marks, turned = {}, 0.0
+    for _ in range(round(seconds / 0.01)):
+        t = data.time
+        u = [[0.2, 0.0]] if t < 2.0 else ([[0.0, 0.2]] if t < 4.0 else [[0.15, -0.15]])
+        data.ctrl[d.controlled()[0]] = d.command(np.array(u))[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+        mat = data.xmat[sc.body[0]]
+        turned = max(turned, abs(np.degrees(np.arctan2(mat[3], mat[0]))))
+        marks[round(data.time, 2)] = data.site_xpos[sc.site[0], :2] - x0
+    return marks, turned
+
+
+def _paper_outcome(robot_file: Path, rule: str, within: float) -> None:
+    """paper_case on the robot (its calibration in its file) with threshold rule ``rule``:
+    robot 1's stop at 41.8 s flagged by all four within ``within`` s, robot 1 alone
+    excluded, nobody else flagged, every premise held."""
+    over = {"team.robot_model": str(robot_file), "onboard.thresholds": rule}
+    r = loop.simulate(scenario.load_scenario("paper_case", overrides=over), progress=False)
+    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
+    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
+    assert all(41.8 < t < 41.8 + within for _, _, t in flags)
+    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+    assert all(p["held"] for p in r.summary["premises"].values())
+
+
 def test_an_omni_base_is_read_from_its_wheels():
     """Issue 24: drive = "omni" classifies each wheel from the compiled model: its position
     from the base, the direction a positive turn rolls the base (axle × z), its radius (the
@@ -696,21 +729,9 @@ def test_an_omni_base_is_read_from_its_wheels():
 def test_an_omni_base_goes_where_it_is_told_and_keeps_its_heading():
     """Physics: 0.2 m/s along x for 2 s, then along y for 2 s; the base moves 0.4 m each way
     (within its start-up) without turning."""
-    r = robots.get(str(OMNIBASE))
-    sc = scene.compose(r, np.zeros((1, 2)))
-    data = Plant.initial_data(sc)
-    d = r.adapter(sc, data)
-    x0 = data.site_xpos[sc.site[0], :2].copy()
-    yaw = []
-    for _ in range(400):
-        u = np.array([[0.2, 0.0]]) if data.time < 2.0 else np.array([[0.0, 0.2]])
-        data.ctrl[d.controlled()[0]] = d.command(u)[0]
-        mujoco.mj_step(sc.model, data, nstep=5)
-        mat = data.xmat[sc.body[0]]
-        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
-    moved = data.site_xpos[sc.site[0], :2] - x0
-    np.testing.assert_allclose(moved, [0.4, 0.4], atol=0.03)
-    assert max(abs(a) for a in yaw) < 1.0
+    marks, turned = _legs(robots.get(str(OMNIBASE)), 4.0)
+    np.testing.assert_allclose(marks[4.0], [0.4, 0.4], atol=0.03)
+    assert turned < 1.0
 
 
 def test_omni_wheels_that_cannot_move_the_base_everywhere_are_refused(tmp_path):
@@ -739,16 +760,7 @@ def test_the_paper_case_on_omni_wheels():
     """paper_case on the omni base (its calibration in the robot file) with block_row:
     robot 1's stop is flagged by all four and robot 1 alone is excluded; nobody else is
     flagged and every premise holds."""
-    s = scenario.load_scenario(
-        "paper_case",
-        overrides={"team.robot_model": str(OMNIBASE), "onboard.thresholds": "block_row"},
-    )
-    r = loop.simulate(s, progress=False)
-    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
-    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
-    assert all(41.8 < t < 41.8 + 2.5 for _, _, t in flags)
-    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
-    assert all(p["held"] for p in r.summary["premises"].values())
+    _paper_outcome(OMNIBASE, "block_row", within=2.5)
 
 
 MECANUM = DATA / "mecanumbase.robot.toml"
@@ -765,23 +777,11 @@ def test_mecanum_wheels_are_read_with_their_rollers_and_drive_the_base_sideways(
         assert abs(p[f"wheel{k}_rx"]) == pytest.approx(np.sqrt(0.5), abs=1e-3)
         assert abs(p[f"wheel{k}_ry"]) == pytest.approx(np.sqrt(0.5), abs=1e-3)
     assert p["wheel0_ry"] == pytest.approx(-p["wheel1_ry"])  # an X seen from above
-    sc = scene.compose(r, np.zeros((1, 2)))
-    data = Plant.initial_data(sc)
-    d = r.adapter(sc, data)
-    x0 = data.site_xpos[sc.site[0], :2].copy()
-    marks, yaw = {}, []
-    for _ in range(600):
-        t = data.time
-        u = [[0.2, 0.0]] if t < 2.0 else ([[0.0, 0.2]] if t < 4.0 else [[0.15, -0.15]])
-        data.ctrl[d.controlled()[0]] = d.command(np.array(u))[0]
-        mujoco.mj_step(sc.model, data, nstep=5)
-        mat = data.xmat[sc.body[0]]
-        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
-        marks[round(data.time, 2)] = data.site_xpos[sc.site[0], :2] - x0
+    marks, turned = _legs(r, 6.0)
     np.testing.assert_allclose(marks[2.0], [0.4, 0.0], atol=0.02)
     np.testing.assert_allclose(marks[4.0] - marks[2.0], [0.0, 0.4], atol=0.03)
     np.testing.assert_allclose(marks[6.0] - marks[4.0], [0.3, -0.3], atol=0.03)
-    assert max(abs(a) for a in yaw) < 2.0  # degrees, at the command switches
+    assert turned < 2.0  # degrees, at the command switches
 
 
 def test_plain_wheels_are_not_omni_wheels(tmp_path):
@@ -799,15 +799,7 @@ def test_plain_wheels_are_not_omni_wheels(tmp_path):
 def test_the_paper_case_on_mecanum_wheels():
     """paper_case on the mecanum base (its calibration in the robot file) with l1: robot
     1's stop flagged by all four within a second, robot 1 alone excluded, premises held."""
-    s = scenario.load_scenario(
-        "paper_case", overrides={"team.robot_model": str(MECANUM), "onboard.thresholds": "l1"}
-    )
-    r = loop.simulate(s, progress=False)
-    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
-    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
-    assert all(41.8 < t < 41.8 + 1.0 for _, _, t in flags)
-    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
-    assert all(p["held"] for p in r.summary["premises"].values())
+    _paper_outcome(MECANUM, "l1", within=1.0)
 
 
 SWERVE = DATA / "swervebase.robot.toml"
@@ -822,38 +814,18 @@ def test_swerve_modules_are_read_from_the_model_and_steer_where_they_are_told():
     corners = {(p[f"module{k}_x"], p[f"module{k}_y"]) for k in range(4)}
     assert corners == {(0.1, 0.1), (0.1, -0.1), (-0.1, 0.1), (-0.1, -0.1)}
     assert all(p[f"module{k}_r"] == pytest.approx(0.035, abs=1e-4) for k in range(4))
-    sc = scene.compose(r, np.zeros((1, 2)))
-    data = Plant.initial_data(sc)
-    d = r.adapter(sc, data)
-    x0 = data.site_xpos[sc.site[0], :2].copy()
-    marks, yaw = {}, []
-    for _ in range(600):
-        t = data.time
-        u = [[0.2, 0.0]] if t < 2.0 else ([[0.0, 0.2]] if t < 4.0 else [[0.15, -0.15]])
-        data.ctrl[d.controlled()[0]] = d.command(np.array(u))[0]
-        mujoco.mj_step(sc.model, data, nstep=5)
-        mat = data.xmat[sc.body[0]]
-        yaw.append(np.degrees(np.arctan2(mat[3], mat[0])))
-        marks[round(data.time, 2)] = data.site_xpos[sc.site[0], :2] - x0
+    marks, turned = _legs(r, 6.0)
     # each leg loses a little while the modules turn to their new direction
     np.testing.assert_allclose(marks[2.0], [0.4, 0.0], atol=0.03)
     np.testing.assert_allclose(marks[4.0] - marks[2.0], [0.0, 0.4], atol=0.03)
     np.testing.assert_allclose(marks[6.0] - marks[4.0], [0.3, -0.3], atol=0.03)
-    assert max(abs(a) for a in yaw) < 1.0
+    assert turned < 1.0
 
 
 def test_the_paper_case_on_swerve_modules():
     """paper_case on the swerve base (its calibration in the robot file) with l1: robot 1's
     stop flagged by all four within 1.5 s, robot 1 alone excluded, premises held."""
-    s = scenario.load_scenario(
-        "paper_case", overrides={"team.robot_model": str(SWERVE), "onboard.thresholds": "l1"}
-    )
-    r = loop.simulate(s, progress=False)
-    flags = [(e["by"], e["robot"], e["t"]) for e in r.events.items if e["kind"] == "detection"]
-    assert sorted(b for b, k, _ in flags) == [1, 2, 3, 4] and all(k == 1 for _, k, _ in flags)
-    assert all(41.8 < t < 41.8 + 1.5 for _, _, t in flags)
-    assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
-    assert all(p["held"] for p in r.summary["premises"].values())
+    _paper_outcome(SWERVE, "l1", within=1.5)
 
 
 def test_a_swerve_file_names_pairs_and_steers_about_the_vertical(tmp_path):
