@@ -450,6 +450,7 @@ class Simulation:
         )
         assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
+        log = self.log
         channel, sensors = self.channel, self.sensors
         watch = MONITOR_ALLOWED
         data = plant.data
@@ -504,6 +505,10 @@ class Simulation:
                     j = k if k < last else last
                     if channel is not None:
                         self._radio(t, k, channel)
+                    # the estimates only where a log row or the snapshot after step() shows them
+                    team.estimates = (
+                        (k % log_every == 0 and log.row_nn >= 0) or k == steps or k == k_end - 1
+                    )
                     try:
                         team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
                     except (SimulationError, KeyboardInterrupt):

@@ -492,7 +492,7 @@ def test_exclusive_isolation_needs_the_other_residuals_below_their_thresholds():
     ):
         for rule, flagged in expect.items():
             d = Decision.standalone(3, window=0.05, dt=0.01)
-            d.above, d.below = np.zeros((2, 3)), np.zeros((2, 3))
+            d.timer = np.zeros((2, 3), np.int32)
             d.flag, d._raised = np.zeros((2, 3), bool), np.zeros((2, 3), bool)
             d.isolated = np.full(2, -1, dtype=np.int64)
             d.exclusive = ISOLATION[rule]

@@ -7,6 +7,7 @@ The rule is the compiled :func:`decide`, which the compiled period calls too."""
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -15,54 +16,124 @@ from numba import njit, prange
 from ..graph import Graph
 from .block import Block, TeamConfig
 from .parallel import twin
+from .thresholds.paper import dense_thresholds, threshold_at
 
 #: ``fdir.isolation`` -> the mode of :func:`decide`
 ISOLATION = {"pairwise": 0, "exclusive": 1, "exclusive_history": 2}
 
 
-def _decide(
-    r_norm, mu, above, below, flag, dt, window, mode, isolated, raised, blocks
-):  # pragma: no cover - compiled
-    """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``window`` s; lowers it after as long below.
+@functools.cache
+def count_for(window: float, dt: float) -> int:
+    """How many rounds a condition must hold to last ``window`` s: the smallest c with
+    dt + dt + … (c times, in floating point) ≥ window − 1e-9, the sum the float timers of
+    Remark 5.2 used to keep, so the integer timers switch at the very same round."""
+    if not window / dt < 1e6:  # beyond any run (inf: never): the float sum is not kept
+        return int(min(np.ceil(window / dt), np.iinfo(np.int32).max))
+    acc, c = 0.0, 0
+    while acc < window - 1e-9:
+        acc += dt
+        c += 1
+    return c
 
-    Updates the timers ``above``, ``below`` and ``flag`` (M, M) in place (eq. 39 with
-    Remark 5.2's window); ``raised`` (M, M) marks the flags raised now. Returns how many
-    were raised. ``mode`` (:data:`ISOLATION`): 0, pairwise, robot i judges each k on its
-    own; 1, exclusive, robot i counts ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals are
-    at or below their thresholds (eq. 39's second clause, instant by instant); 2,
-    exclusive with history, eq. 39 as the paper states it: also only if robot i has flagged
-    no other robot since the last restart. ``isolated[i]`` (M,) is the robot robot i
-    flagged first since then (−1: none), kept for mode 2. Robots are taken in ``blocks``
-    contiguous groups (each robot's row is its own decision).
+
+@njit(inline="always")
+def tick(c, over, need):  # pragma: no cover - compiled
+    """A timer after one more round: rounds above (> 0) or not above (< 0) the threshold,
+    counted from 1 at each change of side and kept within ±max(need, 1)."""
+    top = max(need, 1)
+    if over:
+        return 1 if c <= 0 else min(c + 1, top)
+    return -1 if c >= 0 else max(c - 1, -top)
+
+
+@njit(inline="always")
+def move_flag(i, k, c, flag, need, isolated, raised):  # pragma: no cover - compiled
+    """Raise robot i's flag on k once its timer ``c`` counts ``need`` rounds above, lower it
+    after ``need`` rounds not above; returns 1 when it was raised now."""
+    if c > 0 and c >= need and not flag[i, k]:
+        flag[i, k] = True
+        raised[i, k] = True
+        if isolated[i] < 0:
+            isolated[i] = k
+        return 1
+    if c < 0 and -c >= need and flag[i, k]:
+        flag[i, k] = False
+    return 0
+
+
+@njit(inline="always")
+def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
+    """Eq. 39 with Remark 5.2's window for robot i's row (its own residuals and thresholds
+    only) and the decision's record ``dec``; returns how many flags it raised. ``th`` is
+    this round's thresholds (:func:`~.thresholds.paper.threshold_at`). See :func:`_decide`.
+
+    Pairwise with eq. 40's factors (the common case) the timers move in a loop without
+    branches (ⁱμ_k = cᵢ b_k off the diagonal; where b_k = +inf, cᵢ b_k is inf or nan and
+    the comparison false, as with the +inf of :func:`~.thresholds.paper.threshold_at`),
+    and only a row whose flags may change takes the loop that moves them."""
+    timer, flag, need, mode, isolated, raised = (
+        dec.timer,
+        dec.flag,
+        dec.need,
+        dec.exclusive,
+        dec.isolated,
+        dec.raised,
+    )
+    m = r_norm.shape[1]
+    if dec.raised_rows[i]:  # the flags raised at the last round are not raised now
+        raised[i, :] = False
+        dec.raised_rows[i] = False
+    count = 0
+    if mode == 0 and th.dense.shape[0] == 0:
+        ci, bound, own = th.coef[i], th.bound, timer[i, i]
+        changes = 0
+        for k in range(m):
+            c = tick(timer[i, k], r_norm[i, k] > ci * bound[k], need)
+            timer[i, k] = c
+            changes += (c > 0 and c >= need) != flag[i, k]
+        c = tick(own, r_norm[i, i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
+        timer[i, i] = c
+        changes += (c > 0 and c >= need) != flag[i, i]
+        if changes:
+            for k in range(m):
+                count += move_flag(i, k, timer[i, k], flag, need, isolated, raised)
+    else:
+        n_over = 0
+        if mode > 0:
+            for k in range(m):
+                if r_norm[i, k] > threshold_at(th, i, k):
+                    n_over += 1
+        for k in range(m):  # in order: mode 2 blocks the k after one isolated in this round
+            blocked = (mode > 0 and n_over > 1) or (
+                mode == 2 and isolated[i] >= 0 and isolated[i] != k
+            )
+            over = r_norm[i, k] > threshold_at(th, i, k) and not blocked
+            timer[i, k] = tick(timer[i, k], over, need)
+            count += move_flag(i, k, timer[i, k], flag, need, isolated, raised)
+    if count:
+        dec.raised_rows[i] = True
+    return count
+
+
+def _decide(r_norm, th, dec, blocks):  # pragma: no cover - compiled
+    """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``dec.need`` rounds (the window); lowers
+    it after as many not above.
+
+    Updates the record's ``timer`` and ``flag`` (M, M) in place (eq. 39 with Remark 5.2's
+    window); ``raised`` (M, M) marks the flags raised now. Returns how many were raised.
+    ``exclusive`` (:data:`ISOLATION`): 0, pairwise, robot i judges each k on its own; 1,
+    exclusive, robot i counts ‖ⁱr_k‖ > ⁱμ_k only while all its other residuals are at or
+    below their thresholds (eq. 39's second clause, instant by instant); 2, exclusive with
+    history, eq. 39 as the paper states it: also only if robot i has flagged no other robot
+    since the last restart. ``isolated[i]`` (M,) is the robot robot i flagged first since
+    then (−1: none), kept for mode 2. Robots are taken in ``blocks`` contiguous groups
+    (each robot's row is its own decision, :func:`decide_row`).
     """
     count = 0
     m = r_norm.shape[0]
     for b in prange(blocks):
         for i in range(b * m // blocks, (b + 1) * m // blocks):
-            n_over = 0
-            if mode > 0:
-                for k in range(r_norm.shape[1]):
-                    if r_norm[i, k] > mu[i, k]:
-                        n_over += 1
-            for k in range(r_norm.shape[1]):
-                raised[i, k] = False
-                blocked = (mode > 0 and n_over > 1) or (
-                    mode == 2 and isolated[i] >= 0 and isolated[i] != k
-                )
-                if r_norm[i, k] > mu[i, k] and not blocked:
-                    above[i, k] += dt
-                    below[i, k] = 0.0
-                    if not flag[i, k] and above[i, k] >= window - 1e-9:
-                        flag[i, k] = True
-                        raised[i, k] = True
-                        count += 1
-                        if isolated[i] < 0:
-                            isolated[i] = k
-                else:
-                    above[i, k] = 0.0
-                    below[i, k] += dt
-                    if flag[i, k] and below[i, k] >= window - 1e-9:
-                        flag[i, k] = False
+            count += decide_row(r_norm, th, i, dec)
     return count
 
 
@@ -72,23 +143,21 @@ decide_parallel = njit(cache=True, parallel=True)(twin(_decide, "_decide_paralle
 
 
 @njit(cache=True)
-def decide(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised):  # pragma: no cover
+def decide(r_norm, th, dec):  # pragma: no cover - compiled
     """Eq. 39 for every robot on one core (:func:`_decide`)."""
-    return decide_in_groups(r_norm, mu, above, below, flag, dt, window, mode, isolated, raised, 1)
+    return decide_in_groups(r_norm, th, dec, 1)
 
 
 class DecisionRecord(NamedTuple):
     """What the compiled period (:mod:`.period`) reads and writes of the decision."""
 
-    mu: np.ndarray  # (M, M) this period's thresholds ⁱμ_k
-    above: np.ndarray  # (M, M) time above, below the threshold [s]
-    below: np.ndarray
+    timer: np.ndarray  # (M, M) int32: rounds above (> 0) or not above (< 0) the threshold
     flag: np.ndarray  # (M, M) robot i flags robot k
-    dt: float
-    window: float
+    need: int  # rounds a condition must hold: the window (:func:`count_for`)
     exclusive: int  # the isolation mode (ISOLATION)
     isolated: np.ndarray  # (M,) the robot each isolates, or -1
     raised: np.ndarray  # (M, M) the flags raised this period
+    raised_rows: np.ndarray  # (M,) rows of ``raised`` with a flag in them
 
 
 class Decision(Block):
@@ -120,12 +189,15 @@ class Decision(Block):
         self.exclusive = ISOLATION[isolation]
         n = len(x_m0)
         self.isolated = np.full(n, -1, dtype=np.int64)
+        self._allocate(n)
+
+    def _allocate(self, n: int) -> None:
         # np.full writes every page now: np.zeros leaves them to the first read, and the
         # decision of eq. 39 then paid page faults every period (31-35 ms at N = 1000)
-        self.above = np.full((n, n), 0.0)
-        self.below = np.full((n, n), 0.0)
+        self.timer = np.full((n, n), 0, dtype=np.int32)
         self.flag = np.full((n, n), False)
         self._raised = np.full((n, n), False)
+        self._raised_rows = np.full(n, False)
 
     @classmethod
     def standalone(cls, n: int, window: float, dt: float) -> Decision:
@@ -133,27 +205,25 @@ class Decision(Block):
         d = cls(window)
         d.dt, d.window, d.exclusive = dt, window, 0
         d.isolated = np.full(n, -1, dtype=np.int64)
-        d.above, d.below = np.full((n, n), 0.0), np.full((n, n), 0.0)
-        d.flag, d._raised = np.full((n, n), False), np.full((n, n), False)
+        d._allocate(n)
         return d
 
     def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
         """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
-        decide(np.ascontiguousarray(r_norm, float), *self.record(np.ascontiguousarray(mu, float)))
+        th = dense_thresholds(np.ascontiguousarray(mu, float))
+        decide(np.ascontiguousarray(r_norm, float), th, self.record())
         return self._raised
 
-    def record(self, mu: np.ndarray) -> DecisionRecord:
-        """The state the compiled period updates, with this period's thresholds ``mu``."""
+    def record(self) -> DecisionRecord:
+        """The state the compiled period updates (the thresholds come in their own record)."""
         return DecisionRecord(
-            mu,
-            self.above,
-            self.below,
+            self.timer,
             self.flag,
-            self.dt,
-            self.window,
+            count_for(self.window, self.dt),
             self.exclusive,
             self.isolated,
             self._raised,
+            self._raised_rows,
         )
 
     @property
@@ -164,7 +234,8 @@ class Decision(Block):
     def drop(self, p: int, graph: Graph, t: float) -> None:
         """Forget robot at position ``p`` (vectors resized after an exclusion); the isolation
         history starts again (the fault it recorded has been handled)."""
-        for name in ("above", "below", "flag", "_raised"):
+        self._raised_rows = np.full(len(self.flag) - 1, False)
+        for name in ("timer", "flag", "_raised"):
             a = getattr(self, name)
             setattr(self, name, np.delete(np.delete(a, p, axis=0), p, axis=1))
         self.isolated = np.full(len(self.flag), -1, dtype=np.int64)

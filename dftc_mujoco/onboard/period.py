@@ -32,7 +32,7 @@ from numba import njit, prange
 
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
-from .decision import DecisionRecord, decide_in_groups, decide_parallel
+from .decision import DecisionRecord, decide_row
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
     ObserverRecord,
@@ -44,6 +44,7 @@ from .observer import (
 )
 from .parallel import twin
 from .supervisor import SupervisorRecord, Surroundings, supervise
+from .thresholds.paper import ThresholdRecord
 
 RAISED = 1  # some flag was raised (detection events to report)
 SWITCHED = 2  # some robot switched behaviour (reactive events to report)
@@ -61,6 +62,7 @@ class PeriodInputs(NamedTuple):
     rates: np.ndarray
     fdir: bool  # the fault estimator and the decision run
     round_now: bool  # the observers step and the decision runs (every period: ideal network)
+    estimates: bool  # write ⁱx̂ into the buffers (a log row or a snapshot reads them)
 
 
 class PeriodBuffers(NamedTuple):
@@ -79,68 +81,70 @@ class PeriodBuffers(NamedTuple):
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
 
 
-def _estimates(y, s, xh, xd, vd, u_g, kc, dt, n, blocks):  # pragma: no cover - compiled
-    """Pass 1 for every robot i, in ``blocks`` contiguous groups of rows: u_g,i (eq. 16),
-    ⁱx̂ (eq. 21) into ``xh`` and ∫ ⁱû_g (eqs. 15, 20) advanced in ``s`` (rows M × M·n)."""
-    m = y.shape[0]
+@njit(cache=True)
+def _round_row(inp, ob, th, dec, out, i, row, y, yn, n):  # pragma: no cover - compiled
+    """Robot i at a round of the observers: ⁱr (eq. 35), ‖ⁱr_k‖, ⁱŷ of the next period
+    (eq. 19) and, with FDIR, its flags (eq. 39); returns how many it raised."""
+    residual_row(
+        ob.y_hat,
+        ob.int_u_own,
+        out.x_own,
+        ob.src,
+        ob.first_edge,
+        ob.in_degree,
+        ob.links,
+        ob.networked,
+        i,
+        row,
+    )
+    row_norms(row, i, n, out.r_norm)
+    for a in range(y.shape[1]):
+        yn[i, a] = advance_one(y[i, a], row[a], ob.ko, ob.dt_o)
+    if not inp.fdir:
+        return 0
+    return decide_row(out.r_norm, th, i, dec)
+
+
+def _rows(inp, ob, ctl, th, dec, out):  # pragma: no cover - compiled
+    """The one pass over the team's N × N state, robot by robot (row i: robot i's own state,
+    its own measurement and its in-neighbours' messages only), in as many contiguous groups
+    of robots as ``rows`` (B, M·n) has scratch rows; returns how many flags were raised.
+
+    For robot i: u_g,i (eq. 16, its own block, before ∫ moves), ⁱx̂ (eq. 21, into ``xh``
+    when ``write_xh``: only where a log row or a snapshot reads it) and ∫ ⁱû_g advanced in
+    ``s`` (eqs. 15, 20); at a round of the observers (``round_now``) its residual ⁱr
+    (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm``, ⁱŷ of the next period (eq. 19) into ``yn``
+    and, with FDIR, its flags (eq. 39, :func:`~.decision.decide_row`, with the
+    thresholds ``th`` read entry by entry). Every N × N array is read or written once per
+    period; the residual reads only ŷ and ∫u, which this pass does not change, so its
+    order against the integrals is free."""
+    m, _, n = ob.y_hat.shape
+    y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
+    yn, xh = ob.y_next.reshape(m, m * n), out.x_hat.reshape(m, m * n)
+    xd, vd, u_g, kc, dt = out.x_d.reshape(-1), out.xd_dot.reshape(-1), out.u_g, ctl.kc, ob.dt
+    rows, write_xh, round_now = out.row, inp.estimates, inp.round_now
+    blocks = rows.shape[0]
+    count = 0
     for b in prange(blocks):
+        row = rows[b]
         for i in range(b * m // blocks, (b + 1) * m // blocks):
             for d in range(n):  # u_g,i = Γᵢ ⁱû_g (eq. 16): robot i's own block, before ∫ moves
                 a = i * n + d
                 u_g[i, d] = collective_one(vd[a], kc, xd[a], estimate_one(y[i, a], s[i, a]))
             for a in range(m * n):
                 e = estimate_one(y[i, a], s[i, a])  # eq. 21
-                xh[i, a] = e
+                if write_xh:
+                    xh[i, a] = e
                 s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
+            if round_now:
+                count += _round_row(inp, ob, th, dec, out, i, row, y, yn, n)
+    return count
 
 
-def _residuals(
-    y_hat,
-    int_u_own,
-    x_own,
-    src,
-    first_edge,
-    in_degree,
-    links,
-    networked,
-    rows,
-    r_norm,
-    yn,
-    ko,
-    dt,
-):  # pragma: no cover - compiled
-    """Pass 2 for every robot i, in as many contiguous groups of rows as ``rows`` (B, M·n)
-    has scratch rows: ⁱr (eq. 35), its norms, and ⁱŷ of the next period (eq. 19) into
-    ``yn``."""
-    m, _, n = y_hat.shape
-    y = y_hat.reshape(m, m * n)
-    blocks = rows.shape[0]
-    for b in prange(blocks):
-        row = rows[b]
-        for i in range(b * m // blocks, (b + 1) * m // blocks):
-            residual_row(  # eq. 35
-                y_hat,
-                int_u_own,
-                x_own,
-                src,
-                first_edge,
-                in_degree,
-                links,
-                networked,
-                i,
-                row,
-            )
-            row_norms(row, i, n, r_norm)
-            for a in range(m * n):
-                yn[i, a] = advance_one(y[i, a], row[a], ko, dt)  # eq. 19
-
-
-# the passes over the team's N × N state, each on one core or split over the cores (a team
-# of PARALLEL_FROM robots or more: below it, starting the threads costs more than it saves)
-estimates = njit(cache=True)(_estimates)
-estimates_parallel = njit(cache=True, parallel=True)(twin(_estimates, "_estimates_parallel"))
-residuals = njit(cache=True)(_residuals)
-residuals_parallel = njit(cache=True, parallel=True)(twin(_residuals, "_residuals_parallel"))
+# the pass over the team's N × N state on one core, or split over the cores (a team of
+# PARALLEL_FROM robots or more: below it, starting the threads costs more than it saves)
+team_rows = njit(cache=True)(_rows)
+team_rows_parallel = njit(cache=True, parallel=True)(twin(_rows, "_rows_parallel"))
 PARALLEL_FROM = 200
 
 
@@ -262,14 +266,15 @@ def team_period(
     seen: Surroundings,
     drive: DriveRecord,
     est: EstimatorRecord,
+    th: ThresholdRecord,
     dec: DecisionRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
     """One period for the members ``inp.rows`` on one core; returns RAISED | SWITCHED |
-    SATURATED bits. The stages in the order of Fig. 1: :func:`begin`, the estimate pass
-    (eqs. 15, 16, 20, 21), :func:`act`, the residual pass (eqs. 35, 19), :func:`deliver`,
-    the decision (eq. 39); :func:`team_period_split` runs the same stages with the passes
-    and the decision over every core.
+    SATURATED bits. The stages in the order of Fig. 1: :func:`begin`, the pass over the
+    N × N state (eqs. 16, 21, 15, 20, 35, 19 and the decision of eq. 39, :func:`_rows`),
+    :func:`act`, :func:`deliver`; :func:`team_period_split` runs the same stages with the
+    pass over every core.
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
     ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
@@ -279,48 +284,10 @@ def team_period(
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
     begin(inp, out)
-    m, _, n = ob.y_hat.shape
-    y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
-    xh, xd, vd = out.x_hat.reshape(m, m * n), out.x_d.reshape(-1), out.xd_dot.reshape(-1)
-    estimates(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, 1)
+    raised = team_rows(inp, ob, ctl, th, dec, out)
     code = act(inp, sup, seen, drive, out)
-    yn = ob.y_next.reshape(m, m * n)
-    if inp.round_now:  # a round of the observers (every period on the ideal network)
-        residuals(
-            ob.y_hat,
-            ob.int_u_own,
-            out.x_own,
-            ob.src,
-            ob.first_edge,
-            ob.in_degree,
-            ob.links,
-            ob.networked,
-            out.row,
-            out.r_norm,
-            yn,
-            ob.ko,
-            ob.dt_o,
-        )
     deliver(inp, ob, drive, est, out)
-    if (
-        inp.fdir
-        and inp.round_now
-        and decide_in_groups(
-            out.r_norm,
-            dec.mu,
-            dec.above,
-            dec.below,
-            dec.flag,
-            dec.dt,
-            dec.window,
-            dec.exclusive,
-            dec.isolated,
-            dec.raised,
-            1,
-        )
-    ):  # eq. 39 (star-unpacking a NamedTuple does not compile)
-        code |= RAISED
-    return code
+    return code | RAISED if raised else code
 
 
 def team_period_split(
@@ -331,43 +298,20 @@ def team_period_split(
     seen: Surroundings,
     drive: DriveRecord,
     est: EstimatorRecord,
+    th: ThresholdRecord,
     dec: DecisionRecord,
     out: PeriodBuffers,
 ) -> int:
-    """:func:`team_period`'s stages with the two passes over the N × N state and the decision
-    run in ``out.row.shape[0]`` groups of robots over every core: the same arithmetic per
-    robot, so the same numbers bit for bit. Called stage by stage from Python (a few µs,
-    nothing at the N ≥ PARALLEL_FROM it is for): a compiled caller of the parallel passes
-    pays the thread pool's cost even where it runs them on one core (4.5 µs per period at
-    N = 4)."""
-    groups = out.row.shape[0]
+    """:func:`team_period`'s stages with the pass over the N × N state run in
+    ``out.row.shape[0]`` groups of robots over every core: the same arithmetic per robot,
+    so the same numbers bit for bit. Called stage by stage from Python (a few µs, nothing
+    at the N ≥ PARALLEL_FROM it is for): a compiled caller of the parallel pass pays the
+    thread pool's cost even where it runs it on one core (4.5 µs per period at N = 4)."""
     begin(inp, out)
-    m, _, n = ob.y_hat.shape
-    y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
-    xh, xd, vd = out.x_hat.reshape(m, m * n), out.x_d.reshape(-1), out.xd_dot.reshape(-1)
-    estimates_parallel(y, s, xh, xd, vd, out.u_g, ctl.kc, ob.dt, n, groups)
+    raised = team_rows_parallel(inp, ob, ctl, th, dec, out)
     code = act(inp, sup, seen, drive, out)
-    yn = ob.y_next.reshape(m, m * n)
-    if inp.round_now:  # a round of the observers (every period on the ideal network)
-        residuals_parallel(
-            ob.y_hat,
-            ob.int_u_own,
-            out.x_own,
-            ob.src,
-            ob.first_edge,
-            ob.in_degree,
-            ob.links,
-            ob.networked,
-            out.row,
-            out.r_norm,
-            yn,
-            ob.ko,
-            ob.dt_o,
-        )
     deliver(inp, ob, drive, est, out)
-    if inp.fdir and inp.round_now and decide_parallel(out.r_norm, *dec, groups):  # eq. 39
-        code |= RAISED
-    return int(code)
+    return int(code | RAISED if raised else code)
 
 
 @njit(cache=True)
@@ -375,19 +319,20 @@ def team_period_flat(*a):  # pragma: no cover - compiled
     """:func:`team_period` with the records' fields passed one by one, in the records' order
     (``team_period_flat(*inputs, *observer, ..., *buffers)``), the records rebuilt inside
     compiled code, where building them costs nothing. At the boundary numba types a tuple
-    argument element by element in Python on every call (10 µs for the nine records at
-    N = 4, twice the period's arithmetic) and a flat argument list in its C fast path. The
-    slices below are checked against the records' field counts (:data:`RECORDS`)."""
+    argument element by element in Python on every call (10 µs for the records at N = 4,
+    twice the period's arithmetic) and a flat argument list in its C fast path. The slices
+    below are checked against the records' field counts (:data:`RECORDS`)."""
     return team_period(
-        PeriodInputs(*a[0:8]),
-        ObserverRecord(*a[8:20]),
-        ControllerRecord(*a[20:21]),
-        SupervisorRecord(*a[21:26]),
-        Surroundings(*a[26:30]),
-        DriveRecord(*a[30:36]),
-        EstimatorRecord(*a[36:47]),
-        DecisionRecord(*a[47:56]),
-        PeriodBuffers(*a[56:67]),
+        PeriodInputs(*a[0:9]),
+        ObserverRecord(*a[9:21]),
+        ControllerRecord(*a[21:22]),
+        SupervisorRecord(*a[22:27]),
+        Surroundings(*a[27:31]),
+        DriveRecord(*a[31:37]),
+        EstimatorRecord(*a[37:48]),
+        ThresholdRecord(*a[48:53]),
+        DecisionRecord(*a[53:60]),
+        PeriodBuffers(*a[60:71]),
     )
 
 
@@ -400,9 +345,10 @@ RECORDS = (
     Surroundings,
     DriveRecord,
     EstimatorRecord,
+    ThresholdRecord,
     DecisionRecord,
     PeriodBuffers,
 )
-_ENDS = (8, 20, 21, 26, 30, 36, 47, 56, 67)  # where each record ends in team_period_flat's a
+_ENDS = (9, 21, 22, 27, 31, 37, 48, 53, 60, 71)  # where each record ends in team_period_flat's a
 if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
     raise ImportError("team_period_flat's slices no longer match the records' fields")

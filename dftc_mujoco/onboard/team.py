@@ -37,11 +37,11 @@ from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
 from .fault_estimator import EstimatorRecord, FaultEstimator
+from .general import general_period
 from .observer import Observer
 from .period import (
     PARALLEL_FROM,
     RAISED,
-    SATURATED,
     SWITCHED,
     PeriodBuffers,
     PeriodInputs,
@@ -53,6 +53,7 @@ from .recovery import Recovery, split_event
 from .sighting import Sighting
 from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
 from .thresholds import Thresholds
+from .thresholds.paper import dense_thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -84,7 +85,8 @@ class Team:
     After a step the period's outputs are attributes: ``u`` and ``u_bar`` (N, 2)
     on the original robot axis (nominal input of eq. 8 and the compensated one
     sent to the actuators, eq. 28); ``x_hat`` (M, M, 2) the estimates before the
-    update, ``x_d`` (M, 2), ``r_norm`` and ``mu`` (M, M) on the members' axis.
+    update (on the compiled path written only while :attr:`estimates` is true), ``x_d``
+    (M, 2), ``r_norm`` and ``mu`` (M, M) on the members' axis.
     Events (1-based robots) accumulate in ``events`` until the caller takes them.
     """
 
@@ -173,6 +175,10 @@ class Team:
         tol, reach, wd = config.sighting_tolerance, config.sighting_range, config.detection_window
         see = config.networked and config.fdir and tol > 0 and reach > 0
         self.sighting = Sighting(n, tol, reach, wd, config.dt) if see else None  # silent robots
+        #: write the estimates ⁱx̂ this period (the loop asks only at the periods whose log
+        #: row or snapshot shows them: they are the largest array a period writes)
+        self.estimates = True
+        self._mu_t = 0.0
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
@@ -243,7 +249,7 @@ class Team:
         self.x_own = np.empty((m, 2))
         self.x_d = np.empty((m, 2))
         self.xd_dot = np.empty((m, 2))
-        self.x_hat = np.empty((m, m, 2))
+        self.x_hat = np.full((m, m, 2), np.nan)  # written at the periods that ask (estimates)
         self._u_g = np.empty((m, 2))
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
@@ -254,7 +260,7 @@ class Team:
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
         self.r_norm = np.zeros((m, m))  # no residual before the first round of a network
         self._raised = np.zeros((m, m), bool)
-        self.mu = np.full((m, m), np.inf)
+        self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         cfg, gone = self.config, len(self.gone)
         self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
         self._obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
@@ -323,14 +329,14 @@ class Team:
             b.t = t
         radios = self.radios
         if radios is None:  # the paper's network: the observers step every period
-            self.mu = self.thresholds.mu(t)
+            self._thresholds_at(t)
         elif self.rounds.tick():  # a round of the observers
-            self.mu = self.thresholds.mu(self.rounds.rule_time(t))
+            self._thresholds_at(self.rounds.rule_time(t))
             self.events += radios.watch(t, self.rounds.index, self.members)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
-            code = self._general(x_m, c, c_dot, offsets, rates)
+            code = general_period(self, x_m, c, c_dot, offsets, rates)
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
         if self.sighting is not None and sensed_bodies is not None:
@@ -345,6 +351,27 @@ class Team:
         if code & SWITCHED:
             self._switches(t)
         return code
+
+    def _thresholds_at(self, t: float) -> None:
+        """This round's ⁱμ_k: the compiled period reads the thresholds' record (eq. 40 as its
+        factors); :attr:`mu` writes them out as an array only when read."""
+        if self.compiled:
+            self._th = self.thresholds.record(t)
+            self._mu, self._mu_t = None, t
+        else:
+            self._mu = self.thresholds.mu(t)
+
+    @property
+    def mu(self) -> np.ndarray:
+        """(M, M) this round's thresholds ⁱμ_k (rows observe, columns are monitored)."""
+        if self._mu is None:
+            self._mu = self.thresholds.mu(self._mu_t)
+        return self._mu
+
+    @mu.setter
+    def mu(self, value: np.ndarray) -> None:
+        self._mu = value
+        self._th = dense_thresholds(np.ascontiguousarray(value, dtype=float))
 
     def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
         """The network delivered messages (:meth:`.radio.Radios.receive`)."""
@@ -362,14 +389,25 @@ class Team:
         if self._row.shape[0] > 1:  # a large team: the passes on every core
             ctl, sup, seen, drive, est = self._records()
             code = team_period_split(
-                PeriodInputs(x_m, self.members, c, c_dot, offsets, rates, fdir, self.rounds.now),
+                PeriodInputs(
+                    x_m,
+                    self.members,
+                    c,
+                    c_dot,
+                    offsets,
+                    rates,
+                    fdir,
+                    self.rounds.now,
+                    self.estimates or self.ended is not None,  # an ended team's last row
+                ),
                 self.observer.record(),
                 ctl,
                 sup,
                 seen,
                 drive,
                 est,
-                self.decision.record(self.mu),
+                self._th,
+                self.decision.record(),
                 self._buffers,
             )
         else:  # one compiled call, the records passed field by field (team_period_flat)
@@ -382,6 +420,7 @@ class Team:
                 rates,
                 fdir,
                 self.rounds.now,
+                self.estimates or self.ended is not None,  # an ended team's last row
                 *self._flat_records(),
             )
         if self.rounds.now:
@@ -394,7 +433,7 @@ class Team:
         Their arrays change only at an exclusion (the cache is emptied then), ŷ and ŷ⁺ swap
         every period and a thresholds rule may hand out a new ⁱμ_k: the tuples are kept per
         (ŷ, μ, range reading), at most a few. Each holds its arrays, so no id is reused."""
-        key = (id(self.observer.y_hat), id(self.mu), self._sensed)
+        key = (id(self.observer.y_hat), id(self._th.dense), self._sensed)
         flat = self._flat.get(key)
         if flat is None:
             if len(self._flat) >= 4:
@@ -402,7 +441,8 @@ class Team:
             records = (
                 self.observer.record(),
                 *self._records(),
-                self.decision.record(self.mu),
+                self._th,
+                self.decision.record(),
                 self._buffers,
             )
             flat = self._flat[key] = tuple(v for r in records for v in r)
@@ -420,67 +460,6 @@ class Team:
             self.drive.record(),
             self.estimator.record(self._touch),
         )
-
-    def _general(self, x_m, c, c_dot, offsets, rates) -> int:
-        """The same period through the blocks' Python methods (any block set)."""
-        cfg, mem = self.config, self.members
-        whole = len(mem) == self.n
-        x_own = x_m if whole else x_m[mem]
-        np.add(c, offsets, out=self.x_d)  # J⁻¹σ_d, the mission (eq. 14)
-        np.add(c_dot, rates, out=self.xd_dot)
-        before = np.array(self.supervisor.active, copy=True)
-        x_hat = self.observer.estimate()  # eq. 21
-        self.x_hat = np.array(x_hat, dtype=float)
-        u_hat_g = self.controller.collective_input(x_hat, self.x_d, self.xd_dot)  # eq. 15
-        u_g = self.controller.own_input(u_hat_g)  # eq. 16
-        mates = self._mates if self._sensed and cfg.teammate_safe > 0 else None
-        if mates is not None and self._supervisor_sees_mates:
-            u_mem, delta_u = self.supervisor.step(
-                x_own, u_g, self._obs_p, self._obs_d, self._obs_a, teammates=mates
-            )
-        else:
-            u_mem, delta_u = self.supervisor.step(x_own, u_g, self._obs_p, self._obs_d, self._obs_a)
-        u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
-        delta_u = np.array(delta_u, dtype=float)
-        saturated = self.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem)
-        if not whole:
-            self.u[:] = 0.0  # an excluded robot is told to stay where it is
-        self.u[mem] = u_mem
-        self.drive.deliver(self.u)  # with a lag, u becomes what the drive delivers
-        if self.drive.lagged:
-            u_mem = self.u[mem]
-            delta_u = u_mem - u_g
-        if self.rounds.now:
-            r = self.observer.residual(x_own)  # eq. 35
-            self.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
-            if cfg.fdir:  # what the detector judges by, on this period's messages (‖r‖ vs μ)
-                self.r_norm, self.mu = self.detector.judge(
-                    self.r_norm, self.mu, self.observer, x_own
-                )
-        else:  # between two rounds of the network only the integrals move
-            r = np.zeros_like(self.x_hat)
-        self.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
-        code = SWITCHED if not np.array_equal(before, self.supervisor.active) else 0
-        if saturated:
-            code |= SATURATED
-        if cfg.fdir:
-            if self._estimator_holds:  # eqs. 28-31, nominal u (docs/notes.md, 2)
-                u_bar = self.estimator.step(x_m, self.u, hold=self._touch)
-            else:
-                u_bar = self.estimator.step(x_m, self.u)
-            if not cfg.compensate:
-                self.u_bar[:] = self.drive.command
-            elif self.drive.lagged:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
-                self.u_bar[:] = self.drive.command - (self.u - u_bar)
-            else:
-                self.u_bar[:] = u_bar
-            if self.rounds.now:
-                self._raised = np.asarray(self.decision.update(self.r_norm, self.mu), bool)
-                if self._raised.any():  # eq. 39
-                    code |= RAISED
-        else:
-            self.u_bar[:] = self.drive.command
-        return code
 
     # ------------------------------------------------------------------ outputs
 

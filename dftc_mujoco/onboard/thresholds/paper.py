@@ -7,6 +7,8 @@ rules subclass it) and :func:`eq40` its compiled evaluation, with κ, λ from
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -15,27 +17,62 @@ from ..block import Block, TeamConfig
 from .decay import decay_bounds
 
 
-@njit(cache=True)
-def eq40(start, steady, lam, elapsed, coef, eta, out, bound):  # pragma: no cover - compiled
-    """ⁱμ_k(t) = (√n dᵢ + δᵢₖ)·‖ỹ*_k‖-bound + δᵢₖ η̄ into ``out`` (M, M) (eq. 40).
+class ThresholdRecord(NamedTuple):
+    """This round's ⁱμ_k as the compiled period reads them (:func:`threshold_at`): a dense
+    (M, M) array, or, for eq. 40 (``dense`` of shape (0, 0)), its factors: ⁱμ_k =
+    (cᵢ + δᵢₖ) b_k + δᵢₖ η̄ with cᵢ = √n dᵢ, b_k the bound of ‖ỹ*_k‖, +inf where λ_k = 0
+    (not ``finite[k]``), so no N × N array is written or read per period."""
 
-    The bound of ‖ỹ*_k(t)‖ is ‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt})
-    with ``start`` = κ‖ỹ*_k(0)‖ and ``steady`` = κ(k_o η̄ + √N ξ̄)/λ, into ``bound`` (M,);
-    where λ_k = 0 (no bound: the graph is not strongly connected) the threshold is +inf.
-    ``out`` is written row by row, in memory order (column by column was 4.4× slower).
-    """
-    for k in range(out.shape[1]):
+    dense: np.ndarray  # (M, M), or (0, 0): the factors below
+    coef: np.ndarray  # (M,) √n dᵢ
+    bound: np.ndarray  # (M,) the bound of ‖ỹ*_k(t)‖
+    finite: np.ndarray  # (M,) bool: λ_k > 0
+    eta: float  # η̄
+
+
+_NONE = np.zeros(0)
+
+
+def dense_thresholds(mu: np.ndarray) -> ThresholdRecord:
+    """The record of thresholds given as an (M, M) array."""
+    return ThresholdRecord(mu, _NONE, _NONE, np.zeros(0, bool), 0.0)
+
+
+@njit(inline="always")
+def threshold_at(th, i, k):  # pragma: no cover - compiled
+    """ⁱμ_k of the record ``th`` (:class:`ThresholdRecord`); the same number
+    :func:`eq40` writes (its off-diagonal δᵢₖ η̄ adds +0.0)."""
+    if th.dense.shape[0]:
+        return th.dense[i, k]
+    if not th.finite[k]:
+        return np.inf
+    if i == k:
+        return (th.coef[i] + 1.0) * th.bound[k] + th.eta
+    return th.coef[i] * th.bound[k]
+
+
+@njit(cache=True)
+def bound_of(start, steady, lam, elapsed, bound):  # pragma: no cover - compiled
+    """The bound of ‖ỹ*_k(t)‖ in eq. 40 for every k, into ``bound`` (M,):
+    ‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt}) with ``start`` = κ‖ỹ*_k(0)‖
+    and ``steady`` = κ(k_o η̄ + √N ξ̄)/λ; +inf where λ_k = 0 (no bound: the graph is not
+    strongly connected)."""
+    for k in range(bound.shape[0]):
         if lam[k] > 0:
             decay = np.exp(-lam[k] * elapsed)
             bound[k] = start[k] * decay + steady[k] * (1.0 - decay)
         else:
             bound[k] = np.inf
+
+
+@njit(cache=True)
+def eq40(th, out):  # pragma: no cover - compiled
+    """ⁱμ_k(t) = (√n dᵢ + δᵢₖ)·‖ỹ*_k‖-bound + δᵢₖ η̄ of the record ``th`` into ``out``
+    (M, M) (eq. 40), row by row, in memory order (column by column was 4.4× slower).
+    The compiled period does not call it: it reads the factors (:func:`threshold_at`)."""
     for i in range(out.shape[0]):
         for k in range(out.shape[1]):
-            if lam[k] > 0:
-                out[i, k] = coef[i, k] * bound[k] + eta[i, k]
-            else:
-                out[i, k] = np.inf
+            out[i, k] = threshold_at(th, i, k)
 
 
 class Thresholds(Block):
@@ -105,9 +142,6 @@ class Thresholds(Block):
         self.graph, self.y0, self.t0 = graph, y0, t0
         self.kappa, self.lam = decay_bounds(graph, self.ko)
         n = graph.n
-        eye = np.eye(n)
-        self._coef = np.sqrt(self.n_dim) * graph.in_degree()[:, None] + eye  # √n dᵢ + δᵢₖ
-        self._eta = self.eta_bar * eye  # δᵢₖ η̄
         with np.errstate(divide="ignore", invalid="ignore"):
             self._steady = np.where(
                 self.lam > 0,
@@ -121,9 +155,15 @@ class Thresholds(Block):
         # after this long every transient term of eq. 40 is below 1e-12 of its start
         finite = self.lam[self.lam > 0]
         self._settled = t0 + (28.0 / finite.min() if len(finite) else np.inf)
-        self._mu_steady: np.ndarray | None = None
-        self._mu_buf = np.empty((n, n))
+        self._steady_bound: np.ndarray | None = None
+        self._mu_buf = np.empty((0, 0))  # eq. 40 as an array, written when asked for
+        self._mu_at = np.nan  # the time _mu_buf holds
         self._bound = np.empty(n)
+        # eq. 40's factors (ThresholdRecord): √n dᵢ, the bound, λ_k > 0, η̄
+        coef = np.sqrt(self.n_dim) * graph.in_degree()
+        self._record = ThresholdRecord(
+            np.zeros((0, 0)), coef, self._bound, self._finite, float(self.eta_bar)
+        )
 
     def drop(self, p: int, graph: Graph, t: float) -> None:
         """Restart on the reduced graph from the bound ‖ỹ*_k(t)‖ of the robots left."""
@@ -145,22 +185,32 @@ class Thresholds(Block):
         threshold is +inf: robot k cannot be judged. The array returned is
         valid until the next call.
         """
-        if t >= self._settled:
-            if self._mu_steady is None:
-                self._mu_steady = self._mu(t).copy()
-            return self._mu_steady
-        return self._mu(t)
-
-    def _mu(self, t: float) -> np.ndarray:
-        elapsed = max(t - self.t0, 0.0)
-        eq40(
-            self._start,
-            self._steady_f,
-            self.lam,
-            elapsed,
-            self._coef,
-            self._eta,
-            self._mu_buf,
-            self._bound,
-        )
+        at = min(t, self._settled)  # one array from the settling time on
+        if self._mu_at != at:
+            n = len(self.lam)
+            if self._mu_buf.shape != (n, n):
+                self._mu_buf = np.empty((n, n))
+            eq40(self._record._replace(bound=self._bound_at(t)), self._mu_buf)
+            self._mu_at = at
         return self._mu_buf
+
+    def record(self, t: float) -> ThresholdRecord:
+        """ⁱμ_k(t) as the compiled period reads them: eq. 40's factors (O(M) per period),
+        or, for a rule that overrides :meth:`mu`, its array."""
+        if type(self).mu is not Thresholds.mu:
+            return dense_thresholds(np.ascontiguousarray(self.mu(t), dtype=float))
+        bound = self._bound_at(t)
+        if bound is not self._bound:
+            self._bound[:] = bound
+        return self._record
+
+    def _bound_at(self, t: float) -> np.ndarray:
+        """The bound of ‖ỹ*_k(t)‖ (:func:`bound_of`); kept from the first call at or past
+        the settling time on (every transient term is then below 1e-12 of its start)."""
+        if t >= self._settled and self._steady_bound is not None:
+            return self._steady_bound
+        bound = np.empty(len(self.lam)) if t >= self._settled else self._bound
+        bound_of(self._start, self._steady_f, self.lam, max(t - self.t0, 0.0), bound)
+        if t >= self._settled:
+            self._steady_bound = bound
+        return bound

@@ -1,0 +1,76 @@
+"""The team's period through the blocks' Python methods: the *general* path.
+
+When a user's block replaces one of the paper's, :class:`~.team.Team` cannot run the
+compiled period (:mod:`.period`): it calls each block's methods here, in the order of
+Fig. 1, and both paths compute the same thing for the paper's blocks (tested).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .period import RAISED, SATURATED, SWITCHED
+
+
+def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
+    """One period of :class:`~.team.Team` ``team`` through its blocks' Python methods
+    (any block set); returns RAISED | SWITCHED | SATURATED bits. The arguments are those
+    of the compiled period (:class:`~.period.PeriodInputs`)."""
+    cfg, mem = team.config, team.members
+    whole = len(mem) == team.n
+    x_own = x_m if whole else x_m[mem]
+    np.add(c, offsets, out=team.x_d)  # J⁻¹σ_d, the mission (eq. 14)
+    np.add(c_dot, rates, out=team.xd_dot)
+    before = np.array(team.supervisor.active, copy=True)
+    x_hat = team.observer.estimate()  # eq. 21
+    team.x_hat = np.array(x_hat, dtype=float)
+    u_hat_g = team.controller.collective_input(x_hat, team.x_d, team.xd_dot)  # eq. 15
+    u_g = team.controller.own_input(u_hat_g)  # eq. 16
+    mates = team._mates if team._sensed and cfg.teammate_safe > 0 else None
+    if mates is not None and team._supervisor_sees_mates:
+        u_mem, delta_u = team.supervisor.step(
+            x_own, u_g, team._obs_p, team._obs_d, team._obs_a, teammates=mates
+        )
+    else:
+        u_mem, delta_u = team.supervisor.step(x_own, u_g, team._obs_p, team._obs_d, team._obs_a)
+    u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
+    delta_u = np.array(delta_u, dtype=float)
+    saturated = team.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem)
+    if not whole:
+        team.u[:] = 0.0  # an excluded robot is told to stay where it is
+    team.u[mem] = u_mem
+    team.drive.deliver(team.u)  # with a lag, u becomes what the drive delivers
+    if team.drive.lagged:
+        u_mem = team.u[mem]
+        delta_u = u_mem - u_g
+    if team.rounds.now:
+        r = team.observer.residual(x_own)  # eq. 35
+        team.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
+        if cfg.fdir:  # what the detector judges by, on this period's messages (‖r‖ vs μ)
+            team.r_norm, team.mu = team.detector.judge(team.r_norm, team.mu, team.observer, x_own)
+    else:  # between two rounds of the network only the integrals move
+        r = np.zeros_like(team.x_hat)
+    team.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
+    code = SWITCHED if not np.array_equal(before, team.supervisor.active) else 0
+    if saturated:
+        code |= SATURATED
+    if cfg.fdir:
+        if team._estimator_holds:  # eqs. 28-31, nominal u (docs/notes.md, 2)
+            u_bar = team.estimator.step(x_m, team.u, hold=team._touch)
+        else:
+            u_bar = team.estimator.step(x_m, team.u)
+        if not cfg.compensate:
+            team.u_bar[:] = team.drive.command
+        elif team.drive.lagged:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
+            team.u_bar[:] = team.drive.command - (team.u - u_bar)
+        else:
+            team.u_bar[:] = u_bar
+        if team.rounds.now:
+            team._raised = np.asarray(team.decision.update(team.r_norm, team.mu), bool)
+            if team._raised.any():  # eq. 39
+                code |= RAISED
+    else:
+        team.u_bar[:] = team.drive.command
+    return code
