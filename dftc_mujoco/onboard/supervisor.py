@@ -20,6 +20,63 @@ from numba import njit
 
 from .block import Block, TeamConfig
 
+#: from this many teammates on, each robot looks for the ones in reach through a grid of
+#: cells as wide as the activation distance (the same choice as looking at all of them)
+GRID_FROM = 64
+
+
+@njit(inline="always")
+def _cell(cx, cy, cells):  # pragma: no cover - compiled
+    """The bucket of the grid cell (cx, cy) among ``cells`` (a power of two)."""
+    return ((np.int64(cx) * 73856093) ^ (np.int64(cy) * 19349663)) & (cells - 1)
+
+
+@njit(cache=True)
+def _grid(mates, width):  # pragma: no cover - compiled
+    """The teammates sorted by the bucket of their cell of side ``width``: bucket h holds
+    ``order[start[h]:start[h + 1]]`` (a counting sort; a bucket may hold several cells)."""
+    m = mates.shape[0]
+    cells = 1
+    while cells < 2 * m:
+        cells *= 2
+    key = np.empty(m, np.int64)
+    start = np.zeros(cells + 1, np.int64)
+    for j in range(m):
+        key[j] = _cell(np.floor(mates[j, 0] / width), np.floor(mates[j, 1] / width), cells)
+        start[key[j] + 1] += 1
+    for h in range(cells):
+        start[h + 1] += start[h]
+    fill = start[:-1].copy()
+    order = np.empty(m, np.int64)
+    for j in range(m):
+        order[fill[key[j]]] = j
+        fill[key[j]] += 1
+    return cells, start, order
+
+
+@njit(inline="always")
+def _mate(
+    i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe, best
+):  # pragma: no cover - compiled
+    """Teammate j as robot i's obstacle (eq. 17 with it as the obstacle): the nearer of it
+    and ``best`` = (index, margin, r̂, barrier, r̂ᵀu_g,i), the lower index on a tie (the
+    choice of a scan in index order, cylinders first)."""
+    e0 = x[i, 0] - mates[j, 0]
+    e1 = x[i, 1] - mates[j, 1]
+    d2 = e0 * e0 + e1 * e1
+    if j == i or d2 >= reach:
+        return best
+    dist = np.sqrt(d2)
+    h0 = e0 / max(dist, 1e-9)
+    h1 = e1 / max(dist, 1e-9)
+    radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]
+    barrier = theta * (mate_safe - dist)
+    rel = release if active[i] == n_obs + j else 0.0
+    margin = dist - mate_safe
+    if radial < barrier + rel and (margin < best[1] or (margin == best[1] and n_obs + j < best[0])):
+        return (n_obs + j, margin, h0, h1, barrier, radial)
+    return best
+
 
 @njit(cache=True)
 def supervise(
@@ -40,6 +97,11 @@ def supervise(
     ``release``; at the switch eq. 18 and u_g,i coincide (docs/notes.md, 12).
     """
     changed = False
+    grid = mate_safe > 0.0 and mates.shape[0] >= GRID_FROM
+    if grid:
+        cells, start, order = _grid(mates, mate_act)
+    else:
+        cells, start, order = 1, np.zeros(1, np.int64), np.zeros(0, np.int64)
     for i in range(x.shape[0]):
         best = -1
         best_m = 1e300
@@ -63,21 +125,25 @@ def supervise(
         if mate_safe > 0.0:
             n_obs = obs.shape[0]
             reach = mate_act * mate_act
-            for j in range(mates.shape[0]):
-                e0 = x[i, 0] - mates[j, 0]
-                e1 = x[i, 1] - mates[j, 1]
-                d2 = e0 * e0 + e1 * e1
-                if j == i or d2 >= reach:
-                    continue
-                dist = np.sqrt(d2)
-                h0 = e0 / max(dist, 1e-9)
-                h1 = e1 / max(dist, 1e-9)
-                radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]
-                barrier = theta * (mate_safe - dist)  # eq. 17 with the teammate as obstacle
-                rel = release if active[i] == n_obs + j else 0.0
-                if radial < barrier + rel and dist - mate_safe < best_m:
-                    best, best_m, r0, r1 = n_obs + j, dist - mate_safe, h0, h1
-                    bar, rad = barrier, radial
+            best_now = (best, best_m, r0, r1, bar, rad)
+            if grid:  # only the teammates in the 3 × 3 cells around robot i can be in reach
+                cx = np.floor(x[i, 0] / mate_act)
+                cy = np.floor(x[i, 1] / mate_act)
+                for dx in range(-1, 2):
+                    for dy in range(-1, 2):
+                        h = _cell(cx + dx, cy + dy, cells)
+                        for q in range(start[h], start[h + 1]):
+                            best_now = _mate(
+                                i, order[q], x, mates, u_g, theta, release, active, n_obs,
+                                reach, mate_safe, best_now,
+                            )  # fmt: skip
+            else:
+                for j in range(mates.shape[0]):
+                    best_now = _mate(
+                        i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe,
+                        best_now,
+                    )  # fmt: skip
+            best, best_m, r0, r1, bar, rad = best_now
         if active[i] != best:
             changed = True
         active[i] = best
