@@ -50,9 +50,14 @@ def residual_row(
     for a in range(m * n):
         row[a] = -in_degree[i] * y[i, a]
     for e in range(first_edge[i], first_edge[i + 1]):
-        msg = links[e] if networked else y[src[e]]
-        for a in range(m * n):
-            row[a] += msg[a]
+        if networked:  # two loops, one array type each, which the compiler vectorises
+            msg = links[e]
+            for a in range(m * n):
+                row[a] += msg[a]
+        else:
+            sent = y[src[e]]
+            for a in range(m * n):
+                row[a] += sent[a]
     for d in range(n):
         row[i * n + d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
 
