@@ -185,3 +185,53 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
     assert list(fast.members) == list(slow.members)
     assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
     copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)
+
+
+def test_periods_that_keep_no_estimates_change_nothing_else():
+    """The compiled period writes ⁱx̂ (the largest array a period writes) only where it is
+    asked (:attr:`Team.estimates`: the loop asks at its log rows and the last period of
+    step()): every other output and event is the same bit for bit, through a detection,
+    and the estimates of an asked period are the same too."""
+    every, x = _team(12, obstacles=False, command_limit=1.0)
+    some, _ = _team(12, obstacles=False, command_limit=1.0)
+    rng = np.random.default_rng(12)
+    v, xs = np.array([0.1, 0.0]), x.copy()
+    kept = 0
+    for k in range(1500):
+        t = k * 0.01
+        x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
+        some.estimates = k % 7 == 0
+        every.step(t, x_m, v * t, v)
+        some.step(t, x_m, v * t, v)
+        a, b = every.outputs(), some.outputs()
+        for name in a:
+            if name == "x_hat" and not some.estimates:
+                continue
+            same = np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f")
+            assert same, f"{name} at step {k}"
+        kept += some.estimates
+        assert every.events == some.events
+        phi = np.zeros_like(xs)
+        if t > 8.0:
+            phi[1] = [1.5, 0.0]
+        xs = xs + 0.01 * (np.clip(every.u_bar, -1.0, 1.0) + phi)
+    assert kept == 215 and every.recovery.detected  # robot 2 was detected on the way
+
+
+def test_a_simulation_shows_the_estimates_of_its_log_rows_and_of_each_step():
+    """The loop asks for ⁱx̂ at its log rows and at the last period of step(): a snapshot
+    after step(7) shows the estimates of its own period, the same numbers as stepping one
+    period at a time (which writes them every period), and the log has them at every row."""
+    from dftc_mujoco import load_scenario
+    from dftc_mujoco.loop import Simulation
+
+    s = load_scenario("paper_case", {"duration": 2.0})
+    with Simulation(s) as sim:
+        sevens = [sim.step(7).x_hat for _ in range(5)]
+    with Simulation(s) as sim:
+        ones = [sim.step(1).x_hat for _ in range(35)][6::7]
+    assert all(np.array_equal(a, b) for a, b in zip(sevens, ones, strict=True))
+    assert not np.array_equal(sevens[0], sevens[1])
+    with Simulation(s) as sim:
+        log = sim.run().log
+    assert np.isfinite(log["x_hat"]).all() and len(log["x_hat"]) == len(log["t"])

@@ -135,3 +135,48 @@ def test_a_queue_of_robots_does_not_ring_into_a_healthy_exclusion():
     d["duration"] = 32.0
     summary = simulate(scenario.from_dict(d)).summary
     assert [e["robot"] for e in summary["exclusions"]] == [8]
+
+
+def _nearest_by_scan(x, u_g, mates, theta, release, active, safe, act):
+    """The teammate each robot avoids, by a scan of every pair in index order (what the
+    supervisor did for every team size before it used a grid)."""
+    m, out = len(x), np.full(len(x), -1)
+    for i in range(m):
+        best, best_m = -1, 1e300
+        for j in range(m):
+            e = x[i] - mates[j]
+            d2 = e @ e
+            if j == i or d2 >= act * act:
+                continue
+            dist = np.sqrt(d2)
+            h = e / max(dist, 1e-9)
+            radial, barrier = h @ u_g[i], theta * (safe - dist)
+            rel = release if active[i] == j else 0.0
+            if radial < barrier + rel and dist - safe < best_m:
+                best, best_m = j, dist - safe
+        out[i] = best
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_grid_of_a_large_team_finds_the_teammates_a_scan_finds(seed):
+    """From GRID_FROM robots on each robot looks for teammates in reach through a grid of
+    cells: the same choice as a scan of every pair, ties (robots on a lattice, at equal
+    distances) going to the lower index."""
+    from dftc_mujoco.onboard.supervisor import GRID_FROM
+
+    rng = np.random.default_rng(seed)
+    m = GRID_FROM + 40 * seed
+    spread = (0.15, 0.3, 0.5)[seed % 3] * np.sqrt(m)  # a dense, a sparse and a sparser team
+    x = rng.uniform(-spread, spread, (m, 2))
+    if seed % 2:
+        x = np.round(x * 4) / 4  # a lattice of 0.25 m: exact ties
+    mates = x.copy()
+    u_g = rng.normal(0, 0.3, (m, 2))
+    active = rng.integers(-1, m, m).astype(np.intp)
+    expect = _nearest_by_scan(x, u_g, mates, 3.0, 0.01, active, 0.22, 0.6)
+    u, du = np.empty((m, 2)), np.empty((m, 2))
+    none = np.zeros((0, 2))
+    supervise(x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, active, u, du, mates, 0.22, 0.6)
+    assert np.array_equal(active, expect)
+    assert (expect >= 0).sum() > m // 10  # the case is not empty

@@ -589,3 +589,73 @@ def test_a_team_of_100_detects_and_excludes_a_stopped_robot_within_dt_d_max():
     (excl,) = out["exclusions"]
     assert excl["robot"] == 37 and excl["t"] == pytest.approx(first + dt_d_max, abs=0.011)
     assert out["margin"] < 1
+
+
+@pytest.mark.parametrize("connected", [True, False])
+def test_eq40_read_from_its_factors_is_the_array(connected):
+    """The compiled period reads eq. 40 as (cᵢ + δᵢₖ) b_k + δᵢₖ η̄ (no N × N array per period):
+    entry for entry the numbers of ``(√n dᵢ + δᵢₖ) b_k + δᵢₖ η̄`` over the whole array, with
+    +inf where no bound exists, before and after the transient settles."""
+    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.onboard.thresholds import Thresholds
+    from dftc_mujoco.onboard.thresholds.paper import bound_of
+
+    edges = ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)) if connected else ((0, 1), (1, 2), (2, 3))
+    graph = Graph(4, edges)
+    th = Thresholds.for_graph(graph, 3.0, 0.001, 0.02, np.full(4, 0.5))
+    d = graph.in_degree()
+    for t in (0.0, 0.37, 5.0, 1e9):
+        mu = np.array(th.mu(t))
+        bound = np.empty(4)
+        bound_of(th._start, th._steady_f, th.lam, t, bound)
+        if t >= th._settled:
+            bound = th._bound_at(t)
+        with np.errstate(invalid="ignore"):
+            expect = (np.sqrt(2) * d[:, None] + np.eye(4)) * bound + 0.001 * np.eye(4)
+        expect[:, th.lam <= 0] = np.inf
+        assert np.array_equal(mu, expect), t
+        rec = th.record(t)
+        assert rec.dense.shape == (0, 0) and np.array_equal(rec.bound, bound)
+    assert connected == bool(np.isfinite(mu).all())
+
+
+@pytest.mark.parametrize("mode", ["pairwise", "exclusive", "exclusive_history"])
+def test_integer_timers_flag_where_the_time_sums_did(mode):
+    """Remark 5.2's window as whole rounds: a flag rises and falls at the very rounds the
+    sums of dt (above >= window - 1e-9) gave, for windows that are and are not whole numbers
+    of rounds, on random residuals near their thresholds."""
+    from dftc_mujoco.onboard.decision import ISOLATION, Decision, count_for
+
+    rng = np.random.default_rng(ISOLATION[mode])
+    for window, dt in ((0.05, 0.01), (0.3, 0.02), (0.25, 0.03), (0.0, 0.01), (1.0, 0.1)):
+        need, acc = 0, 0.0
+        while acc < window - 1e-9:
+            acc, need = acc + dt, need + 1
+        assert count_for(window, dt) == need
+        d = Decision.standalone(3, window=window, dt=dt)
+        d.exclusive = ISOLATION[mode]
+        above, below = np.zeros((3, 3)), np.zeros((3, 3))
+        flag = np.zeros((3, 3), bool)
+        isolated = np.full(3, -1)
+        mu = np.full((3, 3), 1.0)
+        for _ in range(400):
+            r = rng.uniform(0.5, 1.5, (3, 3)) * (rng.random((3, 1)) < 0.8)
+            d.update(r, mu)
+            for i in range(3):  # the float timers, as the decision kept them before
+                n_over = int((r[i] > mu[i]).sum())
+                for k in range(3):
+                    blocked = (mode != "pairwise" and n_over > 1) or (
+                        mode == "exclusive_history" and isolated[i] >= 0 and isolated[i] != k
+                    )
+                    if r[i, k] > mu[i, k] and not blocked:
+                        above[i, k] += dt
+                        below[i, k] = 0.0
+                        if not flag[i, k] and above[i, k] >= window - 1e-9:
+                            flag[i, k] = True
+                            isolated[i] = k if isolated[i] < 0 else isolated[i]
+                    else:
+                        above[i, k] = 0.0
+                        below[i, k] += dt
+                        if flag[i, k] and below[i, k] >= window - 1e-9:
+                            flag[i, k] = False
+            assert np.array_equal(d.flag, flag)
