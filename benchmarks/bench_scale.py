@@ -8,7 +8,7 @@
 range-limited one (:data:`NETWORK`), both with the l1 rule at k_o = 2 (the round of that
 network needs k_o R h (d_max + 1) <= 1), and the network's cost as the loop's ratio.
 
-For each N, in a fresh process (so peak memory is that run's own): a grid
+For each N, in a fresh process (so peak memory is that process's own): a grid
 formation of 0.5 m spacing, a ring with chords 2 and 5, no cylinders, a stop
 fault at half time. Reports the κ/λ computation (part of the onboard
 set-up), the whole set-up of a Simulation, µs per control period of the
@@ -16,8 +16,10 @@ closed loop and of bare ``mj_step`` replaying the run's own commands (median
 of ``--repeat``, numba's cache loaded before timing: see ``replay.py``), their
 ratio, the real-time factor of the loop alone and with the cold set-up (the first
 Simulation of the fresh process: κ/λ, numba's cache) and post-run derivation, the peak
-resident memory, the wall time of the whole process (imports included) and whether the
-replay ended in the closed loop's final state bit for bit (the exact floor).
+resident memory of the benchmark's process (its warm-up, recording and timed runs), the wall
+time of the whole process (imports included), whether the replay ended in the closed loop's
+final state bit for bit (the exact floor), and the peak memory of one run alone in a fresh
+process (``--peak-duration`` s, as ``python -m dftc_mujoco.run`` makes it, figures aside).
 """
 
 from __future__ import annotations
@@ -42,14 +44,9 @@ NETWORK = {
 }
 
 
-def one(
-    n: int, duration: float, log_rate: float = 10.0, repeat: int = 3, network: str = ""
-) -> dict:
-    from replay import measure
-
+def scene(n: int, duration: float, log_rate: float = 10.0, network: str = ""):
+    """The benchmark's scenario for ``n`` robots (see the module docstring)."""
     from dftc_mujoco import scenario
-    from dftc_mujoco.graph import ring_with_chords
-    from dftc_mujoco.onboard.thresholds import decay
 
     d = {
         "name": f"scale{n}",
@@ -75,7 +72,34 @@ def one(
         d["onboard"] = {"thresholds": "l1"}
         if network == "lossy":
             d["network"] = NETWORK
-    s = scenario.from_dict(d, source=f"bench N={n}")
+    return scenario.from_dict(d, source=f"bench N={n}")
+
+
+def run_peak(n: int, duration: float, log_rate: float) -> dict:
+    """One run as ``python -m dftc_mujoco.run`` makes it (set-up, the whole run, the records
+    and their derived fields), alone in this fresh process: its peak resident memory and
+    wall time (imports excluded)."""
+    from dftc_mujoco.loop import Simulation
+
+    s = scene(n, duration, log_rate)
+    t0 = time.perf_counter()
+    with Simulation(s) as sim:
+        sim.run(progress=False)
+    return {
+        "run_s": time.perf_counter() - t0,
+        "run_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def one(
+    n: int, duration: float, log_rate: float = 10.0, repeat: int = 3, network: str = ""
+) -> dict:
+    from replay import measure
+
+    from dftc_mujoco.graph import ring_with_chords
+    from dftc_mujoco.onboard.thresholds import decay
+
+    s = scene(n, duration, log_rate, network)
     t0 = time.perf_counter()
     decay.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
     kappa = time.perf_counter() - t0
@@ -112,7 +136,16 @@ def main() -> None:
     p.add_argument("--network", action="store_true", help="the network's cost (see above)")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)
     p.add_argument("--variant", default="", help=argparse.SUPPRESS)
+    p.add_argument("--peak", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument(
+        "--peak-duration",
+        type=float,
+        help="simulated seconds of the run whose peak memory is measured (default --duration)",
+    )
     args = p.parse_args()
+    if args.one and args.peak:
+        print(json.dumps(run_peak(args.one, args.duration, args.log_rate)))
+        return
     if args.one:
         r = one(args.one, args.duration, args.log_rate, args.repeat, args.variant)
         print(json.dumps(r))
@@ -123,7 +156,8 @@ def main() -> None:
     )
     print(
         f"{'N':>4} {'κ/λ':>8} {'setup':>8} {'cold':>8} {'bare':>10} {'loop':>10} "
-        f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8} {'process':>8} exact"
+        f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8} {'process':>8} exact "
+        f"{'run peak':>9}"
     )
     variants = ["ideal", "lossy"] if args.network else [""]
     runs = [(n, v) for n in args.n for v in variants]
@@ -153,6 +187,26 @@ def main() -> None:
         r = json.loads(out.stdout.strip().splitlines()[-1])
         loops[(n, variant)] = r["loop_us"]
         cost = ""
+        if variant != "lossy":  # one run alone in a fresh process: its own peak memory
+            peak_s = args.peak_duration or args.duration
+            alone = subprocess.run(
+                [
+                    sys.executable,
+                    __file__,
+                    "--one",
+                    str(n),
+                    "--peak",
+                    "--duration",
+                    str(peak_s),
+                    "--log-rate",
+                    str(args.log_rate),
+                ],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            a = json.loads(alone.stdout.strip().splitlines()[-1])
+            cost = f" {a['run_peak_mb']:>6.0f}MB ({peak_s:g} s run: {a['run_s']:.1f} s)"
         if variant == "lossy":
             cost = f"  network: loop x{r['loop_us'] / loops[(n, 'ideal')]:.3f} of the ideal one"
         print(
