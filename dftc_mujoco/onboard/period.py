@@ -81,7 +81,7 @@ class PeriodBuffers(NamedTuple):
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
 
 
-@njit(cache=True)
+@njit(inline="always")
 def _round_row(inp, ob, th, dec, out, i, row, y, yn, n):  # pragma: no cover - compiled
     """Robot i at a round of the observers: ⁱr (eq. 35), ‖ⁱr_k‖, ⁱŷ of the next period
     (eq. 19) and, with FDIR, its flags (eq. 39); returns how many it raised."""

@@ -329,10 +329,19 @@ class Team:
             b.t = t
         radios = self.radios
         if radios is None:  # the paper's network: the observers step every period
-            self._thresholds_at(t)
+            t_rule: float | None = t
         elif self.rounds.tick():  # a round of the observers
-            self._thresholds_at(self.rounds.rule_time(t))
+            t_rule = self.rounds.rule_time(t)
             self.events += radios.watch(t, self.rounds.index, self.members)
+        else:
+            t_rule = None
+        if t_rule is None:
+            pass
+        elif self.compiled:  # the compiled period reads the record (eq. 40: its factors)
+            self._th = self.thresholds.record(t_rule)
+            self._mu, self._mu_t = None, t_rule  # mu written out only when read
+        else:
+            self._mu = self.thresholds.mu(t_rule)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
@@ -351,15 +360,6 @@ class Team:
         if code & SWITCHED:
             self._switches(t)
         return code
-
-    def _thresholds_at(self, t: float) -> None:
-        """This round's ⁱμ_k: the compiled period reads the thresholds' record (eq. 40 as its
-        factors); :attr:`mu` writes them out as an array only when read."""
-        if self.compiled:
-            self._th = self.thresholds.record(t)
-            self._mu, self._mu_t = None, t
-        else:
-            self._mu = self.thresholds.mu(t)
 
     @property
     def mu(self) -> np.ndarray:

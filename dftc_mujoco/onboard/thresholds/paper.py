@@ -159,6 +159,7 @@ class Thresholds(Block):
         self._mu_buf = np.empty((0, 0))  # eq. 40 as an array, written when asked for
         self._mu_at = np.nan  # the time _mu_buf holds
         self._bound = np.empty(n)
+        self._record_settled = False  # the record holds the settled bound
         # eq. 40's factors (ThresholdRecord): √n dᵢ, the bound, λ_k > 0, η̄
         coef = np.sqrt(self.n_dim) * graph.in_degree()
         self._record = ThresholdRecord(
@@ -195,21 +196,25 @@ class Thresholds(Block):
         return self._mu_buf
 
     def record(self, t: float) -> ThresholdRecord:
-        """ⁱμ_k(t) as the compiled period reads them: eq. 40's factors (O(M) per period),
-        or, for a rule that overrides :meth:`mu`, its array."""
+        """ⁱμ_k(t) as the compiled period reads them: eq. 40's factors (O(M) per period,
+        nothing once settled), or, for a rule that overrides :meth:`mu`, its array."""
         if type(self).mu is not Thresholds.mu:
             return dense_thresholds(np.ascontiguousarray(self.mu(t), dtype=float))
-        bound = self._bound_at(t)
-        if bound is not self._bound:
-            self._bound[:] = bound
+        if t < self._settled:
+            bound_of(self._start, self._steady_f, self.lam, max(t - self.t0, 0.0), self._bound)
+            self._record_settled = False
+        elif not self._record_settled:
+            self._bound[:] = self._bound_at(t)
+            self._record_settled = True
         return self._record
 
     def _bound_at(self, t: float) -> np.ndarray:
-        """The bound of ‖ỹ*_k(t)‖ (:func:`bound_of`); kept from the first call at or past
-        the settling time on (every transient term is then below 1e-12 of its start)."""
+        """The bound of ‖ỹ*_k(t)‖ (:func:`bound_of`; not the record's array); kept from the
+        first call at or past the settling time on (every transient term is then below
+        1e-12 of its start)."""
         if t >= self._settled and self._steady_bound is not None:
             return self._steady_bound
-        bound = np.empty(len(self.lam)) if t >= self._settled else self._bound
+        bound = np.empty(len(self.lam))
         bound_of(self._start, self._steady_f, self.lam, max(t - self.t0, 0.0), bound)
         if t >= self._settled:
             self._steady_bound = bound
