@@ -39,16 +39,22 @@ def dense_thresholds(mu: np.ndarray) -> ThresholdRecord:
 
 
 @njit(inline="always")
-def threshold_at(th, i, k):  # pragma: no cover - compiled
-    """ⁱμ_k of the record ``th`` (:class:`ThresholdRecord`); the same number
-    :func:`eq40` writes (its off-diagonal δᵢₖ η̄ adds +0.0)."""
-    if th.dense.shape[0]:
-        return th.dense[i, k]
-    if not th.finite[k]:
+def factored_at(coef, bound, finite, eta, i, k):  # pragma: no cover - compiled
+    """ⁱμ_k = (cᵢ + δᵢₖ) b_k + δᵢₖ η̄ of eq. 40 from its factors, +inf where λ_k = 0 (the
+    numbers of the (M, M) form (√n dᵢ + δᵢₖ) b_k + δᵢₖ η̄: its off-diagonal δᵢₖ η̄ adds +0.0)."""
+    if not finite[k]:
         return np.inf
     if i == k:
-        return (th.coef[i] + 1.0) * th.bound[k] + th.eta
-    return th.coef[i] * th.bound[k]
+        return (coef[i] + 1.0) * bound[k] + eta
+    return coef[i] * bound[k]
+
+
+@njit(inline="always")
+def threshold_at(th, i, k):  # pragma: no cover - compiled
+    """ⁱμ_k of the record ``th`` (:class:`ThresholdRecord`)."""
+    if th.dense.shape[0]:
+        return th.dense[i, k]
+    return factored_at(th.coef, th.bound, th.finite, th.eta, i, k)
 
 
 @njit(cache=True)
@@ -66,13 +72,14 @@ def bound_of(start, steady, lam, elapsed, bound):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def eq40(th, out):  # pragma: no cover - compiled
-    """ⁱμ_k(t) = (√n dᵢ + δᵢₖ)·‖ỹ*_k‖-bound + δᵢₖ η̄ of the record ``th`` into ``out``
-    (M, M) (eq. 40), row by row, in memory order (column by column was 4.4× slower).
-    The compiled period does not call it: it reads the factors (:func:`threshold_at`)."""
+def eq40(coef, bound, finite, eta, out):  # pragma: no cover - compiled
+    """ⁱμ_k(t) of eq. 40 (:func:`factored_at`) into ``out`` (M, M), row by row, in memory
+    order (column by column was 4.4× slower). The compiled period does not call it: it reads
+    the factors (:func:`threshold_at`). Arrays, not the record: from Python numba types a
+    tuple argument element by element on every call (µs at N = 4)."""
     for i in range(out.shape[0]):
         for k in range(out.shape[1]):
-            out[i, k] = threshold_at(th, i, k)
+            out[i, k] = factored_at(coef, bound, finite, eta, i, k)
 
 
 class Thresholds(Block):
@@ -160,6 +167,7 @@ class Thresholds(Block):
         self._mu_at = np.nan  # the time _mu_buf holds
         self._bound = np.empty(n)
         self._record_settled = False  # the record holds the settled bound
+        self._record_t = np.nan  # the time of the record's transient bound
         # eq. 40's factors (ThresholdRecord): √n dᵢ, the bound, λ_k > 0, η̄
         coef = np.sqrt(self.n_dim) * graph.in_degree()
         self._record = ThresholdRecord(
@@ -191,7 +199,9 @@ class Thresholds(Block):
             n = len(self.lam)
             if self._mu_buf.shape != (n, n):
                 self._mu_buf = np.empty((n, n))
-            eq40(self._record._replace(bound=self._bound_at(t)), self._mu_buf)
+            rec = self._record  # its bound is this t's when the period just read it
+            bound = rec.bound if t == self._record_t else self._bound_at(t)
+            eq40(rec.coef, bound, rec.finite, rec.eta, self._mu_buf)
             self._mu_at = at
         return self._mu_buf
 
@@ -202,10 +212,10 @@ class Thresholds(Block):
             return dense_thresholds(np.ascontiguousarray(self.mu(t), dtype=float))
         if t < self._settled:
             bound_of(self._start, self._steady_f, self.lam, max(t - self.t0, 0.0), self._bound)
-            self._record_settled = False
+            self._record_settled, self._record_t = False, t
         elif not self._record_settled:
             self._bound[:] = self._bound_at(t)
-            self._record_settled = True
+            self._record_settled, self._record_t = True, np.nan
         return self._record
 
     def _bound_at(self, t: float) -> np.ndarray:
