@@ -165,6 +165,7 @@ class Thresholds(Block):
         self._steady_bound: np.ndarray | None = None
         self._mu_buf = np.empty((0, 0))  # eq. 40 as an array, written when asked for
         self._mu_at = np.nan  # the time _mu_buf holds
+        self._mu_steady: np.ndarray | None = None  # eq. 40 once settled, an array of its own
         self._bound = np.empty(n)
         self._record_settled = False  # the record holds the settled bound
         self._record_t = np.nan  # the time of the record's transient bound
@@ -194,15 +195,19 @@ class Thresholds(Block):
         threshold is +inf: robot k cannot be judged. The array returned is
         valid until the next call.
         """
-        at = min(t, self._settled)  # one array from the settling time on
-        if self._mu_at != at:
-            n = len(self.lam)
+        rec, n = self._record, len(self.lam)
+        if t >= self._settled:  # one array from the settling time on, kept apart
+            if self._mu_steady is None:
+                self._mu_steady = np.empty((n, n))
+                eq40(rec.coef, self._bound_at(t), rec.finite, rec.eta, self._mu_steady)
+            return self._mu_steady
+        if self._mu_at != t:
             if self._mu_buf.shape != (n, n):
                 self._mu_buf = np.empty((n, n))
-            rec = self._record  # its bound is this t's when the period just read it
+            # the record's bound is this t's when the period has just read it
             bound = rec.bound if t == self._record_t else self._bound_at(t)
             eq40(rec.coef, bound, rec.finite, rec.eta, self._mu_buf)
-            self._mu_at = at
+            self._mu_at = t
         return self._mu_buf
 
     def record(self, t: float) -> ThresholdRecord:
