@@ -385,21 +385,13 @@ class Team:
 
     def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
         """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
-        fdir = self.config.fdir
-        if self._row.shape[0] > 1:  # a large team: the passes on every core
+        # the period's inputs (PeriodInputs); an ended team's last row shows its estimates
+        keep = self.estimates or self.ended is not None
+        inputs = (x_m, self.members, c, c_dot, offsets, rates, self.config.fdir, self.rounds.now)
+        if self._row.shape[0] > 1:  # a large team: the pass on every core
             ctl, sup, seen, drive, est = self._records()
             code = team_period_split(
-                PeriodInputs(
-                    x_m,
-                    self.members,
-                    c,
-                    c_dot,
-                    offsets,
-                    rates,
-                    fdir,
-                    self.rounds.now,
-                    self.estimates or self.ended is not None,  # an ended team's last row
-                ),
+                PeriodInputs(*inputs, keep),
                 self.observer.record(),
                 ctl,
                 sup,
@@ -411,18 +403,7 @@ class Team:
                 self._buffers,
             )
         else:  # one compiled call, the records passed field by field (team_period_flat)
-            code = team_period_flat(
-                x_m,
-                self.members,
-                c,
-                c_dot,
-                offsets,
-                rates,
-                fdir,
-                self.rounds.now,
-                self.estimates or self.ended is not None,  # an ended team's last row
-                *self._flat_records(),
-            )
+            code = team_period_flat(*inputs, keep, *self._flat_records())
         if self.rounds.now:
             self.observer.advance()  # ŷ of the next period (eq. 19)
         self._raised = self.decision.raised
