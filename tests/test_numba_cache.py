@@ -34,8 +34,7 @@ def test_the_one_core_and_the_parallel_passes_have_caches_of_their_own():
     from dftc_mujoco.onboard import decision, period
 
     pairs = [
-        (period.estimates, period.estimates_parallel),
-        (period.residuals, period.residuals_parallel),
+        (period.team_rows, period.team_rows_parallel),
         (decision.decide_in_groups, decision.decide_parallel),
     ]
     for one, both in pairs:
