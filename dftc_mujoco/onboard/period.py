@@ -5,22 +5,22 @@ same compiled functions the blocks call (observer :func:`~.observer.estimate_one
 :func:`~.observer.residual_row`, :func:`~.observer.advance_one`,
 :func:`~.observer.integrate_inputs`; controller :func:`~.controller.collective_one`;
 supervisor :func:`~.supervisor.supervise`; fault estimator
-:func:`~.fault_estimator.estimate_faults`; decision :func:`~.decision.decide`), each
-equation written once (only the mission's x_d = c + offsets of eq. 14, one addition, is
-spelled out in both paths). It reads and writes the blocks' state records (each block's
-``record()``) and reaches into no block. The stages, in the order of Fig. 1: :func:`begin`,
-the estimate pass (ⁱx̂, ⁱû_g and ∫ⁱû_g fused in one pass over the team's N × N state),
-:func:`act`, the residual pass (each robot's residual, its norms and its next ŷ, written to
-a second buffer the observer swaps in, since every robot reads its in-neighbours' current
-messages), :func:`deliver`, the decision. On a network the residual pass and the decision
-run only at the observers' rounds (``PeriodInputs.round_now``), on the messages the links
-delivered (``ObserverRecord.links``); every period on the ideal network.
-:func:`team_period` runs them as one compiled call on one core (the team calls it through
-:func:`team_period_flat`);
-:func:`team_period_split` runs the two passes and the decision over every core, for teams
-of :data:`PARALLEL_FROM` robots or more. :class:`~.team.Team` uses them whenever the team
-runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as an array), and
-composes the blocks' Python methods otherwise.
+:func:`~.fault_estimator.estimate_faults`; decision :func:`~.decision.decide_row`;
+thresholds :func:`~.thresholds.paper.threshold_at`), each equation written once (only the
+mission's x_d = c + offsets of eq. 14, one addition, is spelled out in both paths). It reads
+and writes the blocks' state records (each block's ``record()``) and reaches into no block.
+The stages, in the order of Fig. 1: :func:`begin`; one pass over the team's N × N state,
+robot by robot (:func:`_rows`: u_g,i, ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms,
+the next ŷ, written to a second buffer the observer swaps in since every robot reads its
+in-neighbours' current messages, and the flags); :func:`act`; :func:`deliver`. On a network
+the residual and the decision run only at the observers' rounds (``PeriodInputs.round_now``),
+on the messages the links delivered (``ObserverRecord.links``); every period on the ideal
+network. :func:`team_period` runs them as one compiled call on one core (the team calls it
+through :func:`team_period_flat`); :func:`team_period_split` runs the pass over every core,
+for teams of :data:`PARALLEL_FROM` robots or more. :class:`~.team.Team` uses them whenever
+the team runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as a
+:class:`~.thresholds.paper.ThresholdRecord`, eq. 40 as its factors, another rule as an
+array), and composes the blocks' Python methods otherwise (:mod:`.general`).
 """
 
 from __future__ import annotations

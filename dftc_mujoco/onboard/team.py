@@ -335,12 +335,10 @@ class Team:
             self.events += radios.watch(t, self.rounds.index, self.members)
         else:
             t_rule = None
-        if t_rule is None:
-            pass
-        elif self.compiled:  # the compiled period reads the record (eq. 40: its factors)
+        if t_rule is not None and self.compiled:  # the record (eq. 40: its factors)
             self._th = self.thresholds.record(t_rule)
             self._mu, self._mu_t = None, t_rule  # mu written out only when read
-        else:
+        elif t_rule is not None:
             self._mu = self.thresholds.mu(t_rule)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates)
