@@ -156,7 +156,6 @@ class Thresholds(Block):
                 np.inf,
             )
         self._finite = self.lam > 0
-        self._all_finite = bool(self._finite.all())
         self._start = np.where(self._finite, y0 * self.kappa, 0.0)  # finite parts only
         self._steady_f = np.where(self._finite, self._steady, 0.0)
         # after this long every transient term of eq. 40 is below 1e-12 of its start
@@ -182,10 +181,8 @@ class Thresholds(Block):
 
     def bracket(self, t: float) -> np.ndarray:
         """‖ỹ*_k(0)‖ κ e^{−λt} + κ(k_o η̄ + √N ξ̄)/λ (1 − e^{−λt}), per k: bounds ‖ỹ*_k(t)‖."""
-        decay = np.exp(-self.lam * max(t - self.t0, 0.0))
-        b = self._start * decay + self._steady_f * (1.0 - decay)
-        if not self._all_finite:
-            b[~self._finite] = np.inf
+        b = np.empty(len(self.lam))
+        bound_of(self._start, self._steady_f, self.lam, max(t - self.t0, 0.0), b)
         return b
 
     def mu(self, t: float) -> np.ndarray:
