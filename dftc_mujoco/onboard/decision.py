@@ -67,10 +67,12 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
     only) and the decision's record ``dec``; returns how many flags it raised. ``th`` is
     this round's thresholds (:func:`~.thresholds.paper.threshold_at`). See :func:`_decide`.
 
-    Pairwise with eq. 40's factors (the common case) the timers move in a loop without
-    branches (ⁱμ_k = cᵢ b_k off the diagonal; where b_k = +inf, cᵢ b_k is inf or nan and
-    the comparison false, as with the +inf of :func:`~.thresholds.paper.threshold_at`),
-    and only a row whose flags may change takes the loop that moves them."""
+    Pairwise (the common case) the timers move in a loop without branches, against row i
+    of a rule's array or eq. 40's factors (ⁱμ_k = cᵢ b_k off the diagonal; where b_k = +inf,
+    cᵢ b_k is inf or nan and the comparison false, as with the +inf of
+    :func:`~.thresholds.paper.threshold_at`), and only a row whose flags may change takes
+    the loop that moves them (the loop that reads each ⁱμ_k through ``threshold_at`` made
+    l1 at N = 100 cost 590 µs a period instead of 290)."""
     timer, flag, need, mode, isolated, raised = (
         dec.timer,
         dec.flag,
@@ -84,16 +86,23 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
         raised[i, :] = False
         dec.raised_rows[i] = False
     count = 0
-    if mode == 0 and th.dense.shape[0] == 0:
-        ci, bound, own = th.coef[i], th.bound, timer[i, i]
+    if mode == 0:
         changes = 0
-        for k in range(m):
-            c = tick(timer[i, k], r_norm[i, k] > ci * bound[k], need)
-            timer[i, k] = c
-            changes += (c > 0 and c >= need) != flag[i, k]
-        c = tick(own, r_norm[i, i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
-        timer[i, i] = c
-        changes += (c > 0 and c >= need) != flag[i, i]
+        if th.dense.shape[0]:  # a rule's array: row i of it
+            mu = th.dense[i]
+            for k in range(m):
+                c = tick(timer[i, k], r_norm[i, k] > mu[k], need)
+                timer[i, k] = c
+                changes += (c > 0 and c >= need) != flag[i, k]
+        else:  # eq. 40's factors
+            ci, bound, own = th.coef[i], th.bound, timer[i, i]
+            for k in range(m):
+                c = tick(timer[i, k], r_norm[i, k] > ci * bound[k], need)
+                timer[i, k] = c
+                changes += (c > 0 and c >= need) != flag[i, k]
+            c = tick(own, r_norm[i, i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
+            timer[i, i] = c
+            changes += (c > 0 and c >= need) != flag[i, i]
         if changes:
             for k in range(m):
                 count += move_flag(i, k, timer[i, k], flag, need, isolated, raised)
