@@ -17,9 +17,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -36,6 +34,7 @@ from .assembly import (
 from .errors import BlockError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team
+from .physics_step import PhysicsStep
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
@@ -43,6 +42,7 @@ from .sim import fleet, scene
 from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
+from .snapshot import Snapshot
 
 
 def _block_error(exc: BaseException, t: float) -> BlockError:
@@ -65,35 +65,6 @@ def _block_error(exc: BaseException, t: float) -> BlockError:
         f"{where} raised {type(exc).__name__}{': ' + text if text else ''} at t = {t:.2f} s; "
         "the run stopped there and its records are kept"
     )
-
-
-@dataclass(frozen=True)
-class Snapshot:
-    """The state of a run after a control period (robots on the original axis, from 0).
-
-    ``x`` true positions, ``x_m`` own measurements, ``x_hat`` (N, N, 2) ⁱx̂
-    (row i: robot i's estimate of every robot), ``u`` nominal and ``u_bar``
-    compensated inputs, ``phi_hat`` fault estimates, ``residual`` and
-    ``threshold`` (N, N) ‖ⁱr_k‖ and ⁱμ_k, ``flag`` (N, N) robot i flags k,
-    ``flagged`` (N,) some teammate flags k, ``reactive`` and ``active`` (N,).
-    Entries of excluded robots are NaN / False. ``events`` happened since the
-    previous snapshot (robots numbered from 1, as in ``summary.json``).
-    """
-
-    t: float
-    x: np.ndarray
-    x_m: np.ndarray
-    x_hat: np.ndarray
-    u: np.ndarray
-    u_bar: np.ndarray
-    phi_hat: np.ndarray
-    residual: np.ndarray
-    threshold: np.ndarray
-    flag: np.ndarray
-    flagged: np.ndarray
-    reactive: np.ndarray
-    active: np.ndarray
-    events: list[dict[str, Any]] = field(default_factory=list)
 
 
 MONITOR_ALLOWED = True
@@ -317,11 +288,18 @@ class Simulation:
         self.left: str | None = None  # a robot left the arena: the mission is over
         self._x = np.array(x0, dtype=float)  # what a snapshot before the first step shows
         self._x_m = np.array(x_m0, dtype=float)
-        self._cmd = np.empty((n, 2))
         self._seen = 0  # events already handed out by step()
-        self._override = np.zeros((n, 2))  # drive(): commands from outside the team
-        self._driven = np.zeros(n, bool)
-        self._any_driven = False
+        # the commands and the physics step of a period (drive(): commands from outside)
+        self._physics = PhysicsStep(
+            self.plant,
+            self.team,
+            self.adapter,
+            self.faults,
+            self._x,
+            self.steps,
+            self.log_every,
+            s.physics.substeps,
+        )
         self._build = self._build_time + (time.perf_counter() - wall0)
         self._wall = self._build
         self._build_time = 0.0
@@ -374,15 +352,16 @@ class Simulation:
         (the environments of :mod:`dftc_mujoco.envs` drive robots this way)."""
         if not 0 <= int(robot) < self.n:
             raise ValueError(f"drive(robot): expected a robot in 0..{self.n - 1}, got {robot!r}")
+        physics = self._physics
         if velocity is None:
-            self._driven[robot] = False
+            physics.driven[robot] = False
         else:
             v = np.asarray(velocity, dtype=float).reshape(2)
             if not np.all(np.isfinite(v)):
                 raise ValueError(f"drive(velocity): expected finite numbers, got {v.tolist()}")
-            self._override[robot] = v
-            self._driven[robot] = True
-        self._any_driven = bool(self._driven.any())
+            physics.override[robot] = v
+            physics.driven[robot] = True
+        physics.any_driven = bool(physics.driven.any())
 
     def request_stop(self, reason: str) -> None:
         """Stop stepping before the next control period (safe from a signal handler):
@@ -441,23 +420,16 @@ class Simulation:
         """Control periods ``self.k`` .. ``k_end - 1``: the hot loop."""
         s = self.scenario
         dt, steps, nsub, log_every = self.dt, self.steps, s.physics.substeps, self.log_every
-        plant, team, faults, adapter, noise = (
-            self.plant,
-            self.team,
-            self.faults,
-            self.adapter,
-            self.noise,
-        )
+        plant, team, faults, noise = self.plant, self.team, self.faults, self.noise
         assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
         log = self.log
         channel, sensors = self.channel, self.sensors
         watch = MONITOR_ALLOWED
-        data = plant.data
-        xpos, xmat = data.xpos, data.xmat
         position, velocity = self.path.position, self.path.velocity
         last = len(position) - 1
-        x, x_m, cmd = self._x, self._x_m, self._cmd
+        x, x_m, physics = self._x, self._x_m, self._physics
+        cmd = physics.cmd
         k0 = self.k
         bar = tqdm(
             total=k_end - k0,
@@ -509,8 +481,10 @@ class Simulation:
                     team.estimates = (
                         (k % log_every == 0 and log.row_nn >= 0) or k == steps or k == k_end - 1
                     )
+                    # a team that shares its pass runs the physics step beside it (physics_step.py)
+                    beside = physics.set(k, xi) if team.shares else None
                     try:
-                        team.step(t, x_m, position[j], velocity[j], x, bumpers.read())
+                        team.step(t, x_m, position[j], velocity[j], x, bumpers.read(), beside)
                     except (SimulationError, KeyboardInterrupt):
                         raise
                     except Exception as exc:  # a (plug-in) block raised: stop, keep records
@@ -526,37 +500,30 @@ class Simulation:
                         seen = team.sighting
                         if seen is not None and watch and seen.judged.any():
                             monitor.slot(t, seen.judged, x, seen.slots, seen.tolerance)
-                    ncon = data.ncon
+                    if beside is None:
+                        before, ctrl = physics.live(), None
+                    elif physics.before is None:  # it failed before the physics step
+                        raise physics.error or RuntimeError("the physics step did not run")
+                    else:  # read before the physics advanced
+                        before, ctrl = physics.before, physics.ctrl
                     if watch:
-                        monitor.period(
-                            t,
-                            x,
-                            eta,
-                            team.u,
-                            team.u_bar,
-                            team.phi_hat,
-                            xpos,
-                            xmat,
-                            data.contact.geom if ncon else None,
-                            data.contact.dist if ncon else None,
-                            ncon,
-                        )
+                        monitor.period(t, x, eta, team.u, team.u_bar, team.phi_hat, *before[:5])
                     if team.events:
                         self._take_team_events(t)
-                    np.add(team.u_bar, xi, out=cmd)
-                    if self._any_driven:  # robots an outside policy drives (drive())
-                        cmd[self._driven] = self._override[self._driven] + xi[self._driven]
-                    ctrl = adapter.command(cmd)
-                    if faults.stuck.any():  # stuck actuators keep their command of onset
-                        ctrl = faults.hold(ctrl)
+                    if ctrl is None:
+                        ctrl = physics.commands(xi)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
-                        self._sample(t, x, cmd, position[j])
+                        pose = None if beside is None else before.pose  # read before physics
+                        self._sample(t, x, cmd, position[j], pose)
                         if np.abs(x).max() > checks.ARENA_HALF:
                             self._left_arena(t, x)
                     if k == steps or team.ended or self.left:
                         k += 1
                         break
-                    plant.step(ctrl, nsub)
+                    if physics.error is not None:  # where its own step would have raised it
+                        raise physics.error
+                    if beside is None or not physics.stepped:
+                        plant.step(ctrl, nsub)
                     if hook is not None:
                         hook(plant.time, plant)
                     if k % 100 == 0:
@@ -623,8 +590,11 @@ class Simulation:
         self.left = f"robot {i + 1} left the arena (at {np.round(x[i], 1).tolist()} m)"
         self.events.add(t, "mission_ended", reason=self.left, robots=[i + 1])
 
-    def _sample(self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray) -> None:
-        """One log row: raw values only (everything else is derived after the run)."""
+    def _sample(
+        self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray, pose: np.ndarray | None
+    ) -> None:
+        """One log row: raw values only (everything else is derived after the run); ``pose``:
+        the robots' poses read before the physics advanced (None: read them now)."""
         log = self.log
         row, d = log.size, log.data
         d["t"][row] = t
@@ -633,7 +603,10 @@ class Simulation:
         lim = self.command_limit  # what the drives were asked for, within their range
         np.clip(cmd, -lim, lim, out=d["v_cmd"][row])
         assert self.plant is not None
-        self.plant.poses(out=d["pose"][row])
+        if pose is None:
+            self.plant.poses(out=d["pose"][row])
+        else:
+            d["pose"][row] = pose
         self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
         if self.channel is not None:
             self.channel.ages(round(t / self.dt), self._ages)

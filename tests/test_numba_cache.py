@@ -31,12 +31,9 @@ def test_the_one_core_and_the_parallel_passes_have_caches_of_their_own():
     """numba names a cache after the function, not its options: one Python function behind
     a one-core and a parallel dispatcher shared one cache, and a process loaded the other's
     code (one core where both were asked for; a crash in a caller)."""
-    from dftc_mujoco.onboard import decision, period
+    from dftc_mujoco.onboard import decision
 
-    pairs = [
-        (period.team_rows, period.team_rows_parallel),
-        (decision.decide_in_groups, decision.decide_parallel),
-    ]
+    pairs = [(decision.decide_in_groups, decision.decide_parallel)]
     for one, both in pairs:
         assert one.py_func.__code__ is both.py_func.__code__  # the same pass, written once
         assert one.py_func.__qualname__ != both.py_func.__qualname__  # two cache names

@@ -160,16 +160,34 @@ def _run_side_by_side(a, b, x, v, seed):
     assert a.recovery.detected == b.recovery.detected and a.recovery.detected  # caught on both
 
 
-def test_the_period_split_over_the_cores_is_the_same_computation(monkeypatch):
-    """From PARALLEL_FROM robots the compiled period's passes over the N × N state run in
-    groups of robots on all cores: the same numbers, bit for bit, as on one core, through a
-    detection."""
+def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
+    """From PARALLEL_FROM robots the compiled period's pass over the N × N state is shared
+    between threads, with the work given beside it run by one of them: the same numbers,
+    bit for bit, as in one thread, through a detection, whatever share each thread took,
+    and the beside work runs once a period, after the commands are out."""
     monkeypatch.setattr(team_mod, "PARALLEL_FROM", 8)
     split, x = _team(12, obstacles=False, command_limit=1.0)
     monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", False)
     one, _ = _team(12, obstacles=False, command_limit=1.0)
+    assert split.shares and not one.shares
     assert split._row.shape[0] >= 2 and one._row.shape[0] == 1
+    seen: list[np.ndarray] = []
+    shares = iter(range(10**6))
+
+    def beside():  # what the commands were when it ran
+        seen.append(split.u_bar.copy())
+
+    real_step = split.step
+
+    def step(*a):  # the helper's share of the 12 robots moves every period, from 0 to all
+        split._sharing.beside_rows = next(shares) % 13
+        return real_step(*a, beside=beside)
+
+    monkeypatch.setattr(split, "step", step)
     _run_side_by_side(split, one, x, np.array([0.1, 0.0]), seed=3)
+    assert len(seen) == 1500 and np.array_equal(seen[-1], split.u_bar)
+    spent, helper, _ = split._sharing.timings
+    assert 0.0 < spent <= helper
 
 
 @pytest.mark.parametrize(("n", "obstacles"), [(4, True), (4, False), (12, False)])

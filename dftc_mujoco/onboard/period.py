@@ -9,16 +9,19 @@ supervisor :func:`~.supervisor.supervise`; fault estimator
 thresholds :func:`~.thresholds.paper.threshold_at`), each equation written once (only the
 mission's x_d = c + offsets of eq. 14, one addition, is spelled out in both paths). It reads
 and writes the blocks' state records (each block's ``record()``) and reaches into no block.
-The stages, in the order of Fig. 1: :func:`begin`; one pass over the team's N × N state,
-robot by robot (:func:`_rows`: u_g,i, ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms,
-the next ŷ, written to a second buffer the observer swaps in since every robot reads its
-in-neighbours' current messages, and the flags); :func:`act`; :func:`deliver`. On a network
-the residual and the decision run only at the observers' rounds (``PeriodInputs.round_now``),
-on the messages the links delivered (``ObserverRecord.links``); every period on the ideal
-network. :func:`team_period` runs them as one compiled call on one core (the team calls it
-through :func:`team_period_flat`); :func:`team_period_split` runs the pass over every core,
-for teams of :data:`PARALLEL_FROM` robots or more. :class:`~.team.Team` uses them whenever
-the team runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as a
+The stages: :func:`begin` (measurements, x_d, u_g,i), :func:`act` and :func:`deliver`
+(every robot's commands, :func:`team_command`); then one pass over the team's N × N state,
+robot by robot (:func:`team_rows`: ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms, the
+next ŷ, written to a second buffer the observer swaps in since every robot reads its
+in-neighbours' current messages, and the flags); then :func:`integrate`. The commands
+come first because nothing they need is changed by the pass: a large team runs the pass
+shared between threads while the physics advances under those commands
+(:class:`~.sharing.Sharing`). On a network the residual and the decision run only at the
+observers' rounds (``PeriodInputs.round_now``), on the messages the links delivered
+(``ObserverRecord.links``); every period on the ideal network. :func:`team_period` runs
+the stages as one compiled call on one core (the team calls it through
+:func:`team_period_flat`). :class:`~.team.Team` uses them whenever the team runs the
+paper's blocks (any thresholds rule included: ⁱμ_k comes in as a
 :class:`~.thresholds.paper.ThresholdRecord`, eq. 40 as its factors, another rule as an
 array), and composes the blocks' Python methods otherwise (:mod:`.general`).
 """
@@ -28,7 +31,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
@@ -42,7 +45,6 @@ from .observer import (
     residual_row,
     row_norms,
 )
-from .parallel import twin
 from .supervisor import SupervisorRecord, Surroundings, supervise
 from .thresholds.paper import ThresholdRecord
 
@@ -105,52 +107,46 @@ def _round_row(inp, ob, th, dec, out, i, row, y, yn, n):  # pragma: no cover - c
     return decide_row(out.r_norm, th, i, dec)
 
 
-def _rows(inp, ob, ctl, th, dec, out):  # pragma: no cover - compiled
-    """The one pass over the team's N × N state, robot by robot (row i: robot i's own state,
-    its own measurement and its in-neighbours' messages only), in as many contiguous groups
-    of robots as ``rows`` (B, M·n) has scratch rows; returns how many flags were raised.
+@njit(cache=True, nogil=True)
+def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - compiled
+    """The pass over the team's N × N state for robots ``lo`` .. ``hi - 1``, robot by robot
+    (row i: robot i's own state, its own measurement and its in-neighbours' messages only),
+    with scratch row ``b`` of ``out.row``; returns how many flags were raised. It holds no
+    lock on Python (``nogil``): several threads run disjoint ranges of robots at once
+    (:class:`~.sharing.Sharing`).
 
-    For robot i: u_g,i (eq. 16, its own block, before ∫ moves), ⁱx̂ (eq. 21, into ``xh``
-    when ``write_xh``: only where a log row or a snapshot reads it) and ∫ ⁱû_g advanced in
-    ``s`` (eqs. 15, 20); at a round of the observers (``round_now``) its residual ⁱr
-    (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm``, ⁱŷ of the next period (eq. 19) into ``yn``
-    and, with FDIR, its flags (eq. 39, :func:`~.decision.decide_row`, with the
-    thresholds ``th`` read entry by entry). Every N × N array is read or written once per
-    period; the residual reads only ŷ and ∫u, which this pass does not change, so its
-    order against the integrals is free."""
+    For robot i: ⁱx̂ (eq. 21, into ``x_hat`` when ``estimates``: only where a log row or a
+    snapshot reads it) and ∫ ⁱû_g advanced (eqs. 15, 20); at a round of the observers
+    (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm``, ⁱŷ of the
+    next period (eq. 19) into ``y_next`` and, with FDIR, its flags (eq. 39,
+    :func:`~.decision.decide_row`, with the thresholds ``th`` read entry by entry). Every
+    N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
+    measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
+    the pass may run after them (and beside the physics); :func:`integrate` follows it."""
     m, _, n = ob.y_hat.shape
     y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
     yn, xh = ob.y_next.reshape(m, m * n), out.x_hat.reshape(m, m * n)
-    xd, vd, u_g, kc, dt = out.x_d.reshape(-1), out.xd_dot.reshape(-1), out.u_g, ctl.kc, ob.dt
-    rows, write_xh, round_now = out.row, inp.estimates, inp.round_now
-    blocks = rows.shape[0]
+    xd, vd, kc, dt = out.x_d.reshape(-1), out.xd_dot.reshape(-1), ctl.kc, ob.dt
+    write_xh, round_now = inp.estimates, inp.round_now
+    row = out.row[b]
     count = 0
-    for b in prange(blocks):
-        row = rows[b]
-        for i in range(b * m // blocks, (b + 1) * m // blocks):
-            for d in range(n):  # u_g,i = Γᵢ ⁱû_g (eq. 16): robot i's own block, before ∫ moves
-                a = i * n + d
-                u_g[i, d] = collective_one(vd[a], kc, xd[a], estimate_one(y[i, a], s[i, a]))
-            for a in range(m * n):
-                e = estimate_one(y[i, a], s[i, a])  # eq. 21
-                if write_xh:
-                    xh[i, a] = e
-                s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
-            if round_now:
-                count += _round_row(inp, ob, th, dec, out, i, row, y, yn, n)
+    for i in range(lo, hi):
+        for a in range(m * n):
+            e = estimate_one(y[i, a], s[i, a])  # eq. 21
+            if write_xh:
+                xh[i, a] = e
+            s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
+        if round_now:
+            count += _round_row(inp, ob, th, dec, out, i, row, y, yn, n)
     return count
 
 
-# the pass over the team's N × N state on one core, or split over the cores (a team of
-# PARALLEL_FROM robots or more: below it, starting the threads costs more than it saves)
-team_rows = njit(cache=True)(_rows)
-team_rows_parallel = njit(cache=True, parallel=True)(twin(_rows, "_rows_parallel"))
-PARALLEL_FROM = 200
-
-
 @njit(cache=True)
-def begin(inp: PeriodInputs, out: PeriodBuffers) -> None:  # pragma: no cover - compiled
-    """Stage 1: the members' own measurements, and the mission's x_d = J⁻¹σ_d (eq. 14)."""
+def begin(
+    inp: PeriodInputs, ob: ObserverRecord, ctl: ControllerRecord, out: PeriodBuffers
+) -> None:  # pragma: no cover - compiled
+    """Stage 1: the members' own measurements, the mission's x_d = J⁻¹σ_d (eq. 14) and
+    each robot's u_g,i = Γᵢ ⁱû_g (eq. 16) from its own block of ⁱx̂ (eq. 21), before ∫ moves."""
     x_m, rows, c, c_dot, offsets, rates = (
         inp.x_m,
         inp.rows,
@@ -159,11 +155,14 @@ def begin(inp: PeriodInputs, out: PeriodBuffers) -> None:  # pragma: no cover - 
         inp.offsets,
         inp.rates,
     )
+    y, s, kc = ob.y_hat, ob.int_u_hat, ctl.kc
     for i in range(rows.shape[0]):
         for d in range(c.shape[0]):
             out.x_own[i, d] = x_m[rows[i], d]
             out.x_d[i, d] = c[d] + offsets[i, d]
             out.xd_dot[i, d] = c_dot[d] + rates[i, d]
+            e = estimate_one(y[i, i, d], s[i, i, d])
+            out.u_g[i, d] = collective_one(out.xd_dot[i, d], kc, out.x_d[i, d], e)
 
 
 @njit(cache=True)
@@ -174,7 +173,7 @@ def act(
     drive: DriveRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
-    """Stage 3: each robot's nominal input (eqs. 8, 18, 22) within its drive's acceleration
+    """Stage 2: each robot's nominal input (eqs. 8, 18, 22) within its drive's acceleration
     and range (Remark 4.1); returns SWITCHED | SATURATED bits."""
     code = 0
     if supervise(
@@ -203,13 +202,13 @@ def act(
 @njit(cache=True)
 def deliver(
     inp: PeriodInputs,
-    ob: ObserverRecord,
     drive: DriveRecord,
     est: EstimatorRecord,
     out: PeriodBuffers,
 ) -> None:  # pragma: no cover - compiled
-    """Stage 5: the inputs on the robot axis (an excluded robot is told to stay), the drive's
-    lag, ∫u (eqs. 20-21), and (with FDIR) every robot's fault estimator and ū (eqs. 28-31)."""
+    """Stage 3: the inputs on the robot axis (an excluded robot is told to stay), the drive's
+    lag and (with FDIR) every robot's fault estimator and ū (eqs. 28-31): the commands are
+    out, and the physics may advance while the pass runs."""
     rows, u, u_mem, du, u_bar, command = (
         inp.rows,
         out.u,
@@ -232,7 +231,6 @@ def deliver(
                 du[i, d] = u_mem[i, d] - out.u_g[i, d]
     else:
         command[:] = u
-    integrate_inputs(ob.int_u_hat, ob.int_u_own, du, u_mem, ob.dt)  # eqs. 20-21
     if not inp.fdir:
         u_bar[:] = command
         return
@@ -258,6 +256,31 @@ def deliver(
 
 
 @njit(cache=True)
+def integrate(ob: ObserverRecord, out: PeriodBuffers) -> None:  # pragma: no cover - compiled
+    """Stage 5, after the pass: ∫ Γᵢᵀ Δuᵢ and ∫uᵢ (eqs. 20-21), added after the pass's ∫ ⁱû_g."""
+    integrate_inputs(ob.int_u_hat, ob.int_u_own, out.du, out.u_mem, ob.dt)
+
+
+@njit(cache=True)
+def team_command(
+    inp: PeriodInputs,
+    ob: ObserverRecord,
+    ctl: ControllerRecord,
+    sup: SupervisorRecord,
+    seen: Surroundings,
+    drive: DriveRecord,
+    est: EstimatorRecord,
+    out: PeriodBuffers,
+) -> int:  # pragma: no cover - compiled
+    """Stages 1-3, :func:`begin`, :func:`act` and :func:`deliver`: every robot's commands;
+    returns SWITCHED | SATURATED bits."""
+    begin(inp, ob, ctl, out)
+    code = act(inp, sup, seen, drive, out)
+    deliver(inp, drive, est, out)
+    return code
+
+
+@njit(cache=True)
 def team_period(
     inp: PeriodInputs,
     ob: ObserverRecord,
@@ -271,10 +294,11 @@ def team_period(
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
     """One period for the members ``inp.rows`` on one core; returns RAISED | SWITCHED |
-    SATURATED bits. The stages in the order of Fig. 1: :func:`begin`, the pass over the
-    N × N state (eqs. 16, 21, 15, 20, 35, 19 and the decision of eq. 39, :func:`_rows`),
-    :func:`act`, :func:`deliver`; :func:`team_period_split` runs the same stages with the
-    pass over every core.
+    SATURATED bits. The stages: the commands (:func:`team_command`: :func:`begin`,
+    :func:`act`, :func:`deliver`), the pass over the N × N state (eqs. 21, 15, 20, 35, 19
+    and the decision of eq. 39, :func:`team_rows`) and :func:`integrate`; a large team runs
+    the same stages with the pass shared between threads and beside the physics
+    (:meth:`.team.Team.step`).
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
     ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
@@ -283,35 +307,10 @@ def team_period(
     Robots that are not members get u = 0 and only run their fault estimator. ŷ of the
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
-    begin(inp, out)
-    raised = team_rows(inp, ob, ctl, th, dec, out)
-    code = act(inp, sup, seen, drive, out)
-    deliver(inp, ob, drive, est, out)
+    code = team_command(inp, ob, ctl, sup, seen, drive, est, out)
+    raised = team_rows(inp, ob, ctl, th, dec, out, 0, inp.rows.shape[0], 0)
+    integrate(ob, out)
     return code | RAISED if raised else code
-
-
-def team_period_split(
-    inp: PeriodInputs,
-    ob: ObserverRecord,
-    ctl: ControllerRecord,
-    sup: SupervisorRecord,
-    seen: Surroundings,
-    drive: DriveRecord,
-    est: EstimatorRecord,
-    th: ThresholdRecord,
-    dec: DecisionRecord,
-    out: PeriodBuffers,
-) -> int:
-    """:func:`team_period`'s stages with the pass over the N × N state run in
-    ``out.row.shape[0]`` groups of robots over every core: the same arithmetic per robot,
-    so the same numbers bit for bit. Called stage by stage from Python (a few µs, nothing
-    at the N ≥ PARALLEL_FROM it is for): a compiled caller of the parallel pass pays the
-    thread pool's cost even where it runs it on one core (4.5 µs per period at N = 4)."""
-    begin(inp, out)
-    raised = team_rows_parallel(inp, ob, ctl, th, dec, out)
-    code = act(inp, sup, seen, drive, out)
-    deliver(inp, ob, drive, est, out)
-    return int(code | RAISED if raised else code)
 
 
 @njit(cache=True)

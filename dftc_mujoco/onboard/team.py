@@ -22,10 +22,9 @@ block and keeps running on every robot, member or not.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, cast
 
-import numba
 import numpy as np
 
 from ..events import make
@@ -40,16 +39,18 @@ from .fault_estimator import EstimatorRecord, FaultEstimator
 from .general import general_period
 from .observer import Observer
 from .period import (
-    PARALLEL_FROM,
     RAISED,
     SWITCHED,
     PeriodBuffers,
     PeriodInputs,
+    integrate,
+    team_command,
     team_period_flat,
-    team_period_split,
+    team_rows,
 )
 from .radio import Radios, Rounds
 from .recovery import Recovery, split_event
+from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
 from .thresholds import Thresholds
@@ -76,7 +77,7 @@ HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
-PARALLEL_ALLOWED = True  # False keeps the compiled period on one core (benchmarks, tests)
+PARALLEL_ALLOWED = True  # False keeps the compiled period in one thread (benchmarks, tests)
 
 
 class Team:
@@ -253,10 +254,10 @@ class Team:
         self._u_g = np.empty((m, 2))
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
-        # one robot's residual per group of robots the compiled period's passes run in
-        split = m >= PARALLEL_FROM and PARALLEL_ALLOWED
-        groups = max(2, numba.get_num_threads()) if split else 1
-        self._row = np.empty((groups, m * 2))
+        # one robot's residual per thread the compiled period's pass runs in (sharing.py)
+        threads = workers() if m >= PARALLEL_FROM and PARALLEL_ALLOWED else 1
+        self._sharing = Sharing(threads) if threads > 1 else None
+        self._row = np.empty((threads, m * 2))
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
         self.r_norm = np.zeros((m, m))  # no residual before the first round of a network
         self._raised = np.zeros((m, m), bool)
@@ -293,6 +294,7 @@ class Team:
         c_dot: np.ndarray,
         sensed_bodies: np.ndarray | None = None,
         touching: np.ndarray | None = None,
+        beside: Callable[[], None] | None = None,
     ) -> int:
         """One control period for every robot; returns RAISED | SWITCHED bits.
 
@@ -301,6 +303,11 @@ class Team:
         (N, 2): where each robot's range sensor sees every robot (robots that were
         excluded become obstacles; teammates are avoided when ``teammate_safe`` > 0;
         None: no sensor reading); ``touching`` (N,): each robot's bumper (None: no bumpers).
+        ``beside``: work to run once the period's commands (``u``, ``u_bar``) are out, before
+        the period ends: beside the pass over the N × N state, in another thread, where the
+        team shares its pass (:attr:`shares`; the simulation's physics step), else right
+        after the period's arithmetic. It should keep its own errors (the simulation's does):
+        one it raises is raised after the period's compiled stages, and ends the period there.
         """
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
@@ -341,9 +348,11 @@ class Team:
         elif t_rule is not None:
             self._mu = self.thresholds.mu(t_rule)
         if self.compiled:
-            code = self._compiled(x_m, c, c_dot, offsets, rates)
+            code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
         else:
             code = general_period(self, x_m, c, c_dot, offsets, rates)
+            if beside is not None:
+                beside()
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
         if self.sighting is not None and sensed_bodies is not None:
@@ -381,27 +390,41 @@ class Team:
         """Links whose message was missing at the last round of the observers."""
         return self.radios.missed if self.radios is not None else 0
 
-    def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
+    @property
+    def shares(self) -> bool:
+        """The period's pass runs shared between threads, and beside the work given to
+        :meth:`step` (a compiled team of :data:`~.sharing.PARALLEL_FROM` members or more)."""
+        return self.compiled and self._sharing is not None
+
+    def _compiled(self, x_m, c, c_dot, offsets, rates, beside) -> int:
         """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
         # the period's inputs (PeriodInputs); an ended team's last row shows its estimates
         keep = self.estimates or self.ended is not None
         inputs = (x_m, self.members, c, c_dot, offsets, rates, self.config.fdir, self.rounds.now)
-        if self._row.shape[0] > 1:  # a large team: the pass on every core
-            ctl, sup, seen, drive, est = self._records()
-            code = team_period_split(
+        sharing = self._sharing
+        if sharing is not None:  # a large team: the commands, then the pass shared (sharing.py)
+            inp, ob, th, dec, buf = (
                 PeriodInputs(*inputs, keep),
                 self.observer.record(),
-                ctl,
-                sup,
-                seen,
-                drive,
-                est,
                 self._th,
                 self.decision.record(),
                 self._buffers,
             )
+            ctl, sup, seen, drive, est = self._records()
+            code = team_command(inp, ob, ctl, sup, seen, drive, est, buf)
+
+            def rows(lo: int, hi: int, b: int) -> int:
+                return team_rows(inp, ob, ctl, th, dec, buf, lo, hi, b)
+
+            try:
+                if sharing.run(rows, len(self.members), beside):
+                    code |= RAISED
+            finally:
+                integrate(ob, buf)
         else:  # one compiled call, the records passed field by field (team_period_flat)
             code = team_period_flat(*inputs, keep, *self._flat_records())
+            if beside is not None:
+                beside()
         if self.rounds.now:
             self.observer.advance()  # ŷ of the next period (eq. 19)
         self._raised = self.decision.raised

@@ -1,0 +1,130 @@
+"""One period's physics step, and what the loop reads of MuJoCo before it.
+
+The loop (:mod:`.loop`) turns the team's compensated inputs into actuator commands
+(:meth:`PhysicsStep.commands`) and advances MuJoCo by a control period. A team that shares
+its pass over the N × N state between threads (:attr:`.onboard.team.Team.shares`) runs
+this step *beside* that pass (:meth:`PhysicsStep.__call__`, given to
+:meth:`.onboard.team.Team.step`): it needs the period's commands and nothing the pass
+writes. What the loop reads of MuJoCo's state for the period after the team's step (the
+premises monitor's poses and contacts, the log row's poses) is then copied before the
+step (:class:`Before`), and a physics error is kept and raised by the loop where its own
+physics step would have raised it, so both ways give the same records.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from . import checks
+from .onboard.team import Team
+from .sim.plant import Plant
+
+
+class Before(NamedTuple):
+    """MuJoCo's state as the loop reads it at a period, before the physics advances."""
+
+    xpos: np.ndarray  # (nbody, 3)
+    xmat: np.ndarray  # (nbody, 9)
+    geom: np.ndarray | None  # (ncon, 2) contacts' geoms, None without contacts
+    dist: np.ndarray | None  # (ncon,)
+    ncon: int
+    pose: np.ndarray  # (N, 3) the robots' planar poses (written when the period is logged)
+
+
+class PhysicsStep:
+    """The period's commands and physics step: ``plant`` driven through ``adapter`` and the
+    actuator ``faults`` by the ``team``'s compensated inputs; ``x`` (N, 2) is the array the
+    loop keeps the true positions of the period in; ``steps`` the run's last period, a log
+    row every ``log_every`` periods, ``nsub`` MuJoCo steps a period."""
+
+    def __init__(
+        self,
+        plant: Plant,
+        team: Team,
+        adapter: Any,
+        faults: Any,
+        x: np.ndarray,
+        steps: int,
+        log_every: int,
+        nsub: int,
+    ) -> None:
+        self.plant, self.team, self.adapter, self.faults = plant, team, adapter, faults
+        self.x, self.steps, self.log_every, self.nsub = x, steps, log_every, nsub
+        n = plant.n
+        self.cmd = np.empty((n, 2))  # the planar velocities asked of the drives (log: v_cmd)
+        self.override = np.zeros((n, 2))  # Simulation.drive(): commands from outside the team
+        self.driven = np.zeros(n, bool)
+        self.any_driven = False  # driven.any(), kept by Simulation.drive()
+        data = plant.data
+        self.xpos = np.empty_like(data.xpos)
+        self.xmat = np.empty_like(data.xmat)
+        self.pose = np.empty((n, 3))
+        self.k = 0
+        self.xi = np.zeros((0, 2))
+        self.ctrl: np.ndarray | None = None
+        self.stepped = False
+        self.error: BaseException | None = None
+        self.before: Before | None = None
+
+    def commands(self, xi: np.ndarray) -> np.ndarray:
+        """The actuator commands for the team's ū plus the drives' errors ``xi`` (eq. 2)
+        (robots driven from outside: their given velocity plus ``xi``), into :attr:`cmd`."""
+        cmd, driven = self.cmd, self.driven
+        np.add(self.team.u_bar, xi, out=cmd)
+        if self.any_driven:  # robots an outside policy drives (Simulation.drive())
+            cmd[driven] = self.override[driven] + xi[driven]
+        ctrl = self.adapter.command(cmd)
+        if self.faults.stuck.any():  # stuck actuators keep their command of onset
+            ctrl = self.faults.hold(ctrl)
+        return ctrl
+
+    def live(self) -> Before:
+        """MuJoCo's state now, without copies (the physics advances after the loop read it)."""
+        data = self.plant.data
+        ncon = data.ncon
+        return Before(
+            data.xpos,
+            data.xmat,
+            data.contact.geom if ncon else None,
+            data.contact.dist if ncon else None,
+            ncon,
+            self.pose,
+        )
+
+    def set(self, k: int, xi: np.ndarray) -> PhysicsStep:
+        """Period ``k`` with the drives' errors ``xi``: ready to be run beside the pass."""
+        self.k, self.xi = k, xi
+        self.ctrl, self.stepped, self.error, self.before = None, False, None, None
+        return self
+
+    def __call__(self) -> None:
+        """The commands, the copy of what the loop reads, then (unless the run ends at this
+        period, as the loop decides) MuJoCo's step; an error is kept in :attr:`error`."""
+        k, plant, team = self.k, self.plant, self.team
+        try:
+            self.ctrl = self.commands(self.xi)
+            data = plant.data
+            np.copyto(self.xpos, data.xpos)
+            np.copyto(self.xmat, data.xmat)
+            ncon = data.ncon
+            logged = k % self.log_every == 0 or team.ended or k == self.steps
+            if logged:
+                plant.poses(out=self.pose)
+            self.before = Before(
+                self.xpos,
+                self.xmat,
+                data.contact.geom.copy() if ncon else None,
+                data.contact.dist.copy() if ncon else None,
+                ncon,
+                self.pose,
+            )
+            # the loop's own test for the last period (its log row marks a robot off the floor)
+            leaves = logged and np.abs(self.x).max() > checks.ARENA_HALF
+            if k == self.steps or team.ended or leaves:
+                return
+            self.stepped = True
+            plant.step(self.ctrl, self.nsub)
+        except BaseException as exc:  # raised by the loop where its physics step stood
+            self.error = exc

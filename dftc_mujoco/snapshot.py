@@ -1,0 +1,37 @@
+"""What a run shows after a control period (:meth:`.loop.Simulation.step`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The state of a run after a control period (robots on the original axis, from 0).
+
+    ``x`` true positions, ``x_m`` own measurements, ``x_hat`` (N, N, 2) ⁱx̂
+    (row i: robot i's estimate of every robot), ``u`` nominal and ``u_bar``
+    compensated inputs, ``phi_hat`` fault estimates, ``residual`` and
+    ``threshold`` (N, N) ‖ⁱr_k‖ and ⁱμ_k, ``flag`` (N, N) robot i flags k,
+    ``flagged`` (N,) some teammate flags k, ``reactive`` and ``active`` (N,).
+    Entries of excluded robots are NaN / False. ``events`` happened since the
+    previous snapshot (robots numbered from 1, as in ``summary.json``).
+    """
+
+    t: float
+    x: np.ndarray
+    x_m: np.ndarray
+    x_hat: np.ndarray
+    u: np.ndarray
+    u_bar: np.ndarray
+    phi_hat: np.ndarray
+    residual: np.ndarray
+    threshold: np.ndarray
+    flag: np.ndarray
+    flagged: np.ndarray
+    reactive: np.ndarray
+    active: np.ndarray
+    events: list[dict[str, Any]] = field(default_factory=list)
