@@ -25,16 +25,3 @@ def test_a_changed_source_empties_the_cache_once(tmp_path):
     assert numba_cache.refresh(pkg)
     assert not any(c.exists() for c in cached)
     assert (pkg / "a.py").exists() and (pkg / "sub" / "b.py").exists()  # sources untouched
-
-
-def test_the_one_core_and_the_parallel_passes_have_caches_of_their_own():
-    """numba names a cache after the function, not its options: one Python function behind
-    a one-core and a parallel dispatcher shared one cache, and a process loaded the other's
-    code (one core where both were asked for; a crash in a caller)."""
-    from dftc_mujoco.onboard import decision
-
-    pairs = [(decision.decide_in_groups, decision.decide_parallel)]
-    for one, both in pairs:
-        assert one.py_func.__code__ is both.py_func.__code__  # the same pass, written once
-        assert one.py_func.__qualname__ != both.py_func.__qualname__  # two cache names
-        assert both.targetoptions.get("parallel") and not one.targetoptions.get("parallel")

@@ -11,11 +11,10 @@ import functools
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..graph import Graph
 from .block import Block, TeamConfig
-from .parallel import twin
 from .thresholds.paper import dense_thresholds, threshold_at
 
 #: ``fdir.isolation`` -> the mode of :func:`decide`
@@ -65,7 +64,7 @@ def move_flag(i, k, c, flag, need, isolated, raised):  # pragma: no cover - comp
 def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
     """Eq. 39 with Remark 5.2's window for robot i's row (its own residuals and thresholds
     only) and the decision's record ``dec``; returns how many flags it raised. ``th`` is
-    this round's thresholds (:func:`~.thresholds.paper.threshold_at`). See :func:`_decide`.
+    this round's thresholds (:func:`~.thresholds.paper.threshold_at`). See :func:`decide`.
 
     Pairwise (the common case) the timers move in a loop without branches, against row i
     of a rule's array or eq. 40's factors (ⁱμ_k = cᵢ b_k off the diagonal; where b_k = +inf,
@@ -124,7 +123,8 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
     return count
 
 
-def _decide(r_norm, th, dec, blocks):  # pragma: no cover - compiled
+@njit(cache=True)
+def decide(r_norm, th, dec):  # pragma: no cover - compiled
     """Robot i flags k once ‖ⁱr_k‖ > ⁱμ_k has held ``dec.need`` rounds (the window); lowers
     it after as many not above.
 
@@ -135,26 +135,13 @@ def _decide(r_norm, th, dec, blocks):  # pragma: no cover - compiled
     below their thresholds (eq. 39's second clause, instant by instant); 2, exclusive with
     history, eq. 39 as the paper states it: also only if robot i has flagged no other robot
     since the last restart. ``isolated[i]`` (M,) is the robot robot i flagged first since
-    then (−1: none), kept for mode 2. Robots are taken in ``blocks`` contiguous groups
-    (each robot's row is its own decision, :func:`decide_row`).
+    then (−1: none), kept for mode 2. Each robot's row is its own decision
+    (:func:`decide_row`, which the compiled period calls robot by robot).
     """
     count = 0
-    m = r_norm.shape[0]
-    for b in prange(blocks):
-        for i in range(b * m // blocks, (b + 1) * m // blocks):
-            count += decide_row(r_norm, th, i, dec)
+    for i in range(r_norm.shape[0]):
+        count += decide_row(r_norm, th, i, dec)
     return count
-
-
-# eq. 39 on one core, or split over the cores (the compiled period's choice, :mod:`.period`)
-decide_in_groups = njit(cache=True)(_decide)
-decide_parallel = njit(cache=True, parallel=True)(twin(_decide, "_decide_parallel"))
-
-
-@njit(cache=True)
-def decide(r_norm, th, dec):  # pragma: no cover - compiled
-    """Eq. 39 for every robot on one core (:func:`_decide`)."""
-    return decide_in_groups(r_norm, th, dec, 1)
 
 
 class DecisionRecord(NamedTuple):
