@@ -371,7 +371,8 @@ def summarize(
             peak_ratio(log["residual"], log["threshold"], settled) if biased.any() else None
         )
         summary["fault_estimates"] = fault_estimates(s, log, events)
-    healthy_flags = [d for d in summary["detections"] if _healthy_at(events, d["robot"], d["t"])]
+    onset = fault_onsets(events)
+    healthy_flags = [d for d in summary["detections"] if _healthy_at(onset, d["robot"], d["t"])]
     summary["healthy_flags"] = len(healthy_flags)
     summary["healthy_flags_premises_held"] = sum(1 for d in healthy_flags if not d["premises"])
     by_premise: dict[str, int] = {}  # each flag counted once under every premise it violated
@@ -380,7 +381,7 @@ def summarize(
             by_premise[p] = by_premise.get(p, 0) + 1
     summary["healthy_flags_by_premise"] = dict(sorted(by_premise.items()))
     summary["healthy_exclusions"] = sum(
-        1 for e in events.of_kind("exclusion") if _healthy_at(events, e["robot"], e["t"])
+        1 for e in events.of_kind("exclusion") if _healthy_at(onset, e["robot"], e["t"])
     )
     summary["systemic_anomalies"] = len(events.of_kind("systemic_anomaly"))
     summary["events"] = events.ordered()
@@ -392,9 +393,10 @@ def _estimates_off(s: Scenario, found: dict[str, Any], events: Events, end: floa
     transient, farther from it (RMS) than half the slots' spacing: estimates that agree with
     each other but not with the world (the residuals cannot show it)."""
     tol = slot_spacing(s.mission.formation, s.team.robots) / 2
+    onset = fault_onsets(events)
     out = []
     for k, rms in enumerate(found["per_robot_rms"]):
-        if rms is not None and rms > tol and _healthy_at(events, k + 1, end):
+        if rms is not None and rms > tol and _healthy_at(onset, k + 1, end):
             out.append(
                 f"the team's estimates of robot {k + 1} were {rms:.3g} m (RMS after the "
                 f"transient) from where it was, more than half the slots' spacing "
@@ -404,6 +406,16 @@ def _estimates_off(s: Scenario, found: dict[str, Any], events: Events, end: floa
     return out
 
 
-def _healthy_at(events: Events, robot: int, t: float) -> bool:
-    """Robot ``robot`` (1-based) had no fault at or before ``t``."""
-    return not any(e["robot"] == robot and e["t"] <= t for e in events.of_kind("fault"))
+def fault_onsets(events: Events) -> dict[int, float]:
+    """Each faulty robot's (1-based) first fault onset, from the ``fault`` events."""
+    onset: dict[int, float] = {}
+    for e in events.of_kind("fault"):
+        onset[e["robot"]] = min(e["t"], onset.get(e["robot"], np.inf))
+    return onset
+
+
+def _healthy_at(onset: dict[int, float], robot: int, t: float) -> bool:
+    """Robot ``robot`` (1-based) had no fault at or before ``t`` (``onset``:
+    :func:`fault_onsets`; looked up, not searched: a run of 400 robots can hold 10⁵
+    detections and as many events, and searching the events per detection took hours)."""
+    return t < onset.get(robot, np.inf)
