@@ -81,7 +81,7 @@ class Sharing:
             count = rows(cuts[0], cuts[1], 0)
             own = time.perf_counter() - t0
         finally:  # nothing is left running on the team's arrays or the physics
-            wait(pending)
+            _join(pending)
         done, spent, total = first.result()
         count += done + sum(f.result() for f in others)
         self.timings = (spent, total, own)
@@ -92,6 +92,19 @@ class Sharing:
             old = share if self.beside_rows >= 0 else m // w
             self.beside_rows = round(0.5 * old + 0.5 * min(max(target, 0.0), m))
         return count
+
+
+def _join(pending: list[Future[Any]]) -> None:
+    """Wait until every helper has ended, through a KeyboardInterrupt too (raised after)."""
+    interrupted: BaseException | None = None
+    while True:
+        try:
+            wait(pending)
+            break
+        except BaseException as exc:  # the helpers still write the team's arrays and MuJoCo's
+            interrupted = exc
+    if interrupted is not None:
+        raise interrupted
 
 
 def _first(
