@@ -162,7 +162,7 @@ def _run_side_by_side(a, b, x, v, seed):
 
 def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
     """From PARALLEL_FROM robots the compiled period's pass over the N × N state is shared
-    between threads, with the work given beside it run by one of them: the same numbers,
+    between threads, the caller running the work given beside it first: the same numbers,
     bit for bit, as in one thread, through a detection, whatever share each thread took,
     and the beside work runs once a period, after the commands are out."""
     monkeypatch.setattr(team_mod, "PARALLEL_FROM", 8)
@@ -179,15 +179,15 @@ def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
 
     real_step = split.step
 
-    def step(*a):  # the helper's share of the 12 robots moves every period, from 0 to all
-        split._sharing.beside_rows = next(shares) % 13
+    def step(*a):  # the caller's share of the 12 robots moves every period, from 0 to all
+        split._sharing.own_rows = next(shares) % 13
         return real_step(*a, beside=beside)
 
     monkeypatch.setattr(split, "step", step)
     _run_side_by_side(split, one, x, np.array([0.1, 0.0]), seed=3)
     assert len(seen) == 1500 and np.array_equal(seen[-1], split.u_bar)
-    spent, helper, _ = split._sharing.timings
-    assert 0.0 < spent <= helper
+    spent, helpers, caller = split._sharing.timings
+    assert 0.0 < spent <= caller and helpers > 0.0
 
 
 @pytest.mark.parametrize(("n", "obstacles"), [(4, True), (4, False), (12, False)])

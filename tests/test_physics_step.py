@@ -59,7 +59,7 @@ def test_the_physics_beside_a_shared_pass_gives_the_very_same_run(monkeypatch):
     alone, _ = _run(False, monkeypatch)
     kinds = {e["kind"] for e in shared.events.items}
     assert {"fault", "detection", "exclusion"} <= kinds
-    assert spent > 0.0  # the time the helper spent on the beside work: MuJoCo's step
+    assert spent > 0.0  # the time spent on the beside work: MuJoCo's step
     _same(shared, alone)
 
 

@@ -2,13 +2,14 @@
 
 The pass over the N × N state (:func:`~.period.team_rows`) treats each robot's row apart
 from the others, so disjoint ranges of robots can run at once in threads (the compiled
-pass holds no lock on Python), and the numbers do not depend on who ran which row. The
-caller's thread takes one share of the robots; each helper thread another, and the first
-helper first runs the work given *beside* the pass (the simulation's physics step, which
-needs the period's commands and nothing the pass writes: MuJoCo holds no lock on Python
-while it steps either). Its share of robots is set from the last period's timings so that
-every thread ends at about the same time: with two cores the physics and the pass share
-them instead of taking turns.
+pass holds no lock on Python), and the numbers do not depend on who ran which row. Helper
+threads take their shares of the robots first; the calling thread meanwhile runs the work
+given *beside* the pass (the simulation's physics step, which needs the period's commands
+and nothing the pass writes: MuJoCo holds no lock on Python while it steps either), then
+takes the last share. The caller's share is set from the last period's timings so that the
+helpers end a little before it: waking a thread costs 50-80 µs on this machine, and the
+caller then never waits to be woken. With two cores the physics and the pass share them
+instead of taking turns.
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ from typing import Any
 import numba
 
 #: a team of this many members or more shares its pass between threads (below it, handing
-#: work to a thread costs more than it saves)
-PARALLEL_FROM = 200
+#: work to a thread costs more than it saves: N = 100, 303 µs a period alone, 407 shared;
+#: N = 150, 503-543 alone, 442-447 shared)
+PARALLEL_FROM = 150
 
 _pool: ThreadPoolExecutor | None = None
 _pool_of = (0, 0)  # the process that made it, and its threads
@@ -44,15 +46,18 @@ def workers() -> int:
     return max(1, numba.get_num_threads())
 
 
+#: [s] how much earlier than the caller the helpers aim to end (a thread's wake-up)
+MARGIN = 1e-4
+
+
 class Sharing:
     """Runs ``rows(lo, hi, b)`` over robots 0 .. m - 1 in ``threads`` threads (``b``: the
-    thread's scratch row), the caller's included, with ``beside()`` run first by one helper.
-    """
+    thread's scratch row), the caller's included, and ``beside()`` in the caller first."""
 
     def __init__(self, threads: int) -> None:
         self.threads = threads
-        self.beside_rows = -1  # robots the helper running the beside work takes (-1: m / threads)
-        self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, its helper, the caller
+        self.own_rows = -1  # robots the caller takes after the beside work (-1: m / threads)
+        self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, helpers, the caller
 
     def run(
         self,
@@ -61,36 +66,45 @@ class Sharing:
         beside: Callable[[], None] | None = None,
     ) -> int:
         """The pass over robots 0 .. m - 1 and ``beside()``, at once; returns the sum of what
-        ``rows`` returned. An exception in either is raised once both have ended."""
+        ``rows`` returned. An exception in ``beside`` is raised once the pass has ended."""
         w = self.threads
         if w < 2:
             count = rows(0, m, 0)
             if beside is not None:
                 beside()
             return count
-        share = m // w if self.beside_rows < 0 or beside is None else self.beside_rows
-        share = min(max(share, 0), m)
-        rest = m - share  # robots 0 .. rest - 1 for the caller and the other helpers
+        share = m // w if self.own_rows < 0 else min(self.own_rows, m)
+        rest = m - share  # robots 0 .. rest - 1 for the helpers, the last ones for the caller
         cuts = [rest * j // (w - 1) for j in range(w)]
         pool = _helpers(w - 1)
-        first: Future[tuple[int, float, float]] = pool.submit(_first, rows, beside, rest, m, w - 1)
-        others = [pool.submit(rows, cuts[j], cuts[j + 1], j) for j in range(1, w - 1)]
-        pending: list[Future[Any]] = [first, *others]
+        t0 = time.perf_counter()
+        helpers: list[Future[Any]] = [
+            pool.submit(_timed, rows, cuts[j], cuts[j + 1], j + 1) for j in range(w - 1)
+        ]
+        error: BaseException | None = None
         try:
-            t0 = time.perf_counter()
-            count = rows(cuts[0], cuts[1], 0)
-            own = time.perf_counter() - t0
-        finally:  # nothing is left running on the team's arrays or the physics
-            _join(pending)
-        done, spent, total = first.result()
-        count += done + sum(f.result() for f in others)
-        self.timings = (spent, total, own)
-        if beside is not None and cuts[1] > 0 and own > 0.0:
-            # the helper's share that ends with the others: t_beside + s·r = (m - s)/(w - 1)·r
-            per_row = own / cuts[1]
-            target = (m - (w - 1) * spent / per_row) / w
-            old = share if self.beside_rows >= 0 else m // w
-            self.beside_rows = round(0.5 * old + 0.5 * min(max(target, 0.0), m))
+            if beside is not None:
+                try:
+                    beside()
+                except Exception as exc:  # raised once the team's rows are whole
+                    error = exc
+            t1 = time.perf_counter()
+            count = rows(rest, m, 0) if share else 0
+            t2 = time.perf_counter()
+        finally:  # nothing is left running on the team's arrays
+            _join(helpers)
+        ends = [f.result() for f in helpers]
+        count += sum(c for c, _, _ in ends)
+        helper_end = max(end for _, _, end in ends) - t0
+        self.timings = (t1 - t0, helper_end, t2 - t0)
+        spent = sum(end - start for _, start, end in ends)
+        if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
+            per_row = spent / rest  # one thread's time for a robot
+            late = helper_end - (t2 - t0) + MARGIN
+            target = share + late / per_row * (w - 1) / w
+            self.own_rows = round(0.5 * share + 0.5 * min(max(target, 0.0), m))
+        if error is not None:
+            raise error
         return count
 
 
@@ -107,25 +121,8 @@ def _join(pending: list[Future[Any]]) -> None:
         raise interrupted
 
 
-def _first(
-    rows: Callable[[int, int, int], int],
-    beside: Callable[[], None] | None,
-    lo: int,
-    hi: int,
-    b: int,
-) -> tuple[int, float, float]:
-    """The first helper: the beside work, then robots lo .. hi - 1 (those even if the beside
-    work raised, which is raised after them); returns what ``rows`` returned, the beside
-    work's time and the whole time."""
+def _timed(rows: Callable[[int, int, int], int], lo: int, hi: int, b: int) -> tuple:
+    """A helper's share: what ``rows`` returned, and when it began and ended."""
     t0 = time.perf_counter()
-    error: BaseException | None = None
-    if beside is not None:
-        try:
-            beside()
-        except BaseException as exc:  # raised once the team's rows are whole
-            error = exc
-    t1 = time.perf_counter()
     count = rows(lo, hi, b) if hi > lo else 0
-    if error is not None:
-        raise error
-    return count, t1 - t0, time.perf_counter() - t0
+    return count, t0, time.perf_counter()

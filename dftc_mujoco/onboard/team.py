@@ -304,10 +304,11 @@ class Team:
         excluded become obstacles; teammates are avoided when ``teammate_safe`` > 0;
         None: no sensor reading); ``touching`` (N,): each robot's bumper (None: no bumpers).
         ``beside``: work to run once the period's commands (``u``, ``u_bar``) are out, before
-        the period ends: beside the pass over the N × N state, in another thread, where the
-        team shares its pass (:attr:`shares`; the simulation's physics step), else right
-        after the period's arithmetic. It should keep its own errors (the simulation's does):
-        one it raises is raised after the period's compiled stages, and ends the period there.
+        the period ends: in this thread while helper threads run the pass over the N × N
+        state, where the team shares its pass (:attr:`shares`; the simulation's physics
+        step), else right after the period's arithmetic. It should keep its own errors (the
+        simulation's does): one it raises is raised after the period's compiled stages, and
+        ends the period there.
         """
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
