@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from dftc_mujoco import scenario
@@ -34,6 +35,17 @@ def ring_with_chords(n: int, chord: int = 3) -> list[list[int]]:
     edges = [[i, i % n + 1] for i in range(1, n + 1)]
     edges += [[i, (i + chord - 1) % n + 1] for i in range(1, n + 1)]
     return edges
+
+
+def ring_team(n: int, radius: float, chord: int = 3, shift: float = 0.0) -> dict[str, Any]:
+    """A ``[team]`` table: n robots evenly on a circle of ``radius`` about (shift, shift),
+    on :func:`ring_with_chords`."""
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return {
+        "robots": n,
+        "graph": ring_with_chords(n, chord=chord),
+        "initial_positions": (radius * np.c_[np.cos(ang), np.sin(ang)] + shift).tolist(),
+    }
 
 
 def make(data: dict[str, Any], source: str = "<test>") -> scenario.Scenario:

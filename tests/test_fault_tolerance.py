@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import loop, run, scenario
-from tests.conftest import make, ring_with_chords, scenario_dict
+from tests.conftest import make, ring_team, scenario_dict
 
 SLOW_SEEDS = [pytest.param(s, marks=pytest.mark.slow) for s in (4, 5, 6, 7, 8)]
 
@@ -112,14 +112,8 @@ def test_bias_too_large_to_compensate_is_isolated_like_a_stop():
 
 
 def test_two_stop_faults_on_six_robots_are_handled_one_after_the_other():
-    n = 6
     d = scenario_dict()
-    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    d["team"] = {
-        "robots": n,
-        "graph": ring_with_chords(n, chord=2),
-        "initial_positions": (0.5 * np.c_[np.cos(ang), np.sin(ang)]).tolist(),
-    }
+    d["team"] = ring_team(6, 0.5, chord=2)
     d["obstacles"] = []
     d["faults"] = [{"robot": 1, "kind": "stop", "t": 12.0}, {"robot": 4, "kind": "stop", "t": 30.0}]
     d["duration"] = 50.0

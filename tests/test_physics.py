@@ -14,7 +14,7 @@ from dftc_mujoco.record import LOG_FIELDS, STATIC_FIELDS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
-from tests.conftest import make, ring_with_chords, scenario_dict
+from tests.conftest import make, ring_team, scenario_dict
 
 
 def _fault_free(**changes):
@@ -154,14 +154,8 @@ def test_same_seed_same_numbers_other_seed_other_numbers():
 
 
 def test_twelve_robots_converge():
-    n = 12
     d = scenario_dict()
-    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    d["team"] = {
-        "robots": n,
-        "initial_positions": (1.1 * np.c_[np.cos(ang), np.sin(ang)] + 0.05).tolist(),
-        "graph": ring_with_chords(n),
-    }
+    d["team"] = ring_team(12, 1.1, shift=0.05)
     d["obstacles"], d["faults"], d["duration"] = [], [], 25.0
     d["mission"]["formation"]["side"] = 0.6
     d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start

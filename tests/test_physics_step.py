@@ -9,7 +9,7 @@ import pytest
 
 from dftc_mujoco import loop
 from dftc_mujoco.onboard import team as team_mod
-from tests.conftest import make, ring_with_chords, scenario_dict
+from tests.conftest import make, ring_team, scenario_dict
 
 N = 6
 
@@ -18,12 +18,7 @@ def _ring(duration: float):
     """Six robots on a ring (chords of 2), robot 1 stopping at 12 s (after the thresholds
     settled: detected, and excluded by 26 s), without obstacles."""
     d = scenario_dict()
-    ang = np.linspace(0, 2 * np.pi, N, endpoint=False)
-    d["team"] = {
-        "robots": N,
-        "graph": ring_with_chords(N, chord=2),
-        "initial_positions": (0.5 * np.c_[np.cos(ang), np.sin(ang)]).tolist(),
-    }
+    d["team"] = ring_team(N, 0.5, chord=2)
     d["obstacles"], d["duration"] = [], duration
     d["faults"] = [{"robot": 1, "kind": "stop", "t": 12.0}] if duration > 12.0 else []
     d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start

@@ -153,15 +153,10 @@ def test_plot_command_rerenders_the_video(tmp_path):
 def test_figures_adapt_to_other_teams(tmp_path):
     """N = 6, two stops, no bias: every figure still draws."""
     from dftc_mujoco.loop import simulate
-    from tests.conftest import make, ring_with_chords, scenario_dict
+    from tests.conftest import make, ring_team, scenario_dict
 
     d = scenario_dict()
-    ang = np.linspace(0, 2 * np.pi, 6, endpoint=False)
-    d["team"] = {
-        "robots": 6,
-        "graph": ring_with_chords(6, chord=2),
-        "initial_positions": (0.5 * np.c_[np.cos(ang), np.sin(ang)]).tolist(),
-    }
+    d["team"] = ring_team(6, 0.5, chord=2)
     d["faults"] = [{"robot": 1, "kind": "stop", "t": 5.0}]
     d["duration"] = 15.0
     d["fdir"]["initial_error_bound"] = "auto"  # paper_case's 1 m is below this start
