@@ -208,32 +208,42 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
 def test_periods_that_keep_no_estimates_change_nothing_else():
     """The compiled period writes ⁱx̂ (the largest array a period writes) only where it is
     asked (:attr:`Team.estimates`: the loop asks at its log rows and the last period of
-    step()): every other output and event is the same bit for bit, through a detection,
-    and the estimates of an asked period are the same too."""
+    step()), and ‖ⁱr_k‖ only there and while an exclusion is pending (its instant reads
+    them); streamed past the caches, ŷ of the next period is the same: every other output
+    and event is the same bit for bit, through a detection and an exclusion, and the
+    estimates and norms of a period that keeps them are the same too."""
     every, x = _team(12, obstacles=False, command_limit=1.0)
     some, _ = _team(12, obstacles=False, command_limit=1.0)
+    assert not some._stream  # 12 robots: their arrays stay in the caches
     rng = np.random.default_rng(12)
     v, xs = np.array([0.1, 0.0]), x.copy()
-    kept = 0
-    for k in range(1500):
+    kept = norms = 0
+    for k in range(2000):
         t = k * 0.01
         x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
         some.estimates = k % 7 == 0
+        some._stream = True  # as a large team's period does (streaming.py)
         every.step(t, x_m, v * t, v)
-        some.step(t, x_m, v * t, v)
+        some.step(t, x_m, v * t, v)  # its exclusion instant raises if the norms were not kept
+        assert some._norms_kept >= some.estimates
         a, b = every.outputs(), some.outputs()
         for name in a:
-            if name == "x_hat" and not some.estimates:
+            if (name == "x_hat" and not some.estimates) or (
+                name == "residual" and not some._norms_kept
+            ):
                 continue
             same = np.array_equal(a[name], b[name], equal_nan=a[name].dtype.kind == "f")
             assert same, f"{name} at step {k}"
         kept += some.estimates
+        norms += some._norms_kept
         assert every.events == some.events
         phi = np.zeros_like(xs)
         if t > 8.0:
             phi[1] = [1.5, 0.0]
         xs = xs + 0.01 * (np.clip(every.u_bar, -1.0, 1.0) + phi)
-    assert kept == 215 and every.recovery.detected  # robot 2 was detected on the way
+    assert kept == 286 and every.recovery.detected  # robot 2 was detected at 14.66 s
+    assert list(every.gone) == list(some.gone) == [1]  # and excluded at its t_r, 19.66 s
+    assert kept < norms < 2000
 
 
 def test_a_simulation_shows_the_estimates_of_its_log_rows_and_of_each_step():

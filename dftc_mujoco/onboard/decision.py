@@ -61,10 +61,11 @@ def move_flag(i, k, c, flag, need, isolated, raised):  # pragma: no cover - comp
 
 
 @njit(inline="always")
-def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
-    """Eq. 39 with Remark 5.2's window for robot i's row (its own residuals and thresholds
-    only) and the decision's record ``dec``; returns how many flags it raised. ``th`` is
-    this round's thresholds (:func:`~.thresholds.paper.threshold_at`). See :func:`decide`.
+def decide_row(r, th, i, dec):  # pragma: no cover - compiled
+    """Eq. 39 with Remark 5.2's window for robot i's row (its own residuals' norms ``r``,
+    (M,), and its thresholds only) and the decision's record ``dec``; returns how many
+    flags it raised. ``th`` is this round's thresholds
+    (:func:`~.thresholds.paper.threshold_at`). See :func:`decide`.
 
     Pairwise (the common case) the timers move in a loop without branches, against row i
     of a rule's array or eq. 40's factors (ⁱμ_k = cᵢ b_k off the diagonal; where b_k = +inf,
@@ -80,7 +81,7 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
         dec.isolated,
         dec.raised,
     )
-    m = r_norm.shape[1]
+    m = r.shape[0]
     if dec.raised_rows[i]:  # the flags raised at the last round are not raised now
         raised[i, :] = False
         dec.raised_rows[i] = False
@@ -90,16 +91,16 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
         if th.dense.shape[0]:  # a rule's array: row i of it
             mu = th.dense[i]
             for k in range(m):
-                c = tick(timer[i, k], r_norm[i, k] > mu[k], need)
+                c = tick(timer[i, k], r[k] > mu[k], need)
                 timer[i, k] = c
                 changes += (c > 0 and c >= need) != flag[i, k]
         else:  # eq. 40's factors
             ci, bound, own = th.coef[i], th.bound, timer[i, i]
             for k in range(m):
-                c = tick(timer[i, k], r_norm[i, k] > ci * bound[k], need)
+                c = tick(timer[i, k], r[k] > ci * bound[k], need)
                 timer[i, k] = c
                 changes += (c > 0 and c >= need) != flag[i, k]
-            c = tick(own, r_norm[i, i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
+            c = tick(own, r[i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
             timer[i, i] = c
             changes += (c > 0 and c >= need) != flag[i, i]
         if changes:
@@ -109,13 +110,13 @@ def decide_row(r_norm, th, i, dec):  # pragma: no cover - compiled
         n_over = 0
         if mode > 0:
             for k in range(m):
-                if r_norm[i, k] > threshold_at(th, i, k):
+                if r[k] > threshold_at(th, i, k):
                     n_over += 1
         for k in range(m):  # in order: mode 2 blocks the k after one isolated in this round
             blocked = (mode > 0 and n_over > 1) or (
                 mode == 2 and isolated[i] >= 0 and isolated[i] != k
             )
-            over = r_norm[i, k] > threshold_at(th, i, k) and not blocked
+            over = r[k] > threshold_at(th, i, k) and not blocked
             timer[i, k] = tick(timer[i, k], over, need)
             count += move_flag(i, k, timer[i, k], flag, need, isolated, raised)
     if count:
@@ -140,7 +141,7 @@ def decide(r_norm, th, dec):  # pragma: no cover - compiled
     """
     count = 0
     for i in range(r_norm.shape[0]):
-        count += decide_row(r_norm, th, i, dec)
+        count += decide_row(r_norm[i], th, i, dec)
     return count
 
 

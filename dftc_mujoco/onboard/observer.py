@@ -63,20 +63,20 @@ def residual_row(
 
 
 @njit(inline="always")
-def row_norms(row, i, n, r_norm):  # pragma: no cover - compiled
-    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``r_norm[i]``."""
+def row_norms(row, n, norms):  # pragma: no cover - compiled
+    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``norms`` (M,)."""
     if n == 2:  # the plane: the same sums unrolled, which the compiler vectorises
-        for k in range(r_norm.shape[1]):
+        for k in range(norms.shape[0]):
             acc = 0.0
             acc += row[2 * k] ** 2
             acc += row[2 * k + 1] ** 2
-            r_norm[i, k] = np.sqrt(acc)
+            norms[k] = np.sqrt(acc)
         return
-    for k in range(r_norm.shape[1]):
+    for k in range(norms.shape[0]):
         acc = 0.0
         for d in range(n):
             acc += row[k * n + d] ** 2
-        r_norm[i, k] = np.sqrt(acc)
+        norms[k] = np.sqrt(acc)
 
 
 @njit(cache=True)
@@ -96,7 +96,7 @@ def residual(
     rr = r.reshape(m, m * n)
     for i in range(m):
         residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, rr[i])
-        row_norms(rr[i], i, n, r_norm)
+        row_norms(rr[i], n, r_norm[i])
 
 
 @njit(inline="always")

@@ -45,6 +45,7 @@ from .observer import (
     residual_row,
     row_norms,
 )
+from .streaming import store_fence, stream_store
 from .supervisor import SupervisorRecord, Surroundings, supervise
 from .thresholds.paper import ThresholdRecord
 
@@ -65,6 +66,8 @@ class PeriodInputs(NamedTuple):
     fdir: bool  # the fault estimator and the decision run
     round_now: bool  # the observers step and the decision runs (every period: ideal network)
     estimates: bool  # write ⁱx̂ into the buffers (a log row or a snapshot reads them)
+    norms: bool  # write ‖ⁱr_k‖ into r_norm (a log row, a snapshot or an exclusion reads them)
+    stream: bool  # store ŷ of the next period past the caches (streaming.py: a large team)
 
 
 class PeriodBuffers(NamedTuple):
@@ -78,15 +81,17 @@ class PeriodBuffers(NamedTuple):
     u_mem: np.ndarray  # (M, n) uᵢ, then Δuᵢ (eqs. 8, 22)
     du: np.ndarray
     row: np.ndarray  # (B, M·n) one robot's residual, for each of B groups of robots (scratch)
-    r_norm: np.ndarray  # (M, M) ‖ⁱr_k‖
+    norm: np.ndarray  # (B, M) its norms where r_norm does not keep them (scratch)
+    r_norm: np.ndarray  # (M, M) ‖ⁱr_k‖, written at the periods that keep them (norms)
     u: np.ndarray  # (N, 2) nominal input, original robot axis
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
 
 
 @njit(inline="always")
-def _round_row(inp, ob, th, dec, out, i, row, y, yn, n):  # pragma: no cover - compiled
-    """Robot i at a round of the observers: ⁱr (eq. 35), ‖ⁱr_k‖, ⁱŷ of the next period
-    (eq. 19) and, with FDIR, its flags (eq. 39); returns how many it raised."""
+def _round_row(inp, ob, th, dec, out, i, b, y, yn, n):  # pragma: no cover - compiled
+    """Robot i at a round of the observers: ⁱr (eq. 35) into scratch row ``b``, ‖ⁱr_k‖, ⁱŷ of
+    the next period (eq. 19) and, with FDIR, its flags (eq. 39); returns how many it raised."""
+    row = out.row[b]
     residual_row(
         ob.y_hat,
         ob.int_u_own,
@@ -99,12 +104,19 @@ def _round_row(inp, ob, th, dec, out, i, row, y, yn, n):  # pragma: no cover - c
         i,
         row,
     )
-    row_norms(row, i, n, out.r_norm)
-    for a in range(y.shape[1]):
-        yn[i, a] = advance_one(y[i, a], row[a], ob.ko, ob.dt_o)
+    norms = out.r_norm[i] if inp.norms else out.norm[b]
+    row_norms(row, n, norms)
+    yi, ko, dt_o = y[i], ob.ko, ob.dt_o
+    if inp.stream:  # past the caches: the next period reads it from memory anyway
+        yni = yn[i]
+        for a in range(y.shape[1]):
+            stream_store(yni, a, advance_one(yi[a], row[a], ko, dt_o))
+    else:
+        for a in range(y.shape[1]):
+            yn[i, a] = advance_one(yi[a], row[a], ko, dt_o)
     if not inp.fdir:
         return 0
-    return decide_row(out.r_norm, th, i, dec)
+    return decide_row(norms, th, i, dec)
 
 
 @njit(cache=True, nogil=True)
@@ -117,8 +129,10 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
 
     For robot i: ⁱx̂ (eq. 21, into ``x_hat`` when ``estimates``: only where a log row or a
     snapshot reads it) and ∫ ⁱû_g advanced (eqs. 15, 20); at a round of the observers
-    (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm``, ⁱŷ of the
-    next period (eq. 19) into ``y_next`` and, with FDIR, its flags (eq. 39,
+    (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ (into ``r_norm`` when
+    ``norms``, else into a scratch row: only a log row, a snapshot or an exclusion reads
+    them), ⁱŷ of the next period (eq. 19) into ``y_next`` (past the caches when
+    ``stream``, :mod:`.streaming`) and, with FDIR, its flags (eq. 39,
     :func:`~.decision.decide_row`, with the thresholds ``th`` read entry by entry). Every
     N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
     measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
@@ -128,7 +142,6 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     yn, xh = ob.y_next.reshape(m, m * n), out.x_hat.reshape(m, m * n)
     xd, vd, kc, dt = out.x_d.reshape(-1), out.xd_dot.reshape(-1), ctl.kc, ob.dt
     write_xh, round_now = inp.estimates, inp.round_now
-    row = out.row[b]
     count = 0
     for i in range(lo, hi):
         for a in range(m * n):
@@ -137,7 +150,9 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
                 xh[i, a] = e
             s[i, a] += dt * collective_one(vd[a], kc, xd[a], e)  # ∫ ⁱû_g of eq. 15 (eq. 20)
         if round_now:
-            count += _round_row(inp, ob, th, dec, out, i, row, y, yn, n)
+            count += _round_row(inp, ob, th, dec, out, i, b, y, yn, n)
+    if round_now and inp.stream:
+        store_fence()  # the streamed ŷ is whole before another thread reads it
     return count
 
 
@@ -322,16 +337,16 @@ def team_period_flat(*a):  # pragma: no cover - compiled
     twice the period's arithmetic) and a flat argument list in its C fast path. The slices
     below are checked against the records' field counts (:data:`RECORDS`)."""
     return team_period(
-        PeriodInputs(*a[0:9]),
-        ObserverRecord(*a[9:21]),
-        ControllerRecord(*a[21:22]),
-        SupervisorRecord(*a[22:27]),
-        Surroundings(*a[27:31]),
-        DriveRecord(*a[31:37]),
-        EstimatorRecord(*a[37:48]),
-        ThresholdRecord(*a[48:53]),
-        DecisionRecord(*a[53:60]),
-        PeriodBuffers(*a[60:71]),
+        PeriodInputs(*a[0:11]),
+        ObserverRecord(*a[11:23]),
+        ControllerRecord(*a[23:24]),
+        SupervisorRecord(*a[24:29]),
+        Surroundings(*a[29:33]),
+        DriveRecord(*a[33:39]),
+        EstimatorRecord(*a[39:50]),
+        ThresholdRecord(*a[50:55]),
+        DecisionRecord(*a[55:62]),
+        PeriodBuffers(*a[62:74]),
     )
 
 
@@ -348,6 +363,6 @@ RECORDS = (
     DecisionRecord,
     PeriodBuffers,
 )
-_ENDS = (9, 21, 22, 27, 31, 37, 48, 53, 60, 71)  # where each record ends in team_period_flat's a
+_ENDS = (11, 23, 24, 29, 33, 39, 50, 55, 62, 74)  # where each record ends in team_period_flat's a
 if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
     raise ImportError("team_period_flat's slices no longer match the records' fields")

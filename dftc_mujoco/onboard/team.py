@@ -52,6 +52,7 @@ from .radio import Radios, Rounds
 from .recovery import Recovery, split_event
 from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
+from .streaming import streams
 from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
 from .thresholds import Thresholds
 from .thresholds.paper import dense_thresholds
@@ -179,6 +180,7 @@ class Team:
         #: write the estimates ⁱx̂ this period (the loop asks only at the periods whose log
         #: row or snapshot shows them: they are the largest array a period writes)
         self.estimates = True
+        self._norms_kept = True  # the last period wrote r_norm (see _compiled)
         self._mu_t = 0.0
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
@@ -258,6 +260,8 @@ class Team:
         threads = workers() if m >= PARALLEL_FROM and PARALLEL_ALLOWED else 1
         self._sharing = Sharing(threads) if threads > 1 else None
         self._row = np.empty((threads, m * 2))
+        self._norm = np.empty((threads, m))  # its norms, at the periods that do not keep them
+        self._stream = streams(3 * m * m * 2 * 8)  # ŷ, ŷ⁺, ∫ⁱû_g past the cache (streaming.py)
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
         self.r_norm = np.zeros((m, m))  # no residual before the first round of a network
         self._raised = np.zeros((m, m), bool)
@@ -279,6 +283,7 @@ class Team:
             self._u_mem,
             self._du,
             self._row,
+            self._norm,
             self.r_norm,
             self.u,
             self.u_bar,
@@ -401,11 +406,16 @@ class Team:
         """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
         # the period's inputs (PeriodInputs); an ended team's last row shows its estimates
         keep = self.estimates or self.ended is not None
-        inputs = (x_m, self.members, c, c_dot, offsets, rates, self.config.fdir, self.rounds.now)
+        # ‖ⁱr_k‖ where read: a log row, a snapshot, or the exclusion instant (at the next
+        # period's start): a t_r is Δt_d,max after the flag, or a period after a postponement
+        norms = keep or bool(self.recovery.pending) or self.recovery.dt_d_max < 2 * self.config.dt
+        self._norms_kept = norms
+        fdir, now = self.config.fdir, self.rounds.now
+        inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms, self._stream)
         sharing = self._sharing
         if sharing is not None:  # a large team: the commands, then the pass shared (sharing.py)
             inp, ob, th, dec, buf = (
-                PeriodInputs(*inputs, keep),
+                PeriodInputs(*inputs),
                 self.observer.record(),
                 self._th,
                 self.decision.record(),
@@ -423,7 +433,7 @@ class Team:
             finally:
                 integrate(ob, buf)
         else:  # one compiled call, the records passed field by field (team_period_flat)
-            code = team_period_flat(*inputs, keep, *self._flat_records())
+            code = team_period_flat(*inputs, *self._flat_records())
             if beside is not None:
                 beside()
         if self.rounds.now:
@@ -626,6 +636,8 @@ class Team:
     def _worst_ratio(self, p: int) -> float:
         """The largest ‖ⁱr_k‖ / ⁱμ_k among robot k's teammates (k at member position ``p``):
         what each teammate knows of k, gathered as its flags are."""
+        if not self._norms_kept:  # _compiled keeps them while an exclusion is pending
+            raise RuntimeError("the residuals' norms of the last period were not kept")
         r = np.asarray(self.r_norm, float)[:, p]
         mu = np.asarray(self.mu, float)[:, p]
         with np.errstate(divide="ignore", invalid="ignore"):
