@@ -10,12 +10,13 @@ thresholds :func:`~.thresholds.paper.threshold_at`), each equation written once 
 mission's x_d = c + offsets of eq. 14, one addition, is spelled out in both paths). It reads
 and writes the blocks' state records (each block's ``record()``) and reaches into no block.
 The stages: :func:`begin` (measurements, x_d, u_g,i), :func:`act` and :func:`deliver`
-(every robot's commands, :func:`team_command`); then one pass over the team's N × N state,
+(every robot's commands, :func:`commands`); then one pass over the team's N × N state,
 robot by robot (:func:`team_rows`: ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms, the
 next ŷ, written to a second buffer the observer swaps in since every robot reads its
-in-neighbours' current messages, and the flags); then :func:`integrate`. The commands
-come first because nothing they need is changed by the pass: a large team runs the pass
-shared between threads while the physics advances under those commands
+in-neighbours' current messages, and the flags); then :func:`integrate`. Once
+:func:`begin` has read each robot's own block of the state, the commands and the pass
+touch nothing of each other's: a large team runs the pass shared between threads while
+the calling thread computes the commands and advances the physics under them
 (:class:`~.sharing.Sharing`). On a network the residual and the decision run only at the
 observers' rounds (``PeriodInputs.round_now``), on the messages the links delivered
 (``ObserverRecord.links``); every period on the ideal network. :func:`team_period` runs
@@ -277,6 +278,23 @@ def integrate(ob: ObserverRecord, out: PeriodBuffers) -> None:  # pragma: no cov
 
 
 @njit(cache=True)
+def commands(
+    inp: PeriodInputs,
+    sup: SupervisorRecord,
+    seen: Surroundings,
+    drive: DriveRecord,
+    est: EstimatorRecord,
+    out: PeriodBuffers,
+) -> int:  # pragma: no cover - compiled
+    """Stages 2-3 after :func:`begin`, :func:`act` and :func:`deliver`: every robot's
+    commands; returns SWITCHED | SATURATED bits. They read and write nothing the pass over
+    the N × N state (:func:`team_rows`) does, so the two may run at once."""
+    code = act(inp, sup, seen, drive, out)
+    deliver(inp, drive, est, out)
+    return code
+
+
+@njit(cache=True)
 def team_command(
     inp: PeriodInputs,
     ob: ObserverRecord,
@@ -287,12 +305,9 @@ def team_command(
     est: EstimatorRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
-    """Stages 1-3, :func:`begin`, :func:`act` and :func:`deliver`: every robot's commands;
-    returns SWITCHED | SATURATED bits."""
+    """Stages 1-3, :func:`begin` and :func:`commands`; returns SWITCHED | SATURATED bits."""
     begin(inp, ob, ctl, out)
-    code = act(inp, sup, seen, drive, out)
-    deliver(inp, drive, est, out)
-    return code
+    return commands(inp, sup, seen, drive, est, out)
 
 
 @njit(cache=True)
@@ -309,7 +324,7 @@ def team_period(
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
     """One period for the members ``inp.rows`` on one core; returns RAISED | SWITCHED |
-    SATURATED bits. The stages: the commands (:func:`team_command`: :func:`begin`,
+    SATURATED bits. The stages: :func:`begin`, the commands (:func:`commands`:
     :func:`act`, :func:`deliver`), the pass over the N × N state (eqs. 21, 15, 20, 35, 19
     and the decision of eq. 39, :func:`team_rows`) and :func:`integrate`; a large team runs
     the same stages with the pass shared between threads and beside the physics

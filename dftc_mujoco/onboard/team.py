@@ -43,8 +43,9 @@ from .period import (
     SWITCHED,
     PeriodBuffers,
     PeriodInputs,
+    begin,
+    commands,
     integrate,
-    team_command,
     team_period_flat,
     team_rows,
 )
@@ -413,7 +414,7 @@ class Team:
         fdir, now = self.config.fdir, self.rounds.now
         inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms, self._stream)
         sharing = self._sharing
-        if sharing is not None:  # a large team: the commands, then the pass shared (sharing.py)
+        if sharing is not None:  # a large team: the pass shared, the commands beside it
             inp, ob, th, dec, buf = (
                 PeriodInputs(*inputs),
                 self.observer.record(),
@@ -422,13 +423,20 @@ class Team:
                 self._buffers,
             )
             ctl, sup, seen, drive, est = self._records()
-            code = team_command(inp, ob, ctl, sup, seen, drive, est, buf)
+            begin(inp, ob, ctl, buf)  # each robot's own block of the state, before it moves
+            code = 0
 
             def rows(lo: int, hi: int, b: int) -> int:
                 return team_rows(inp, ob, ctl, th, dec, buf, lo, hi, b)
 
+            def command_then_beside() -> None:  # in this thread while helpers take rows
+                nonlocal code
+                code = commands(inp, sup, seen, drive, est, buf)
+                if beside is not None:
+                    beside()
+
             try:
-                if sharing.run(rows, len(self.members), beside):
+                if sharing.run(rows, len(self.members), command_then_beside):
                     code |= RAISED
             finally:
                 integrate(ob, buf)
