@@ -162,9 +162,10 @@ def _run_side_by_side(a, b, x, v, seed):
 
 def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
     """From PARALLEL_FROM robots the compiled period's pass over the N × N state is shared
-    between threads, the caller running the work given beside it first: the same numbers,
-    bit for bit, as in one thread, through a detection, whatever share each thread took,
-    and the beside work runs once a period, after the commands are out."""
+    between threads, the caller computing the commands and running the work given beside
+    it first: the same numbers, bit for bit, as in one thread, through a detection, whatever
+    share each thread took and with the next ŷ streamed past the caches or not, and the
+    beside work runs once a period, after the commands are out."""
     monkeypatch.setattr(team_mod, "PARALLEL_FROM", 8)
     split, x = _team(12, obstacles=False, command_limit=1.0)
     monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", False)
@@ -180,7 +181,9 @@ def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
     real_step = split.step
 
     def step(*a):  # the caller's share of the 12 robots moves every period, from 0 to all
-        split._sharing.own_rows = next(shares) % 13
+        k = next(shares)
+        split._sharing.own_rows = k % 13
+        split._stream = k % 2 == 0  # every other period as a large team's (streaming.py)
         return real_step(*a, beside=beside)
 
     monkeypatch.setattr(split, "step", step)
