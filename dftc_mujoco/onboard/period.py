@@ -82,8 +82,9 @@ class PeriodBuffers(NamedTuple):
     u_mem: np.ndarray  # (M, n) uᵢ, then Δuᵢ (eqs. 8, 22)
     du: np.ndarray
     row: np.ndarray  # (B, M·n) one robot's residual, for each of B groups of robots (scratch)
-    norm: np.ndarray  # (B, M) its norms where r_norm does not keep them (scratch)
-    r_norm: np.ndarray  # (M, M) ‖ⁱr_k‖, written at the periods that keep them (norms)
+    # (M + B, M) ‖ⁱr_k‖ in rows 0 .. M - 1 at the periods that keep them (norms), else in
+    # row M + b for the robots of group b (scratch)
+    r_norm: np.ndarray
     u: np.ndarray  # (N, 2) nominal input, original robot axis
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
 
@@ -92,7 +93,7 @@ class PeriodBuffers(NamedTuple):
 def _round_row(inp, ob, th, dec, out, i, b, y, yn, n):  # pragma: no cover - compiled
     """Robot i at a round of the observers: ⁱr (eq. 35) into scratch row ``b``, ‖ⁱr_k‖, ⁱŷ of
     the next period (eq. 19) and, with FDIR, its flags (eq. 39); returns how many it raised."""
-    row = out.row[b]
+    row, mn = out.row[b], y.shape[1]
     residual_row(
         ob.y_hat,
         ob.int_u_own,
@@ -105,15 +106,15 @@ def _round_row(inp, ob, th, dec, out, i, b, y, yn, n):  # pragma: no cover - com
         i,
         row,
     )
-    norms = out.r_norm[i] if inp.norms else out.norm[b]
+    norms = out.r_norm[i if inp.norms else y.shape[0] + b]
     row_norms(row, n, norms)
     yi, ko, dt_o = y[i], ob.ko, ob.dt_o
     if inp.stream:  # past the caches: the next period reads it from memory anyway
         yni = yn[i]
-        for a in range(y.shape[1]):
+        for a in range(mn):
             stream_store(yni, a, advance_one(yi[a], row[a], ko, dt_o))
     else:
-        for a in range(y.shape[1]):
+        for a in range(mn):
             yn[i, a] = advance_one(yi[a], row[a], ko, dt_o)
     if not inp.fdir:
         return 0
@@ -361,7 +362,7 @@ def team_period_flat(*a):  # pragma: no cover - compiled
         EstimatorRecord(*a[39:50]),
         ThresholdRecord(*a[50:55]),
         DecisionRecord(*a[55:62]),
-        PeriodBuffers(*a[62:74]),
+        PeriodBuffers(*a[62:73]),
     )
 
 
@@ -378,6 +379,6 @@ RECORDS = (
     DecisionRecord,
     PeriodBuffers,
 )
-_ENDS = (11, 23, 24, 29, 33, 39, 50, 55, 62, 74)  # where each record ends in team_period_flat's a
+_ENDS = (11, 23, 24, 29, 33, 39, 50, 55, 62, 73)  # where each record ends in team_period_flat's a
 if tuple(np.cumsum([len(r._fields) for r in RECORDS])) != _ENDS:  # pragma: no cover
     raise ImportError("team_period_flat's slices no longer match the records' fields")

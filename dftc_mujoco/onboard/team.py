@@ -28,7 +28,6 @@ from typing import Any, cast
 import numpy as np
 
 from ..events import make
-from ..graph import Graph
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
 from .block import Block, TeamConfig
@@ -56,6 +55,7 @@ from .sighting import Sighting
 from .streaming import streams
 from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
 from .thresholds import Thresholds
+from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -151,7 +151,7 @@ class Team:
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
-        self.dt_d_max, self.dt_d_max_info = self._detection_horizon()
+        self.dt_d_max, self.dt_d_max_info = detection_horizon(config, config.graph, self.thresholds)
         # the exclusion protocol (eqs. 42-43) under the fault hypothesis
         self.recovery = Recovery(
             self.dt_d_max, config.max_faults, config.self_exclusion, config.postpone_on_contact
@@ -187,40 +187,6 @@ class Team:
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
         self.x_d[:] = prior
-
-    def _detection_horizon(self, graph: Graph | None = None) -> tuple[float, dict[str, Any]]:
-        """Δt_d,max: the scenario's, or (``"auto"``) eq. 46 for the reference fault on the
-        current graph and thresholds (recomputed at each exclusion)."""
-        cfg = self.config
-        graph = cfg.graph if graph is None else graph
-        if cfg.dt_d_max != "auto":
-            return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
-        from .thresholds import predicted_delays
-
-        # the steady thresholds of the run's rule, whatever it is; the signature of a
-        # constant fault comes from the columns A_k^j e_k alone (no tables)
-        steady = np.array(self.thresholds.mu(1e9), dtype=float)
-        delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
-        # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
-        # reported, not waited for (its own residual sits on its noise and drift offset)
-        self_ok = bool(np.isfinite(np.diag(delays)).all())
-        np.fill_diagonal(delays, 0.0)
-        worst = float(delays.max()) + cfg.detection_window
-        info = {
-            "source": "analysis (eq. 46)",
-            "reference_fault": cfg.reference_fault,
-            "predicted_delays_max": worst if np.isfinite(worst) else None,
-            "self_detection_guaranteed": self_ok,
-        }
-        if np.isfinite(worst):
-            info["value"] = worst
-            return worst, info
-        info["value"] = 5.0
-        info["warning"] = (
-            f"a constant fault of {cfg.reference_fault:g} m/s is not guaranteed detectable by "
-            "every teammate with these thresholds (eq. 46); Δt_d,max falls back to 5 s"
-        )
-        return 5.0, info
 
     def settle_time(self, horizon: float, tolerance: float = 0.1) -> float:
         """T_s: from when on every threshold is within ``tolerance`` of its steady value, the
@@ -261,10 +227,10 @@ class Team:
         threads = workers() if m >= PARALLEL_FROM and PARALLEL_ALLOWED else 1
         self._sharing = Sharing(threads) if threads > 1 else None
         self._row = np.empty((threads, m * 2))
-        self._norm = np.empty((threads, m))  # its norms, at the periods that do not keep them
         self._stream = streams(3 * m * m * 2 * 8)  # ŷ, ŷ⁺, ∫ⁱû_g past the cache (streaming.py)
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
-        self.r_norm = np.zeros((m, m))  # no residual before the first round of a network
+        # ‖ⁱr_k‖ (none before the first round of a network), then each thread's scratch row
+        self._norms = np.zeros((m + threads, m))
         self._raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         cfg, gone = self.config, len(self.gone)
@@ -284,8 +250,7 @@ class Team:
             self._u_mem,
             self._du,
             self._row,
-            self._norm,
-            self.r_norm,
+            self._norms,
             self.u,
             self.u_bar,
         )
@@ -408,20 +373,17 @@ class Team:
         # the period's inputs (PeriodInputs); an ended team's last row shows its estimates
         keep = self.estimates or self.ended is not None
         # ‖ⁱr_k‖ where read: a log row, a snapshot, or the exclusion instant (at the next
-        # period's start): a t_r is Δt_d,max after the flag, or a period after a postponement
-        norms = keep or bool(self.recovery.pending) or self.recovery.dt_d_max < 2 * self.config.dt
+        # period's start): a t_r is Δt_d,max after the flag, or a period after a postponement;
+        # over a network a round's norms are read until the next round: always kept
+        rec, dt = self.recovery, self.config.dt
+        norms = keep or bool(rec.pending) or rec.dt_d_max < 2 * dt or self.radios is not None
         self._norms_kept = norms
         fdir, now = self.config.fdir, self.rounds.now
         inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms, self._stream)
         sharing = self._sharing
         if sharing is not None:  # a large team: the pass shared, the commands beside it
-            inp, ob, th, dec, buf = (
-                PeriodInputs(*inputs),
-                self.observer.record(),
-                self._th,
-                self.decision.record(),
-                self._buffers,
-            )
+            inp, buf, th = PeriodInputs(*inputs), self._buffers, self._th
+            ob, dec = self.observer.record(), self.decision.record()
             ctl, sup, seen, drive, est = self._records()
             begin(inp, ob, ctl, buf)  # each robot's own block of the state, before it moves
             code = 0
@@ -483,6 +445,15 @@ class Team:
         )
 
     # ------------------------------------------------------------------ outputs
+
+    @property
+    def r_norm(self) -> np.ndarray:
+        """(M, M) ‖ⁱr_k‖ of the last round (written where read: see :meth:`_compiled`)."""
+        return self._norms[: len(self.members)]
+
+    @r_norm.setter
+    def r_norm(self, value: np.ndarray) -> None:
+        self._norms[: len(self.members)] = value
 
     @property
     def flag(self) -> np.ndarray:
@@ -675,7 +646,7 @@ class Team:
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
         if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
             before = self.dt_d_max
-            self.dt_d_max, info = self._detection_horizon(self.graph)
+            self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))

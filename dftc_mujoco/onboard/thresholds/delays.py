@@ -1,13 +1,17 @@
 """Δt_d of eq. 46: when a constant fault is guaranteed detected, robot by robot.
 
 :func:`predicted_delays` sweeps the signature of a constant fault, h·fault·S_ik(j), against
-twice the steady threshold of any rule (``fdir.dt_d_max = "auto"``)."""
+twice the steady threshold of any rule; :func:`detection_horizon` makes Δt_d,max of it
+(``fdir.dt_d_max = "auto"``)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from ...graph import Graph, reaches_all, rotation_invariant
+from ..block import TeamConfig
 from .envelope import CHECK, MAX_PERIODS, MAX_WORK, _slack
 from .kernels import Adjacency, advance_crossing, column_of_row
 
@@ -115,3 +119,36 @@ def _crossing_periods(
         )
         cert, cols = cert[keep], cols[keep]
     return result
+
+
+def detection_horizon(
+    cfg: TeamConfig, graph: Graph, thresholds: Any
+) -> tuple[float, dict[str, Any]]:
+    """Δt_d,max and how it was found: the scenario's, or (``"auto"``) eq. 46 for the
+    reference fault on ``graph`` with the steady thresholds of ``thresholds`` (the team's
+    block, whatever its rule; recomputed on the new graph at each exclusion)."""
+    if cfg.dt_d_max != "auto":
+        return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
+    # the signature of a constant fault comes from the columns A_k^j e_k alone (no tables)
+    steady = np.array(thresholds.mu(1e9), dtype=float)
+    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
+    # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
+    # reported, not waited for (its own residual sits on its noise and drift offset)
+    self_ok = bool(np.isfinite(np.diag(delays)).all())
+    np.fill_diagonal(delays, 0.0)
+    worst = float(delays.max()) + cfg.detection_window
+    info: dict[str, Any] = {
+        "source": "analysis (eq. 46)",
+        "reference_fault": cfg.reference_fault,
+        "predicted_delays_max": worst if np.isfinite(worst) else None,
+        "self_detection_guaranteed": self_ok,
+    }
+    if np.isfinite(worst):
+        info["value"] = worst
+        return worst, info
+    info["value"] = 5.0
+    info["warning"] = (
+        f"a constant fault of {cfg.reference_fault:g} m/s is not guaranteed detectable by "
+        "every teammate with these thresholds (eq. 46); Δt_d,max falls back to 5 s"
+    )
+    return 5.0, info
