@@ -95,7 +95,7 @@ def head():
     assert address, "ray start --head did not come up"
     host = address.rsplit(":", 1)[0]
     try:
-        yield {"address": address, "client": f"ray://{host}:{client}", "env": env}
+        yield {"address": address, "client": f"ray://{host}:{client}", "env": env, "temp": temp}
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
@@ -128,18 +128,32 @@ def test_a_campaign_joins_a_running_cluster_by_address_and_by_bare_ray(head, loc
     assert _rows(tmp_path / "b") == local_rows
 
 
+def _client_server_logs(temp: Path, lines: int = 20) -> str:
+    """The last lines of the head's Ray client server logs (the proxy and one per driver)."""
+    logs = sorted((temp / "session_latest" / "logs").glob("ray_client_server*"))
+    tails = [f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-lines:]) for f in logs]
+    return "\n".join(tails) or f"(no client server logs under {temp})"
+
+
 def test_ray_client_addresses_work_with_the_cluster_extra(head, local_rows, tmp_path):
     pytest.importorskip("grpc", reason="ray[client] is not installed (the cluster extra)")
     # Ray's client server starts a server process per driver: tens of seconds on a
-    # loaded 2-core machine (CI once gave up at 25 s), hence the long --ray-timeout.
-    code, _, err, _ = _campaign(
-        *("--runs", "2", "--ray", head["client"], "--ray-timeout", "150"),
-        *("--out", str(tmp_path)),
-        env=head["env"],
-        timeout=240,
-    )
-    assert code == 0, err
-    assert _rows(tmp_path) == local_rows
+    # loaded 2-core machine (CI once gave up at 25 s), hence the long --ray-timeout. Twice
+    # (2026-11-26, first in a full CI run) a driver was not let in within 150 s at all,
+    # while the same test alone, or under two busy cores, joins in 15-20 s: a driver that
+    # could not join is followed by one more, and a second failure shows the head's logs.
+    for attempt in (1, 2):
+        out = tmp_path / f"attempt{attempt}"
+        code, _, err, _ = _campaign(
+            *("--runs", "2", "--ray", head["client"], "--ray-timeout", "150"),
+            *("--out", str(out)),
+            env=head["env"],
+            timeout=240,
+        )
+        if code == 0 or "could not join" not in err:
+            break
+    assert code == 0, f"{err}\n{_client_server_logs(head['temp'])}"
+    assert _rows(out) == local_rows
 
 
 def test_a_cluster_that_wants_a_token_says_so_in_one_line(head, tmp_path):
