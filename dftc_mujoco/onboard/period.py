@@ -138,7 +138,7 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     :func:`~.decision.decide_row`, with the thresholds ``th`` read entry by entry). Every
     N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
     measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
-    the pass may run after them (and beside the physics); :func:`integrate` follows it."""
+    the pass may run beside them and the physics; :func:`integrate` follows it."""
     m, _, n = ob.y_hat.shape
     y, s = ob.y_hat.reshape(m, m * n), ob.int_u_hat.reshape(m, m * n)
     yn, xh = ob.y_next.reshape(m, m * n), out.x_hat.reshape(m, m * n)
@@ -287,28 +287,12 @@ def commands(
     est: EstimatorRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
-    """Stages 2-3 after :func:`begin`, :func:`act` and :func:`deliver`: every robot's
+    """Stages 2-3, after :func:`begin`: :func:`act` and :func:`deliver`, every robot's
     commands; returns SWITCHED | SATURATED bits. They read and write nothing the pass over
     the N × N state (:func:`team_rows`) does, so the two may run at once."""
     code = act(inp, sup, seen, drive, out)
     deliver(inp, drive, est, out)
     return code
-
-
-@njit(cache=True)
-def team_command(
-    inp: PeriodInputs,
-    ob: ObserverRecord,
-    ctl: ControllerRecord,
-    sup: SupervisorRecord,
-    seen: Surroundings,
-    drive: DriveRecord,
-    est: EstimatorRecord,
-    out: PeriodBuffers,
-) -> int:  # pragma: no cover - compiled
-    """Stages 1-3, :func:`begin` and :func:`commands`; returns SWITCHED | SATURATED bits."""
-    begin(inp, ob, ctl, out)
-    return commands(inp, sup, seen, drive, est, out)
 
 
 @njit(cache=True)
@@ -328,7 +312,7 @@ def team_period(
     SATURATED bits. The stages: :func:`begin`, the commands (:func:`commands`:
     :func:`act`, :func:`deliver`), the pass over the N × N state (eqs. 21, 15, 20, 35, 19
     and the decision of eq. 39, :func:`team_rows`) and :func:`integrate`; a large team runs
-    the same stages with the pass shared between threads and beside the physics
+    the same stages with the pass shared between threads, beside the commands and the physics
     (:meth:`.team.Team.step`).
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
@@ -338,7 +322,8 @@ def team_period(
     Robots that are not members get u = 0 and only run their fault estimator. ŷ of the
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
-    code = team_command(inp, ob, ctl, sup, seen, drive, est, out)
+    begin(inp, ob, ctl, out)
+    code = commands(inp, sup, seen, drive, est, out)
     raised = team_rows(inp, ob, ctl, th, dec, out, 0, inp.rows.shape[0], 0)
     integrate(ob, out)
     return code | RAISED if raised else code
