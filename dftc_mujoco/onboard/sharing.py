@@ -4,12 +4,12 @@ The pass over the N × N state (:func:`~.period.team_rows`) treats each robot's 
 from the others, so disjoint ranges of robots can run at once in threads (the compiled
 pass holds no lock on Python), and the numbers do not depend on who ran which row. Helper
 threads take their shares of the robots first; the calling thread meanwhile runs the work
-given *beside* the pass (the simulation's physics step, which needs the period's commands
-and nothing the pass writes: MuJoCo holds no lock on Python while it steps either), then
-takes the last share. The caller's share is set from the last period's timings so that the
-helpers end a little before it: waking a thread costs 50-80 µs on this machine, and the
-caller then never waits to be woken. With two cores the physics and the pass share them
-instead of taking turns.
+given *beside* the pass (the team's commands, then the simulation's physics step under
+them: neither needs anything the pass writes, and MuJoCo holds no lock on Python while it
+steps either), then takes the last share. The caller's share is set from the last
+period's timings so that the helpers end a little before it: waking a thread costs
+50-80 µs on this machine, and the caller then never waits to be woken. With two cores the
+physics and the pass share them instead of taking turns.
 """
 
 from __future__ import annotations
