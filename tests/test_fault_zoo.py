@@ -134,3 +134,51 @@ def test_an_actuator_drift_grows_and_a_stuck_robot_keeps_its_command():
         sim.step(150)
         assert np.array_equal(sim.data.ctrl[ids[2]], held)  # robot 3 keeps its command
         assert not np.array_equal(sim.data.ctrl[ids[0]], others)  # robot 1 does not
+
+
+def test_faults_left_alone_between_their_switches_act_as_if_re_evaluated_every_period():
+    # apply() runs every period while a bias moves; it skips the stops' bookkeeping until
+    # the next start or end, and the due-time search while the bias keeps moving: the
+    # physics must be what re-evaluating everything every period gives, bit for bit
+    from dftc_mujoco import Simulation
+
+    faults = [
+        {
+            "robot": 1,
+            "kind": "bias",
+            "t": 2.0,
+            "value": [0.1, -0.05],
+            "time_constant": 0.5,
+            "end": 10.0,
+        },
+        {"robot": 2, "kind": "stop", "t": 3.0, "end": 5.0},
+        {"robot": 3, "kind": "intermittent", "t": 4.0, "period": 1.0, "duty": 0.5, "end": 8.0},
+        {"robot": 4, "kind": "loss_of_effectiveness", "t": 6.0, "value": 0.5, "end": 9.0},
+        {"robot": 2, "kind": "stuck", "t": 6.5, "end": 8.5},
+        {"robot": 1, "kind": "stop", "t": 9.0, "end": 9.5},
+    ]
+    s = load_scenario("paper_case", {"duration": 11.0, "faults": faults})
+
+    def run(every_period: bool):
+        params, qpos = [], []
+
+        def hook(t, plant):
+            m = plant.model
+            params.append(
+                np.concatenate([m.actuator_gainprm[:, 0], m.actuator_biasprm[:, :3].ravel()])
+            )
+            qpos.append(plant.data.qpos.copy())
+            if every_period:  # forget what apply() knows: it re-evaluates everything
+                sim.faults._switch_due = sim.faults._moving_until = -np.inf
+
+        with Simulation(s, hook=hook) as sim:
+            sim.run(progress=False)
+        return np.array(params), np.array(qpos)
+
+    (p_skip, q_skip), (p_all, q_all) = run(False), run(True)
+    assert len(p_skip) == 1100
+    assert np.array_equal(p_skip, p_all) and np.array_equal(q_skip, q_all)
+    # and the faults did act: parameters moved at each switch and while the bias moved
+    changed = np.flatnonzero(np.any(np.diff(p_skip, axis=0) != 0, axis=1)) + 1
+    assert {300, 500, 600, 650, 900, 950} <= set(changed.tolist())
+    assert len(changed) > 400  # the bias moves every period from 2 s (at least until 10 s)

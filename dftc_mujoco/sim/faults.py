@@ -56,6 +56,10 @@ class ActuatorFaults:
         self._b_settled = np.where(self._b_ramp, np.inf, self._b_t + 40.0 * self._b_tau)
         self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
+        # the faults _switch reads, and when what it finds may next change (-inf: now)
+        self._switched = tuple(f for f in faults if f.kind not in ("bias", "drift"))
+        self._switch_due = -np.inf
+        self._moving_until = -np.inf  # a bias profile moves (apply() every period) until then
         self.ended = [False] * len(faults)
         self.just_ended: list[Fault] = []  # the faults that ended at the last apply()
         self._gain = np.ones(n)  # each robot's remaining effectiveness (loss_of_effectiveness)
@@ -105,6 +109,22 @@ class ActuatorFaults:
                 m.actuator_biasprm[ids, 2] = bias0[ids, 2]
                 self._written = None  # the bias terms are written again
         self.stopped, self._gain = stopped, gain
+        self._switch_due = self._switch_next(t)
+
+    def _switch_next(self, t: float) -> float:
+        """When :meth:`_switch` may next find other faults acting than at ``t``: the next start
+        or end of a fault it reads (-inf while an intermittent one acts: its windows). Until
+        then it would change nothing, so :meth:`apply` (every period while a bias moves)
+        skips it."""
+        times = []
+        for f in self._switched:
+            if t < f.t:
+                times.append(f.t)
+            elif t < f.end:
+                if f.kind == "intermittent":
+                    return -np.inf
+                times.append(f.end)
+        return min(times, default=np.inf)
 
     def apply(self, t: float) -> list[Fault]:
         """Write the actuator parameters for time ``t``; returns the faults that start now.
@@ -120,7 +140,8 @@ class ActuatorFaults:
             if self.started[k] and not self.ended[k] and t >= f.end:
                 self.ended[k] = True
                 self.just_ended.append(f)
-        self._switch(t)
+        if t >= self._switch_due:
+            self._switch(t)
         m = self.model
         if len(self._bias_robots):
             phi = self.bias_phi(t)
@@ -128,7 +149,8 @@ class ActuatorFaults:
             b0 = self.actuation.bias_terms(self.drive.joint_velocity(phi), advance=True)
             rows = self._bias_robots[~self.stopped[self._bias_robots]]
             offsets = b0[rows]
-            if self._written is None or not np.array_equal(offsets, self._written):
+            written = self._written
+            if written is None or written.shape != offsets.shape or not (offsets == written).all():
                 m.actuator_biasprm[self.actuator[rows], 0] = offsets
                 self._written = offsets
         for robot, (gain, b0, b2) in self._stop_terms.items():
@@ -136,7 +158,7 @@ class ActuatorFaults:
             m.actuator_gainprm[ids, 0] = gain[0]
             m.actuator_biasprm[ids, 0] = b0[0]
             m.actuator_biasprm[ids, 2] = b2[0]
-        self.due = self._next_due(t)
+        self.due = -np.inf if t < self._moving_until else self._next_due(t)
         return new
 
     def hold(self, ctrl: np.ndarray) -> np.ndarray:
@@ -152,18 +174,20 @@ class ActuatorFaults:
         """When :meth:`apply` next has something to write: every period while a bias
         profile moves (or while the drive maps a bias through the robot's pose or
         integrates it), else the next start."""
+        started = (self._b_t <= t) & (self._b_end > t)
+        if started.any():  # moving until the last of them ends (or settles: 1 − e^{−40} = 1)
+            ends = self._b_end[started]
+            if not (self.drive.pose_dependent or self.actuation.any_position):
+                ends = np.minimum(ends, self._b_settled[started])
+            until = ends.max()
+            if until > t:
+                self._moving_until = until
+                return -np.inf
         pending = [f.t for k, f in enumerate(self.faults) if not self.started[k]]
         acting = [f for k, f in enumerate(self.faults) if self.started[k] and not self.ended[k]]
         pending += [f.end for f in acting]
         if any(f.kind == "intermittent" for f in acting):
             return -np.inf  # its windows switch on and off
-        started = (self._b_t <= t) & (self._b_end > t)
-        if started.any() and (
-            self.drive.pose_dependent
-            or self.actuation.any_position
-            or (self._b_settled[started] > t).any()
-        ):
-            return -np.inf
         return min(pending, default=np.inf)
 
     def bias_phi(self, t: float) -> np.ndarray:
@@ -230,3 +254,4 @@ class ActuatorFaults:
         self._written = None
         self.actuation.bias_integral[:] = 0.0
         self.due = min((f.t for f in self.faults), default=np.inf)
+        self._switch_due = self._moving_until = -np.inf
