@@ -473,9 +473,7 @@ class Team:
     def outputs(self) -> dict[str, np.ndarray]:
         """The period's outputs on the original robot axis (NaN / False for non-members)."""
         mem, n = self.members, self.n
-        m = len(mem)
         flag = np.asarray(self.flag, bool)
-        others = ~np.eye(m, dtype=bool)
         return {
             "u": self.u,
             "u_bar": self.u_bar,
@@ -485,10 +483,16 @@ class Team:
             "residual": _expand(self.r_norm, mem, n, square=True),
             "threshold": _expand(self.mu, mem, n, square=True),
             "flag": _expand(flag, mem, n, square=True, fill=False),
-            "flagged": _expand(np.any(flag & others, axis=0), mem, n, fill=False),
+            "flagged": _expand(self._flagged(), mem, n, fill=False),
             "reactive": _expand(self.reactive, mem, n, fill=False),
             "active": self.active,
         }
+
+    def _flagged(self) -> np.ndarray:
+        """(M,) which members some teammate flags."""
+        out = np.empty(len(self.members), bool)
+        flagged_by_teammates(np.asarray(self.flag, bool), out)
+        return out
 
     def write_row(
         self, log: dict[str, np.ndarray], row: int, fdir: bool = True, row_nn: int = -1
@@ -496,17 +500,20 @@ class Team:
         """Write the period's outputs into row ``row`` of preallocated log arrays (original
         robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``); the N × N
         ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1."""
-        if len(self.members) < self.n:  # after an exclusion: expand to the original axis
-            out = self.outputs()
-            for name in ("u", "x_d", "flagged", "reactive", "active"):
-                log[name][row] = out[name]
+        mem = self.members
+        if len(mem) < self.n:  # after an exclusion: onto the original axis, what is written
+            log["u"][row] = self.u
+            _place(log["x_d"][row], self.x_d, mem)
+            _place(log["flagged"][row], self._flagged(), mem, fill=False)
+            _place(log["reactive"][row], self.reactive, mem, fill=False)
+            log["active"][row] = self.active
             if fdir:
-                log["phi_hat"][row] = out["phi_hat"]
+                log["phi_hat"][row] = self.phi_hat
             if row_nn >= 0:
-                log["x_hat"][row_nn] = out["x_hat"]
-                log["residual"][row_nn] = out["residual"]
+                _place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
+                _place(log["residual"][row_nn], self.r_norm, mem, square=True)
                 if fdir:
-                    log["threshold"][row_nn] = out["threshold"]
+                    _place(log["threshold"][row_nn], self.mu, mem, square=True)
             return
         log["u"][row] = self.u
         log["x_d"][row] = self.x_d
@@ -658,11 +665,19 @@ def _expand(
     """Place a members-indexed array on the original robot axis (both first axes if ``square``)."""
     if len(members) == n:
         return a  # the whole team: no copy (callers copy what they keep)
-    dtype = bool if fill is False else float
+    lead = (n, n) if square else (n,)
+    out = np.empty((*lead, *a.shape[len(lead) :]), dtype=bool if fill is False else float)
+    _place(out, a, members, square, fill)
+    return out
+
+
+def _place(
+    out: np.ndarray, a: np.ndarray, members: np.ndarray, square: bool = False, fill: Any = np.nan
+) -> None:
+    """Write a members-indexed array into ``out`` on the original robot axis (both first axes
+    if ``square``), ``fill`` for the robots that are not members."""
+    out[...] = fill
     if square:
-        out = np.full((n, n, *a.shape[2:]), fill, dtype=dtype)
         out[members[:, None], members[None, :]] = a
     else:
-        out = np.full((n, *a.shape[1:]), fill, dtype=dtype)
         out[members] = a
-    return out
