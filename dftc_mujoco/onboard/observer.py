@@ -47,8 +47,9 @@ def residual_row(
     ``links[e]`` (M·n,), instead of the sender's current ŷ."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
+    own, w = y[i], -in_degree[i]  # one-dimensional views: loops the compiler vectorises
     for a in range(m * n):
-        row[a] = -in_degree[i] * y[i, a]
+        row[a] = w * own[a]
     for e in range(first_edge[i], first_edge[i + 1]):
         if networked:  # two loops, one array type each, which the compiler vectorises
             msg = links[e]
