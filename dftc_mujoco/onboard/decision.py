@@ -40,9 +40,9 @@ def tick(c, over, need):  # pragma: no cover - compiled
     """A timer after one more round: rounds above (> 0) or not above (< 0) the threshold,
     counted from 1 at each change of side and kept within ±max(need, 1)."""
     top = max(need, 1)
-    if over:
-        return 1 if c <= 0 else min(c + 1, top)
-    return -1 if c >= 0 else max(c - 1, -top)
+    up = min(max(c, 0) + 1, top)  # 1 after a change of side, else c + 1
+    down = max(min(c, 0) - 1, -top)  # -1 after a change of side, else c - 1
+    return up if over else down  # no branch: a loop of these is vectorised
 
 
 @njit(inline="always")
@@ -87,22 +87,23 @@ def decide_row(r, th, i, dec):  # pragma: no cover - compiled
         dec.raised_rows[i] = False
     count = 0
     if mode == 0:
-        changes = 0
+        changes, top = 0, max(need, 1)  # c >= top: c > 0 and c >= need (a flag to be up)
+        ti, fi = timer[i], flag[i]
         if th.dense.shape[0]:  # a rule's array: row i of it
             mu = th.dense[i]
             for k in range(m):
-                c = tick(timer[i, k], r[k] > mu[k], need)
-                timer[i, k] = c
-                changes += (c > 0 and c >= need) != flag[i, k]
+                c = tick(ti[k], r[k] > mu[k], need)
+                ti[k] = c
+                changes += (c >= top) != fi[k]
         else:  # eq. 40's factors
-            ci, bound, own = th.coef[i], th.bound, timer[i, i]
+            ci, bound, own = th.coef[i], th.bound, ti[i]
             for k in range(m):
-                c = tick(timer[i, k], r[k] > ci * bound[k], need)
-                timer[i, k] = c
-                changes += (c > 0 and c >= need) != flag[i, k]
+                c = tick(ti[k], r[k] > ci * bound[k], need)
+                ti[k] = c
+                changes += (c >= top) != fi[k]
             c = tick(own, r[i] > threshold_at(th, i, i), need)  # k = i: its own ⁱμ_i
-            timer[i, i] = c
-            changes += (c > 0 and c >= need) != flag[i, i]
+            ti[i] = c
+            changes += (c >= top) != fi[i]
         if changes:
             for k in range(m):
                 count += move_flag(i, k, timer[i, k], flag, need, isolated, raised)
