@@ -83,12 +83,6 @@ def _row(i, v, o, src, first, deg, col_of_row, beta):  # pragma: no cover - comp
     observer matrix B_k = I − β(L + e_k e_kᵀ) is applied."""
     a = 1.0 - beta * deg[i]
     vi = v[i]
-    if o.shape[0] == 1:  # one column (a graph invariant under rotation): the same sums, unlooped
-        x = a * vi[0]
-        for e in range(first[i], first[i + 1]):
-            x += beta * v[src[e], 0]
-        o[0] = x - beta * vi[0] if col_of_row[i] == 0 else x
-        return
     for b in range(o.shape[0]):
         o[b] = a * vi[b]
     for e in range(first[i], first[i + 1]):
@@ -240,13 +234,20 @@ def advance_sums(
         _step_rows(ca, na, src, first, deg, col_of_row, beta)
         _step_rows(cu, nu, dst, out_first, deg, col_of_row, beta)
         ma, mu = amax[s], umax[s]
-        ma[:] = 0.0
-        mu[:] = 0.0
-        for i in range(n):  # row by row, in memory order; each column's maximum over i in order
-            nai, nui = na[i], nu[i]
-            for b in range(kk):
-                ma[b] = max(ma[b], nai[b])
-                mu[b] = max(mu[b], nui[b])
+        if kk == 1:  # one column (a graph invariant under rotation)
+            x = y = 0.0
+            for i in range(n):
+                x = max(x, na[i, 0])
+                y = max(y, nu[i, 0])
+            ma[0], mu[0] = x, y
+        else:  # row by row, in memory order; each column's maximum over i in order
+            ma[:] = 0.0
+            mu[:] = 0.0
+            for i in range(n):
+                nai, nui = na[i], nu[i]
+                for b in range(kk):
+                    ma[b] = max(ma[b], nai[b])
+                    mu[b] = max(mu[b], nui[b])
         ca, na = na, ca
         cu, nu = nu, cu
 
