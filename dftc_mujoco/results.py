@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
 from .errors import ScenarioError, SimulationError
 from .events import split_text
@@ -188,15 +189,8 @@ def estimation_errors(log: dict[str, np.ndarray], transient: float) -> dict[str,
     keep = [j for j, r in enumerate(rows) if r < len(t) and t[r] >= transient]
     if not keep or n == 0:
         return {"per_robot_rms": [None] * n, "max": None}
-    total, count, worst = np.zeros(n), np.zeros(n), 0.0
-    for j in keep:  # one sample at a time: the N × N fields may be large
-        e = np.linalg.norm(x_hat[j].astype(float) - x[rows[j]][None], axis=-1)  # (i, k)
-        np.fill_diagonal(e, np.nan)  # a robot's estimate of itself is its own measurement
-        ok = np.isfinite(e)
-        total += np.where(ok, e**2, 0.0).sum(axis=0)
-        count += ok.sum(axis=0)
-        if ok.any():
-            worst = max(worst, float(np.nanmax(e)))
+    total, count = np.zeros(n), np.zeros(n)
+    worst = _estimate_sums(x_hat, x, rows, np.array(keep, dtype=np.int64), total, count)
     with np.errstate(invalid="ignore", divide="ignore"):
         rms = np.sqrt(total / count)
     return {
@@ -205,18 +199,57 @@ def estimation_errors(log: dict[str, np.ndarray], transient: float) -> dict[str,
     }
 
 
+@njit(cache=True)
+def _estimate_sums(x_hat, x, rows, keep, total, count):  # pragma: no cover - compiled
+    """For the samples ``keep`` of the N × N log, add Σ_i ‖ⁱx̂_k − x_k‖² over the teammates i
+    whose error is finite into ``total[k]`` and their number into ``count[k]``, sample by
+    sample (a sample's sum first, then into the total); returns the largest error (NaN
+    aside) of the samples with a finite one, 0 if none. The numbers of the N × N arrays
+    numpy made before, one sample at a time, without them."""
+    n = total.shape[0]
+    part = np.empty(n)
+    worst = 0.0
+    for j in keep:
+        xr = x[rows[j]]
+        part[:] = 0.0
+        top, finite = -np.inf, False
+        for i in range(n):
+            for k in range(n):
+                if i == k:
+                    continue  # a robot's estimate of itself is its own measurement
+                d0 = np.float64(x_hat[j, i, k, 0]) - xr[k, 0]
+                d1 = np.float64(x_hat[j, i, k, 1]) - xr[k, 1]
+                e = np.sqrt(d0 * d0 + d1 * d1)
+                if not np.isnan(e):
+                    top = max(top, e)
+                if np.isfinite(e):
+                    part[k] += e * e
+                    count[k] += 1.0
+                    finite = True
+        for k in range(n):
+            total[k] += part[k]
+        if finite:
+            worst = max(worst, top)
+    return worst
+
+
 def peak_ratio(residual: np.ndarray, threshold: np.ndarray, columns: np.ndarray) -> float:
     """max ‖ⁱr_k‖ / ⁱμ_k over samples and observers i, for the robots k selected per sample
     by ``columns`` (T, N); 0 when none is selected. Excluded robots (NaN) are skipped."""
+    return _peak_ratio(residual, threshold, np.ascontiguousarray(columns, dtype=bool))
+
+
+@njit(cache=True)
+def _peak_ratio(residual, threshold, columns):  # pragma: no cover - compiled
+    """:func:`peak_ratio`, entry by entry (the ratios in float64, finite ones only)."""
     best = 0.0
-    for a in range(0, len(residual), 256):  # chunks: bounded memory at large N
-        cols = columns[a : a + 256]
-        if not cols.any():
-            continue
-        ratio = residual[a : a + 256].astype(float) / threshold[a : a + 256]
-        ratio = np.where(cols[:, None, :], ratio, np.nan)
-        if np.isfinite(ratio).any():
-            best = max(best, float(np.nanmax(np.where(np.isfinite(ratio), ratio, np.nan))))
+    for a in range(min(residual.shape[0], columns.shape[0])):
+        for i in range(residual.shape[1]):
+            for k in range(residual.shape[2]):
+                if columns[a, k]:
+                    r = np.float64(residual[a, i, k]) / np.float64(threshold[a, i, k])
+                    if np.isfinite(r) and r > best:
+                        best = r
     return best
 
 

@@ -57,3 +57,58 @@ def test_a_run_with_a_hundred_thousand_flags_is_summarised_in_seconds():
     made = 20_000 + 19_000
     assert after["healthy_flags"] == before["healthy_flags"] + made
     assert took < 10.0  # the search took 40 000 × 40 000 steps (minutes)
+
+
+def _numpy_peak_ratio(residual, threshold, columns):
+    """The definition of the summary's margin, in numpy (float32 logs, float64 ratios)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = residual.astype(float) / threshold
+    ratio = np.where(columns[:, None, :], ratio, np.nan)
+    finite = np.isfinite(ratio)
+    return float(np.nanmax(np.where(finite, ratio, np.nan))) if finite.any() else 0.0
+
+
+def _numpy_estimation_errors(x_hat, x, rows, keep):
+    """The definition of the summary's estimation error, in numpy, one sample at a time."""
+    n = x.shape[1]
+    total, count, worst = np.zeros(n), np.zeros(n), 0.0
+    for j in keep:
+        e = np.linalg.norm(x_hat[j].astype(float) - x[rows[j]][None], axis=-1)
+        np.fill_diagonal(e, np.nan)
+        ok = np.isfinite(e)
+        total += np.where(ok, e**2, 0.0).sum(axis=0)
+        count += ok.sum(axis=0)
+        if ok.any():
+            worst = max(worst, float(np.nanmax(e)))
+    return total, count, worst
+
+
+def test_the_compiled_derivations_give_numpys_numbers_bit_for_bit():
+    # the summary's margin and estimation error are computed entry by entry after the run
+    # (at N = 1000 numpy's N × N temporaries took a second); on float32 logs with NaN
+    # (excluded robots) and inf (unbounded thresholds) they must be numpy's numbers
+    from dftc_mujoco.results import _estimate_sums, peak_ratio
+
+    rng = np.random.default_rng(7)
+    t, n = 40, 23
+    residual = rng.uniform(0, 2, (t, n, n)).astype(np.float32)
+    threshold = rng.uniform(0.3, 3, (t, n, n)).astype(np.float32)
+    residual[:, 4, :] = np.nan
+    threshold[:, :, 5] = np.inf
+    threshold[3, 2, 7] = 0.0  # a ratio of inf: not finite, skipped
+    columns = rng.uniform(size=(t, n)) < 0.5
+    expected = _numpy_peak_ratio(residual, threshold, columns)
+    assert peak_ratio(residual, threshold, columns) == expected > 1.0
+    assert peak_ratio(residual, threshold, np.zeros_like(columns)) == 0.0
+
+    x = rng.uniform(-20, 20, (3 * t, n, 2))
+    x_hat = (x[::3, None, :, :] + rng.normal(0, 0.3, (t, n, n, 2))).astype(np.float32)
+    x_hat[:, 6] = np.nan  # an excluded robot's estimates
+    x_hat[9, 1, 2] = np.inf
+    rows = np.arange(t) * 3
+    keep = np.arange(5, t)
+    total, count = np.zeros(n), np.zeros(n)
+    worst = _estimate_sums(x_hat, x, rows, keep, total, count)
+    want = _numpy_estimation_errors(x_hat, x, rows, keep)
+    assert np.array_equal(total, want[0]) and np.array_equal(count, want[1])
+    assert worst == want[2] == np.inf  # the infinite estimate is the largest, as numpy's
