@@ -109,22 +109,9 @@ class ActuatorFaults:
                 m.actuator_biasprm[ids, 2] = bias0[ids, 2]
                 self._written = None  # the bias terms are written again
         self.stopped, self._gain = stopped, gain
-        self._switch_due = self._switch_next(t)
-
-    def _switch_next(self, t: float) -> float:
-        """When :meth:`_switch` may next find other faults acting than at ``t``: the next start
-        or end of a fault it reads (-inf while an intermittent one acts: its windows). Until
-        then it would change nothing, so :meth:`apply` (every period while a bias moves)
-        skips it."""
-        times = []
-        for f in self._switched:
-            if t < f.t:
-                times.append(f.t)
-            elif t < f.end:
-                if f.kind == "intermittent":
-                    return -np.inf
-                times.append(f.end)
-        return min(times, default=np.inf)
+        # until the next start or end of a fault it reads it would change nothing, so
+        # apply() (every period while a bias moves) skips it
+        self._switch_due = _next_switch(self._switched, t)
 
     def apply(self, t: float) -> list[Fault]:
         """Write the actuator parameters for time ``t``; returns the faults that start now.
@@ -173,7 +160,7 @@ class ActuatorFaults:
     def _next_due(self, t: float) -> float:
         """When :meth:`apply` next has something to write: every period while a bias
         profile moves (or while the drive maps a bias through the robot's pose or
-        integrates it), else the next start."""
+        integrates it), else the next start or end of a fault."""
         started = (self._b_t <= t) & (self._b_end > t)
         if started.any():  # moving until the last of them ends (or settles: 1 − e^{−40} = 1)
             ends = self._b_end[started]
@@ -183,12 +170,7 @@ class ActuatorFaults:
             if until > t:
                 self._moving_until = until
                 return -np.inf
-        pending = [f.t for k, f in enumerate(self.faults) if not self.started[k]]
-        acting = [f for k, f in enumerate(self.faults) if self.started[k] and not self.ended[k]]
-        pending += [f.end for f in acting]
-        if any(f.kind == "intermittent" for f in acting):
-            return -np.inf  # its windows switch on and off
-        return min(pending, default=np.inf)
+        return _next_switch(self.faults, t)
 
     def bias_phi(self, t: float) -> np.ndarray:
         """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
@@ -255,3 +237,17 @@ class ActuatorFaults:
         self.actuation.bias_integral[:] = 0.0
         self.due = min((f.t for f in self.faults), default=np.inf)
         self._switch_due = self._moving_until = -np.inf
+
+
+def _next_switch(faults: tuple[Fault, ...], t: float) -> float:
+    """The next start or end after ``t`` of any of ``faults``; -inf while an intermittent one
+    acts (its windows switch on and off), inf when none is left."""
+    times = []
+    for f in faults:
+        if t < f.t:
+            times.append(f.t)
+        elif t < f.end:
+            if f.kind == "intermittent":
+                return -np.inf
+            times.append(f.end)
+    return min(times, default=np.inf)
