@@ -232,6 +232,7 @@ class Team:
         # ‖ⁱr_k‖ (none before the first round of a network), then each thread's scratch row
         self._norms = np.zeros((m + threads, m))
         self._raised = np.zeros((m, m), bool)
+        self._logged = np.zeros((2, m), bool)  # a log row's reactive and flagged members
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         cfg, gone = self.config, len(self.gone)
         self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
@@ -474,6 +475,8 @@ class Team:
         """The period's outputs on the original robot axis (NaN / False for non-members)."""
         mem, n = self.members, self.n
         flag = np.asarray(self.flag, bool)
+        flagged = np.empty(len(mem), bool)  # some teammate flags the member
+        flagged_by_teammates(flag, flagged)
         return {
             "u": self.u,
             "u_bar": self.u_bar,
@@ -483,16 +486,10 @@ class Team:
             "residual": _expand(self.r_norm, mem, n, square=True),
             "threshold": _expand(self.mu, mem, n, square=True),
             "flag": _expand(flag, mem, n, square=True, fill=False),
-            "flagged": _expand(self._flagged(), mem, n, fill=False),
+            "flagged": _expand(flagged, mem, n, fill=False),
             "reactive": _expand(self.reactive, mem, n, fill=False),
             "active": self.active,
         }
-
-    def _flagged(self) -> np.ndarray:
-        """(M,) which members some teammate flags."""
-        out = np.empty(len(self.members), bool)
-        flagged_by_teammates(np.asarray(self.flag, bool), out)
-        return out
 
     def write_row(
         self, log: dict[str, np.ndarray], row: int, fdir: bool = True, row_nn: int = -1
@@ -500,33 +497,22 @@ class Team:
         """Write the period's outputs into row ``row`` of preallocated log arrays (original
         robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``); the N × N
         ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1."""
-        mem = self.members
-        if len(mem) < self.n:  # after an exclusion: onto the original axis, what is written
-            log["u"][row] = self.u
-            _place(log["x_d"][row], self.x_d, mem)
-            _place(log["flagged"][row], self._flagged(), mem, fill=False)
-            _place(log["reactive"][row], self.reactive, mem, fill=False)
-            log["active"][row] = self.active
-            if fdir:
-                log["phi_hat"][row] = self.phi_hat
-            if row_nn >= 0:
-                _place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
-                _place(log["residual"][row_nn], self.r_norm, mem, square=True)
-                if fdir:
-                    _place(log["threshold"][row_nn], self.mu, mem, square=True)
-            return
+        mem = self.members  # after an exclusion: onto the original axis (_place)
         log["u"][row] = self.u
-        log["x_d"][row] = self.x_d
         log["active"][row] = self.active
-        np.greater_equal(self.supervisor.active, 0, out=log["reactive"][row])
-        flagged_by_teammates(np.asarray(self.flag, bool), log["flagged"][row])
+        _place(log["x_d"][row], self.x_d, mem)
+        reactive, flagged = self._logged
+        np.greater_equal(self.supervisor.active, 0, out=reactive)
+        flagged_by_teammates(np.asarray(self.flag, bool), flagged)
+        _place(log["reactive"][row], reactive, mem, fill=False)
+        _place(log["flagged"][row], flagged, mem, fill=False)
         if fdir:
             log["phi_hat"][row] = self.phi_hat
         if row_nn >= 0:
-            log["x_hat"][row_nn] = self.x_hat
-            log["residual"][row_nn] = self.r_norm
+            _place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
+            _place(log["residual"][row_nn], self.r_norm, mem, square=True)
             if fdir:
-                log["threshold"][row_nn] = self.mu
+                _place(log["threshold"][row_nn], self.mu, mem, square=True)
 
     def avoiding(self) -> np.ndarray:
         """What each robot avoids, on the original axis: cylinder o as o, robot j (excluded,
@@ -676,6 +662,9 @@ def _place(
 ) -> None:
     """Write a members-indexed array into ``out`` on the original robot axis (both first axes
     if ``square``), ``fill`` for the robots that are not members."""
+    if len(members) == len(out):  # the whole team: a copy
+        out[...] = a
+        return
     out[...] = fill
     if square:
         out[members[:, None], members[None, :]] = a
