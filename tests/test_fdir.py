@@ -210,3 +210,32 @@ def test_decay_bounds_keep_the_exact_method_where_it_is_cheap():
     ring_without_1 = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0))).without(0)
     kn, ln = decay._decay_bounds_fast(ring_without_1, 6.0)
     assert np.isfinite(kn[0]) and ln[0] > 0 and np.isinf(kn[1:]).all() and (ln[1:] == 0).all()
+
+
+@pytest.mark.parametrize("n", [9, 60])
+def test_one_columns_sums_are_its_column_in_a_batch_bit_for_bit(n):
+    """κ, λ of a ring (one column) run entry by entry; a batch of columns runs row by row.
+    The same robot's sums and maxima are the same numbers either way, so a circulant
+    graph's κ, λ do not depend on the path."""
+    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.onboard.thresholds.kernels import Adjacency, advance_sums, column_of_row
+
+    g = random_strongly_connected(n, 3, np.random.default_rng(n))
+    adj = Adjacency.of(g)
+    beta = 1.0 / (adj.deg.max() + 1.0)
+    steps = 400
+
+    def sums(ks: np.ndarray) -> tuple[np.ndarray, ...]:
+        a, u = np.ones((n, len(ks))), np.ones((n, len(ks)))
+        a2, u2 = np.empty_like(a), np.empty_like(u)
+        amax, umax = np.empty((steps, len(ks))), np.empty((steps, len(ks)))
+        args = (adj.src, adj.first, adj.dst, adj.out_first, adj.deg, column_of_row(ks, n))
+        advance_sums(a, a2, u, u2, *args, beta, steps, amax, umax)
+        return a, u, amax, umax
+
+    batch = sums(np.array([2, 5, 7]))
+    for col, k in enumerate((2, 5, 7)):
+        one = sums(np.array([k]))
+        for whole, alone in zip(batch, one, strict=True):
+            assert np.array_equal(whole[:, col], alone[:, 0])
+    assert (batch[2][-1] < batch[2][0]).all()  # ‖B_k^n‖_∞ did decay

@@ -683,3 +683,37 @@ def _team_of(graph):
     from dftc_mujoco.onboard.locality import demo_team
 
     return demo_team(graph.n, graph=graph)
+
+
+def test_settle_time_is_the_first_instant_from_which_every_threshold_stays_near_steady():
+    """T_s over the 96-instant grid, against the definition in numpy: a rule whose
+    thresholds fall as 1 + 9 e^{-t} (within 10 % from t = ln 90 ≈ 4.5 s), with a column
+    that has no bound (+inf, ignored) and a NaN that keeps the rule unsettled until it
+    goes; unsettled at the horizon gives inf; a rule with no finite threshold gives inf."""
+    from dftc_mujoco.onboard.thresholds.settling import settle_time
+
+    def rule(nan_until: float):
+        def mu(t: float) -> np.ndarray:
+            out = np.full((3, 3), 1.0 + 9.0 * np.exp(-t))
+            out[:, 2] = np.inf
+            if t < nan_until:
+                out[1, 0] = np.nan
+            return out
+
+        return mu
+
+    def by_numpy(mu, dt: float, horizon: float) -> float:
+        steady = mu(1e9).copy()
+        fin = np.isfinite(steady)
+        grid = np.unique(np.round(np.geomspace(dt, horizon, 96) / dt) * dt)
+        ok = [bool((mu(t)[fin] <= steady[fin] * 1.1 + 1e-12).all()) for t in grid]
+        last_bad = max((i for i, good in enumerate(ok) if not good), default=-1)
+        return float(grid[last_bad + 1]) if last_bad + 1 < len(grid) else float("inf")
+
+    for nan_until in (0.0, 8.0):
+        got = settle_time(rule(nan_until), 0.01, 60.0)
+        assert got == by_numpy(rule(nan_until), 0.01, 60.0)
+        assert np.log(90.0) <= got < (np.log(90.0) * 1.2 if nan_until == 0 else 9.0)
+        assert got >= nan_until
+    assert settle_time(rule(0.0), 0.01, 3.0) == float("inf")  # still outside at 3 s
+    assert settle_time(lambda t: np.full((2, 2), np.inf), 0.01, 60.0) == float("inf")

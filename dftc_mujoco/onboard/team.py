@@ -57,6 +57,7 @@ from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_lab
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
+from .thresholds.settling import settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -189,22 +190,9 @@ class Team:
         self.x_d[:] = prior
 
     def settle_time(self, horizon: float, tolerance: float = 0.1) -> float:
-        """T_s: from when on every threshold is within ``tolerance`` of its steady value, the
-        domain of eq. 46's guarantee (a fault before it may be flagged later than Δt_d,max,
-        or never). Sampled on a geometric grid up to ``horizon`` [s] (inf if not settled)."""
-        steady = np.asarray(self.thresholds.mu(1e9), dtype=float)
-        finite = np.isfinite(steady)
-        if not finite.any():
-            return float("inf")
-        dt = self.config.dt
-        grid = np.unique(np.round(np.geomspace(dt, max(horizon, dt), 96) / dt) * dt)
-        settled = float("inf")
-        for t in grid[::-1]:  # the last instant that is still outside, from the end
-            mu = np.asarray(self.thresholds.mu(float(t)), dtype=float)
-            if (mu[finite] <= steady[finite] * (1 + tolerance) + 1e-12).all():
-                settled = float(t)
-            else:
-                break
+        """T_s of the team's thresholds (:func:`~.thresholds.settling.settle_time`), up to
+        ``horizon`` [s]; the recovery waits it after a contact."""
+        settled = settle_time(self.thresholds.mu, self.config.dt, horizon, tolerance)
         self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
         return settled
 

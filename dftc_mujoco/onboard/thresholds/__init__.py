@@ -13,6 +13,7 @@ module             concept
 :mod:`.kernels`    the compiled recursions on the observer matrices (B_k applied once)
 :mod:`.compensation`  Φ̄ and the compensation's drift offset (eqs. 28-31)
 :mod:`.delays`     Δt_d of eq. 46 for ``fdir.dt_d_max = "auto"``
+:mod:`.settling`   T_s, from when on every threshold is near its steady value
 =================  =====================================================================
 
 The registry of rule names is ``dftc_mujoco.blocks.BUILTIN``. The decision of eq. 39 is

@@ -95,6 +95,20 @@ def _row(i, v, o, src, first, deg, col_of_row, beta):  # pragma: no cover - comp
 
 
 @njit(inline="always")
+def _entry(i, v, src, first, deg, col_of_row, beta):  # pragma: no cover - compiled
+    """Entry i of B_k v for one column v (N,): :func:`_row`'s arithmetic in its order, on a
+    scalar (a row of one column walked through :func:`_row`'s inner loops cost 3.5× as
+    much), flushed as :func:`_flush` does."""
+    vi = v[i]
+    o = (1.0 - beta * deg[i]) * vi
+    for e in range(first[i], first[i + 1]):
+        o += beta * v[src[e]]
+    if col_of_row[i] >= 0:
+        o -= beta * vi
+    return o if abs(o) > TINY else 0.0
+
+
+@njit(inline="always")
 def _flush(o):  # pragma: no cover - compiled
     """Entries below :data:`TINY` to zero: no subnormal arithmetic (see TINY)."""
     for b in range(o.shape[0]):
@@ -229,25 +243,45 @@ def advance_sums(
     ``amax[s]``, ``umax[s]`` (steps, K). The newest sums are in ``a``, ``u`` if ``steps``
     is even, else in ``a2``, ``u2``; entries below :data:`TINY` are flushed to 0."""
     n, kk = a.shape
+    if kk == 1:  # one column (a graph invariant under rotation): entry by entry
+        _advance_sums_one(
+            a.reshape(n), a2.reshape(n), u.reshape(n), u2.reshape(n), src, first, dst,
+            out_first, deg, col_of_row, beta, steps, amax[:, 0], umax[:, 0],
+        )  # fmt: skip
+        return
     ca, na, cu, nu = a, a2, u, u2
     for s in range(steps):
         _step_rows(ca, na, src, first, deg, col_of_row, beta)
         _step_rows(cu, nu, dst, out_first, deg, col_of_row, beta)
         ma, mu = amax[s], umax[s]
-        if kk == 1:  # one column (a graph invariant under rotation)
-            x = y = 0.0
-            for i in range(n):
-                x = max(x, na[i, 0])
-                y = max(y, nu[i, 0])
-            ma[0], mu[0] = x, y
-        else:  # row by row, in memory order; each column's maximum over i in order
-            ma[:] = 0.0
-            mu[:] = 0.0
-            for i in range(n):
-                nai, nui = na[i], nu[i]
-                for b in range(kk):
-                    ma[b] = max(ma[b], nai[b])
-                    mu[b] = max(mu[b], nui[b])
+        ma[:] = 0.0  # row by row, in memory order; each column's maximum over i in order
+        mu[:] = 0.0
+        for i in range(n):
+            nai, nui = na[i], nu[i]
+            for b in range(kk):
+                ma[b] = max(ma[b], nai[b])
+                mu[b] = max(mu[b], nui[b])
+        ca, na = na, ca
+        cu, nu = nu, cu
+
+
+@njit(cache=True)
+def _advance_sums_one(
+    a, a2, u, u2, src, first, dst, out_first, deg, col_of_row, beta, steps, amax, umax
+):  # pragma: no cover - compiled
+    """:func:`advance_sums` for one column, the sums (N,) and their maxima (steps,): the same
+    numbers, each entry's maximum taken as it is made."""
+    n = a.shape[0]
+    ca, na, cu, nu = a, a2, u, u2
+    for s in range(steps):
+        x = y = 0.0
+        for i in range(n):
+            na[i] = o = _entry(i, ca, src, first, deg, col_of_row, beta)
+            x = max(x, o)
+        for i in range(n):
+            nu[i] = o = _entry(i, cu, dst, out_first, deg, col_of_row, beta)
+            y = max(y, o)
+        amax[s], umax[s] = x, y
         ca, na = na, ca
         cu, nu = nu, cu
 
