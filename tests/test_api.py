@@ -155,6 +155,30 @@ def test_user_blocks_change_the_outcome_and_the_summary_names_them():
     assert check_locality({"controller": Gentle(), "thresholds": Halved()}) == []
 
 
+class OneRow(paper.Thresholds):
+    def mu(self, t):
+        return super().mu(t)[0]
+
+
+class Ragged(paper.Thresholds):
+    def mu(self, t):
+        return [[1.0], [1.0, 2.0]]
+
+
+@pytest.mark.parametrize(("rule", "what"), [(OneRow, r"shape \(4,\)"), (Ragged, "list")])
+def test_a_thresholds_rule_of_the_wrong_shape_is_refused_before_the_run(rule, what):
+    """A rule's ⁱμ_k must be (M, M): one row of them or a ragged list is refused before the
+    run, in one line naming the key, the rule and what it returned (one row used to stop the
+    run at t = 0 with numba's typing error, and a ragged list broke the set-up's numpy)."""
+    s = load_scenario("paper_case", {"duration": 2.0})
+    with pytest.raises(
+        ScenarioError,
+        match=rf"^onboard\.thresholds: .*{rule.__name__}\.mu\(t\) "
+        rf"returned {what}; expected an array of numbers of shape \(4, 4\)",
+    ):
+        Simulation(s, blocks={"thresholds": rule()})
+
+
 def test_blocks_from_the_scenario_and_their_params(tmp_path):
     mod = tmp_path / "labblocks.py"
     mod.write_text(

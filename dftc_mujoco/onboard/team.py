@@ -27,6 +27,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from ..errors import InputError
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
@@ -192,7 +193,24 @@ class Team:
     def settle_time(self, horizon: float, tolerance: float = 0.1) -> float:
         """T_s of the team's thresholds (:func:`~.thresholds.settling.settle_time`), up to
         ``horizon`` [s]; the recovery waits it after a contact."""
-        settled = settle_time(self.thresholds.mu, self.config.dt, horizon, tolerance)
+        m, rule = len(self.members), type(self.thresholds)
+        name = f"{rule.__module__}:{rule.__qualname__}"
+
+        def mu(t: float) -> np.ndarray:  # the rule's thresholds, read here first: checked
+            got = self.thresholds.mu(t)
+            try:
+                out = np.asarray(got, dtype=float)
+            except (TypeError, ValueError):
+                out = None
+            if out is None or out.shape != (m, m):
+                what = f"shape {out.shape}" if out is not None else type(got).__name__
+                raise InputError(
+                    f"onboard.thresholds: {name}.mu(t) returned {what}; expected an array of "
+                    f"numbers of shape ({m}, {m}): row i robot i's thresholds, column k robot k's"
+                )
+            return out
+
+        settled = settle_time(mu, self.config.dt, horizon, tolerance)
         self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
         return settled
 
