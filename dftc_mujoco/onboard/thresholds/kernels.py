@@ -9,7 +9,8 @@ vectors pushed through B_k = I − β(L + e_k e_kᵀ), never B_k's powers:
 
 Arrays are laid out (N, K): row i, one column per monitored robot (``rows[b]`` is
 the robot of column b), so that one pass over the in-neighbour lists serves all
-columns at once. B_k is applied in one place, :func:`_row`; each sweep
+columns at once. B_k is applied in :func:`_row` (and, to a single column, in :func:`_entry`:
+the same arithmetic in the same order, on a scalar; tested bit for bit); each sweep
 (:func:`advance_columns` for the rules' sums, :func:`advance_crossing` for eq. 46's
 crossing times, :func:`advance_sums` for κ, λ) accumulates what its analysis needs as it
 goes. B_k ≥ 0 elementwise when β (d_i + δ_ik) ≤ 1 for every i; the callers check it."""

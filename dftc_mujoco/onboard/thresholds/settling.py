@@ -25,7 +25,7 @@ def settle_time(
     mu: Callable[[float], np.ndarray], dt: float, horizon: float, tolerance: float = 0.1
 ) -> float:
     """T_s of the rule whose thresholds at t are ``mu(t)``, sampled on a geometric grid of
-    96 instants (multiples of the control period ``dt``) up to ``horizon`` [s]: the first
+    at most 96 instants (multiples of the control period ``dt``) up to ``horizon`` [s]: the first
     instant from which every later one has every finite threshold within ``tolerance`` of
     its value at t = 1e9 s; inf if the last one has not."""
     steady = np.asarray(mu(1e9), dtype=float)
