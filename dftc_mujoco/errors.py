@@ -7,6 +7,8 @@ table it belongs to, and the command line prints it as one ``error:`` line per p
 code   name                meaning
 =====  ==================  =========================================================
 0      EXIT_OK             done
+1      EXIT_BUG            a bug in dftc_mujoco: its traceback is printed (the records of a
+                           run are kept when the bug was in drawing its figures or video)
 2      EXIT_INPUT          a scenario, robot file, campaign spec, log or flag is not valid
 3      EXIT_PHYSICS        the physics went wrong during the run (the records are kept)
 4      EXIT_RENDER         no OpenGL context, or rendering failed
@@ -19,6 +21,7 @@ code   name                meaning
 from __future__ import annotations
 
 EXIT_OK = 0
+EXIT_BUG = 1  # what Python returns for an exception nothing caught
 EXIT_INPUT = 2
 EXIT_PHYSICS = 3
 EXIT_RENDER = 4

@@ -31,7 +31,8 @@ from .assembly import (
     make_blocks,
     team_config,
 )
-from .errors import BlockError, SimulationError
+from .block_failure import block_error, setup_error
+from .errors import DftcError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team
 from .physics_step import PhysicsStep
@@ -43,29 +44,6 @@ from .sim.bumpers import Bumpers
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
 from .snapshot import Snapshot
-
-
-def _block_error(exc: BaseException, t: float) -> BlockError:
-    """One line for an exception raised inside the team's step: the innermost onboard
-    block it came from (by the frames' ``self``), the exception and the time."""
-    found = None
-    tb = exc.__traceback__
-    while tb is not None:
-        me = tb.tb_frame.f_locals.get("self")
-        if isinstance(me, Block):
-            found = me
-        tb = tb.tb_next
-    where = (
-        f"onboard block {found.kind} ({type(found).__module__}:{type(found).__qualname__})"
-        if found is not None
-        else "the team's step"
-    )
-    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-    return BlockError(
-        f"{where} raised {type(exc).__name__}{': ' + text if text else ''} at t = {t:.2f} s; "
-        "the run stopped there and its records are kept"
-    )
-
 
 MONITOR_ALLOWED = True
 
@@ -260,11 +238,19 @@ class Simulation:
         found.raise_refusals()
         for message in found.warnings:
             self.events.add(0.0, "warning", message=message)
-        self.team = Team(config, x_m0, self.path.position[0], blocks)
+        try:
+            self.team = Team(config, x_m0, self.path.position[0], blocks)
+            # eq. 46's domain: faults from the rule's settle time on (docs/thresholds.md)
+            self.settle_time = self.team.settle_time(s.duration)
+        except DftcError:
+            raise
+        except Exception as exc:  # a (plug-in) block raised before the run: say which
+            said = setup_error(exc, str(s.source))
+            if said is None:
+                raise
+            raise said from exc
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
-        # eq. 46's domain: faults from the rule's settle time on (docs/thresholds.md)
-        self.settle_time = self.team.settle_time(s.duration)
         self.team.dt_d_max_info["settle_time"] = (
             self.settle_time if np.isfinite(self.settle_time) else None
         )
@@ -488,7 +474,7 @@ class Simulation:
                     except (SimulationError, KeyboardInterrupt):
                         raise
                     except Exception as exc:  # a (plug-in) block raised: stop, keep records
-                        raise _block_error(exc, t) from exc
+                        raise block_error(exc, t) from exc
                     if channel is not None:
                         channel.send(k, team.rounds.content, x)
                         if team.missed and watch:  # since the last round

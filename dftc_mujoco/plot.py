@@ -116,6 +116,9 @@ def write_stills(
 
     from .render.video import FrameRenderer
 
+    if not len(log["t"]):
+        print("error: --still: the run logged no period: there is no frame", file=sys.stderr)
+        return EXIT_INPUT
     try:
         with FrameRenderer(scenario, log, summary, options) as fr:
             for t in times:

@@ -147,7 +147,7 @@ def _read_log(path: Path) -> dict[str, np.ndarray]:
             f"{path}: not a run log: field {k!r} holds {log[k].dtype.name} values, expected numbers"
         )
     t = log["t"]
-    if t.ndim != 1 or not len(t) or any(len(log[k]) != len(t) for k in ("x", "u", "pose")):
+    if t.ndim != 1 or any(len(log[k]) != len(t) for k in ("x", "u", "pose")):
         raise ScenarioError(f"{path}: not a run log: its arrays do not have one row per time")
     return log
 

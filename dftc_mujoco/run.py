@@ -23,11 +23,13 @@ import argparse
 import shutil
 import sys
 import tomllib
+import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import cli, interrupt
 from .errors import (
+    EXIT_BUG,
     EXIT_OK,
     EXIT_OUTPUT,
     EXIT_PHYSICS,
@@ -317,6 +319,15 @@ def _finish(result, work: Path, out: Path, signals: Signals, options, progress: 
         cli.print_error(os_problem(exc, "drawing the figures and video", where=out))
         print(f"note: {kept} are in {out}", file=sys.stderr)
         return EXIT_OUTPUT
+    except Exception:  # a bug of the drawing code: it must not cost the run its records
+        kept = _drop_incomplete(work)
+        traceback.print_exc()
+        print(
+            f"error: drawing the figures and video failed (a bug in dftc_mujoco: please report "
+            f"the traceback above); {kept} are in {out}",
+            file=sys.stderr,
+        )
+        return EXIT_BUG
     return max(code, drawn)
 
 
@@ -356,6 +367,9 @@ def render_outputs(
     except gl.RenderError as exc:
         return cli.fail(exc)
     wall = time.perf_counter() - t0
+    if not frames:
+        print("video: none: the run logged no period")
+        return EXIT_OK
     print(
         f"video: {shown / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
         f"{options.width}x{options.height}, rendered and encoded at {frames / wall:.0f} "

@@ -13,10 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dftc_mujoco import Simulation, load_scenario, open_run, plot, run, simulate
+from dftc_mujoco import Simulation, interrupt, load_scenario, open_run, plot, run, simulate
 from dftc_mujoco.blocks import paper
 from dftc_mujoco.campaign import __main__ as campaign_cli
 from dftc_mujoco.errors import EXIT_INPUT, InputError, OutputError
+from dftc_mujoco.output import run_folder
+from dftc_mujoco.render.video import write_video
 from dftc_mujoco.scenario import SCENARIOS
 
 GOOD = (SCENARIOS / "paper_case.toml").read_text()
@@ -244,15 +246,20 @@ def test_run_folders_get_the_users_umask(tmp_path):
     assert stat.S_IMODE(out.stat().st_mode) == 0o755  # mkdtemp's 0700 before
 
 
-def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(tmp_path, capsys):
-    """A plug-in controller raising at 1 s gave exit 1, a long traceback and no records."""
+@pytest.mark.parametrize(("after", "at"), [(100, "1.00"), (0, "0.00")])
+def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(
+    tmp_path, capsys, after, at
+):
+    """A plug-in controller raising at 1 s gave exit 1, a long traceback and no records.
+    Raising in the first period left a log of no rows: drawing its paths raised IndexError
+    after the report had named the records, and the traceback took the records with it."""
     (tmp_path / "boom.py").write_text(
         "from dftc_mujoco.blocks.paper import Controller\n\n"
         "class Boom(Controller):\n"
         "    calls = 0\n\n"
         "    def own_input(self, u_hat_g):\n"
         "        Boom.calls += 1\n"
-        "        if Boom.calls > 100:\n"
+        f"        if Boom.calls > {after}:\n"
         "            raise ZeroDivisionError('the gain went to zero')\n"
         "        return super().own_input(u_hat_g)\n"
     )
@@ -265,9 +272,95 @@ def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(tmp
     assert code == 3
     assert (
         "onboard block controller (boom:Boom) raised ZeroDivisionError: the gain went to "
-        "zero at t = 1.00 s" in err
+        f"zero at t = {at} s" in err
     )
     assert "Traceback" not in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed"
-    assert np.load(out / "log.npz")["t"][-1] >= 0.98
+    t = np.load(out / "log.npz")["t"]
+    assert len(t) == 0 if after == 0 else t[-1] >= 0.98
+    assert len(list((out / "figures").glob("*.png"))) == 5
+    if after == 0:  # the saved run is read and redrawn; a frame of it is refused in one line
+        assert write_video(tmp_path / "v.mp4", *_records(open_run(out))) == 0
+        assert not (tmp_path / "v.mp4").exists()
+        assert plot.main([str(out)]) == 0
+        assert plot.main([str(out), "--still", "0"]) == EXIT_INPUT
+        err = capsys.readouterr().err
+        assert err == "error: --still: the run logged no period: there is no frame\n"
+
+
+def _records(result):
+    return result.scenario, result.log, result.summary
+
+
+class _NoRow(paper.Thresholds):
+    def mu(self, t):
+        raise RuntimeError("my table has no row for t")
+
+
+@pytest.mark.parametrize(
+    ("rule", "said"),
+    [
+        (
+            'mine:BadParams"\n[onboard.params.thresholds]\nfactor = -1\n',
+            "s.toml: onboard.thresholds: creating 'mine:BadParams' with "
+            "onboard.params.thresholds raised ValueError: factor must be positive, got -1",
+        ),
+        (
+            'mine:NoRow"\n',
+            "s.toml: onboard block thresholds (mine:NoRow) raised RuntimeError: my table has "
+            "no row for t while the team was being set up; nothing ran",
+        ),
+    ],
+    ids=["its-params", "its-thresholds-at-0"],
+)
+def test_a_block_that_raises_before_the_run_is_one_line_of_bad_input(tmp_path, capsys, rule, said):
+    """A plug-in block raising in its constructor (its own check of onboard.params) or in
+    its thresholds at t = 0 gave a traceback; now one line naming the block, exit 2, and
+    nothing is written."""
+    (tmp_path / "mine.py").write_text(
+        "from dftc_mujoco.blocks import paper\n\n"
+        "class BadParams(paper.Thresholds):\n"
+        "    def __init__(self, factor=1.0):\n"
+        "        if factor <= 0:\n"
+        "            raise ValueError(f'factor must be positive, got {factor}')\n\n"
+        "class NoRow(paper.Thresholds):\n"
+        "    def mu(self, t):\n"
+        "        raise RuntimeError('my table has no row for t')\n"
+    )
+    scen = tmp_path / "s.toml"
+    text = (Path(__file__).resolve().parent.parent / "scenarios" / "paper_case.toml").read_text()
+    scen.write_text(f'{text}\n[onboard]\nthresholds = "{rule}')
+    out = tmp_path / "out"
+    code = run.main([str(scen), "--out", str(out), "--no-video", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == EXIT_INPUT
+    assert err.splitlines()[-1] == f"error: {tmp_path / said}"
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_a_given_block_that_raises_before_the_run_names_itself():
+    """The Python API: a thresholds instance given that raises at set-up is named in one
+    line; its own exception stays chained for the user's debugger."""
+    s = load_scenario("paper_case", {"duration": 1.0})
+    with pytest.raises(
+        InputError, match=r"onboard block thresholds \(.*_NoRow\) raised RuntimeError"
+    ) as info:
+        Simulation(s, blocks={"thresholds": _NoRow()})
+    assert isinstance(info.value.__cause__, RuntimeError)
+
+
+def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):
+    """Records a figure cannot draw (obstacles of three columns, as a drawing bug would meet
+    them): the run's records are kept and the exit code is 1, with the traceback."""
+    result = simulate(load_scenario("paper_case", {"duration": 0.5}))
+    result.log["obstacles"] = result.log["obstacles"][:, :3]
+    out = tmp_path / "out"
+    with run_folder(out) as work:
+        code = run._finish(result, work, out, interrupt.Signals(), None, False)
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "Traceback" in err and err.rstrip().endswith(
+        f"please report the traceback above); the records (no figures) are in {out}"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["log.npz", "scenario.toml", "summary.json"]

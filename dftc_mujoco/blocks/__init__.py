@@ -161,3 +161,9 @@ def create(
         raise ScenarioError(
             f"{where}: cannot create {name!r} with onboard.params.{block}: {exc}"
         ) from None
+    except Exception as exc:  # the block's own check of its parameters (or a bug in it)
+        text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise ScenarioError(
+            f"{where}: creating {name!r} with onboard.params.{block} raised "
+            f"{type(exc).__name__}{': ' + text if text else ''}"
+        ) from exc

@@ -105,6 +105,13 @@ def fig_paths(log: dict[str, np.ndarray], summary: dict[str, Any]):
     for ox, oy, r, d in log["obstacles"]:
         ax.add_patch(Circle((ox, oy), r, color="0.55"))
         ax.add_patch(Circle((ox, oy), d, fill=False, ls="--", color="0.55", lw=0.8))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Paths (paper Fig. 3)")
+    if not len(t):  # the run stopped in its first period
+        ax.text(0.5, 0.5, "no period was logged", transform=ax.transAxes, ha="center")
+        return fig
     ax.plot(log["c_d"][:, 0], log["c_d"][:, 1], "b--", lw=1.2, label="desired centroid")
     for i in range(x.shape[1]):
         colour = "tab:red" if i in faulty else "tab:green"
@@ -135,10 +142,6 @@ def fig_paths(log: dict[str, np.ndarray], summary: dict[str, Any]):
         ax.annotate(f"{t[k]:.1f} s", pts.mean(axis=0), fontsize=8, ha="center")
     ax.plot(x[0, :, 0], x[0, :, 1], "kx", ms=7, label="initial")
     ax.plot(x[-1, :, 0], x[-1, :, 1], "kD", ms=5, mfc="none", label="final")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title("Paths (paper Fig. 3)")
     ax.legend(fontsize=8, loc="best")
     return fig
 

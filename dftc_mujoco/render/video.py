@@ -382,7 +382,10 @@ def write_video(
     options: VideoOptions | None = None,
     progress: bool = False,
 ) -> int:
-    """Render the run to an H.264 MP4 at ``path`` (atomically); returns the frame count."""
+    """Render the run to an H.264 MP4 at ``path`` (atomically); returns the frame count
+    (0, and nothing written, for a run that logged no period: it stopped in its first)."""
+    if not len(log["t"]):
+        return 0
     options = options or VideoOptions()
     import imageio.v2 as imageio
     from tqdm.auto import tqdm
