@@ -251,6 +251,16 @@ class Simulation:
             raise said from exc
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
+        if self.team.never_flags and s.fdir.enabled:
+            self.events.add(
+                0.0,
+                "warning",
+                message=(
+                    f"onboard.thresholds: {self.block_names['thresholds']} gives +inf for every "
+                    "pair at t = 0 and when steady: no robot can be flagged, a fault is never "
+                    "detected"
+                ),
+            )
         self.team.dt_d_max_info["settle_time"] = (
             self.settle_time if np.isfinite(self.settle_time) else None
         )

@@ -179,6 +179,59 @@ def test_a_thresholds_rule_of_the_wrong_shape_is_refused_before_the_run(rule, wh
         Simulation(s, blocks={"thresholds": rule()})
 
 
+class Negative(paper.Thresholds):
+    def mu(self, t):
+        return -super().mu(t)
+
+
+class NaNLate(paper.Thresholds):
+    """NaN on robot 3's row from 30 s on: the steady array shows it."""
+
+    def mu(self, t):
+        out = super().mu(t).copy()
+        if t >= 30.0:
+            out[2, 1] = np.nan
+        return out
+
+
+@pytest.mark.parametrize(
+    ("rule", "said"),
+    [
+        (Negative, r"Negative\.mu\(0\) returned -[0-9.]+ as robot 1's threshold on robot 1"),
+        (NaNLate, r"NaNLate\.mu\(1e\+09\) returned nan as robot 3's threshold on robot 2"),
+    ],
+    ids=["negative", "nan-when-steady"],
+)
+def test_a_negative_or_nan_threshold_is_refused_before_the_run(rule, said):
+    """A threshold bounds a residual's norm: a negative one flagged every robot at 0.19 s
+    (the systemic-anomaly guard kept them, blaming the mismatch premise), a NaN one flagged
+    nobody, all in silence. Both are refused in one line naming the entry."""
+    s = load_scenario("paper_case", {"duration": 2.0})
+    with pytest.raises(
+        ScenarioError, match=rf"^onboard\.thresholds: .*{said}; expected a number ≥ 0"
+    ):
+        Simulation(s, blocks={"thresholds": rule()})
+
+
+class Blind(paper.Thresholds):
+    def mu(self, t):
+        return np.full_like(super().mu(t), np.inf)
+
+
+def test_a_rule_that_can_flag_nobody_is_warned_about():
+    """+inf everywhere is a valid rule (no pair can be judged), and a fault then goes
+    undetected: the run says so at t = 0 (it used to say only that the faults came before
+    the thresholds settled)."""
+    result = simulate(
+        load_scenario("paper_case", {"duration": 45.0}), blocks={"thresholds": Blind()}
+    )
+    warned = [e["message"] for e in result.events.items if e.get("kind") == "warning"]
+    assert any("gives +inf for every pair at t = 0 and when steady" in m for m in warned), warned
+    assert result.summary["detections"] == []  # robot 2's bias from 19 s: never flagged
+    plain = simulate(load_scenario("paper_case", {"duration": 2.0}))
+    assert not any("+inf for every pair" in e.get("message", "") for e in plain.events.items)
+
+
 def test_blocks_from_the_scenario_and_their_params(tmp_path):
     mod = tmp_path / "labblocks.py"
     mod.write_text(

@@ -27,7 +27,6 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..errors import InputError
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
@@ -58,7 +57,7 @@ from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_lab
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
-from .thresholds.settling import settle_time
+from .thresholds.settling import Looked, settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -185,6 +184,7 @@ class Team:
         self.estimates = True
         self._norms_kept = True  # the last period wrote r_norm (see _compiled)
         self._mu_t = 0.0
+        self.never_flags = False  # the thresholds are +inf everywhere (settle_time looks)
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
@@ -193,25 +193,12 @@ class Team:
     def settle_time(self, horizon: float, tolerance: float = 0.1) -> float:
         """T_s of the team's thresholds (:func:`~.thresholds.settling.settle_time`), up to
         ``horizon`` [s]; the recovery waits it after a contact."""
-        m, rule = len(self.members), type(self.thresholds)
-        name = f"{rule.__module__}:{rule.__qualname__}"
-
-        def mu(t: float) -> np.ndarray:  # the rule's thresholds, read here first: checked
-            got = self.thresholds.mu(t)
-            try:
-                out = np.asarray(got, dtype=float)
-            except (TypeError, ValueError):
-                out = None
-            if out is None or out.shape != (m, m):
-                what = f"shape {out.shape}" if out is not None else type(got).__name__
-                raise InputError(
-                    f"onboard.thresholds: {name}.mu(t) returned {what}; expected an array of "
-                    f"numbers of shape ({m}, {m}): row i robot i's thresholds, column k robot k's"
-                )
-            return out
-
+        rule = type(self.thresholds)
+        mu = Looked(self.thresholds.mu, self.members, f"{rule.__module__}:{rule.__qualname__}")
+        mu(0.0)  # the first array of the run, checked too
         settled = settle_time(mu, self.config.dt, horizon, tolerance)
         self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
+        self.never_flags = mu.never_flags
         return settled
 
     @property

@@ -1,6 +1,6 @@
 """T_s: the instant from which every threshold ⁱμ_k(t) stays within a tolerance of its
 steady value, the domain of eq. 46's guarantee (a fault before it may be flagged later
-than Δt_d,max, or never)."""
+than Δt_d,max, or never); and a rule's thresholds read for it, checked (:class:`Looked`)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ from collections.abc import Callable
 
 import numpy as np
 from numba import njit
+
+from ...errors import InputError
 
 
 @njit(cache=True)
@@ -41,3 +43,41 @@ def settle_time(
         else:
             break
     return settled
+
+
+class Looked:
+    """A thresholds rule's ``mu(t)`` as read before the run, checked: an (M, M) array of
+    numbers (InputError, one line, otherwise); in the first two arrays read (t = 0 and
+    :func:`settle_time`'s steady one, O(M²) each) every entry ≥ 0, +inf where a pair cannot
+    be judged: a threshold bounds a residual's norm, and a negative or NaN one flags
+    everybody or nobody. ``never_flags``: both were +inf everywhere."""
+
+    def __init__(self, mu: Callable[[float], object], members: np.ndarray, name: str) -> None:
+        self.rule, self.members, self.name = mu, members, name
+        self.looked = 0
+        self.never_flags = True
+
+    def __call__(self, t: float) -> np.ndarray:
+        got, m = self.rule(t), len(self.members)
+        try:
+            out = np.asarray(got, dtype=float)
+        except (TypeError, ValueError):
+            out = None
+        if out is None or out.shape != (m, m):
+            what = f"shape {out.shape}" if out is not None else type(got).__name__
+            raise InputError(
+                f"onboard.thresholds: {self.name}.mu(t) returned {what}; expected an array of "
+                f"numbers of shape ({m}, {m}): row i robot i's thresholds, column k robot k's"
+            )
+        if self.looked < 2:
+            self.looked += 1
+            bad = np.argwhere(~(out >= 0))  # negative, or NaN
+            if len(bad):
+                i, k = (int(self.members[j]) + 1 for j in bad[0])
+                raise InputError(
+                    f"onboard.thresholds: {self.name}.mu({t:g}) returned {out[tuple(bad[0])]:g} "
+                    f"as robot {i}'s threshold on robot {k}; expected a number ≥ 0 (a threshold "
+                    "bounds a residual's norm), or +inf where the pair cannot be judged"
+                )
+            self.never_flags &= not np.isfinite(out).any()
+        return out
