@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -348,6 +349,43 @@ def test_a_given_block_that_raises_before_the_run_names_itself():
     ) as info:
         Simulation(s, blocks={"thresholds": _NoRow()})
     assert isinstance(info.value.__cause__, RuntimeError)
+
+
+class _OneAxis(paper.Controller):
+    def collective_input(self, x_hat, x_d, xd_dot):
+        return super().collective_input(x_hat, x_d, xd_dot)[:, :1]
+
+
+class _Transposed(paper.Supervisor):
+    def step(self, x, u_g, *args, **kwargs):
+        u, delta = super().step(x, u_g, *args, **kwargs)
+        return u, delta.T
+
+
+class _OneRowOfFlags(paper.Decision):
+    def update(self, r_norm, mu):
+        return super().update(r_norm, mu)[0]
+
+
+@pytest.mark.parametrize(
+    ("kind", "block", "said"),
+    [
+        ("controller", _OneAxis, r"collective_input\(\) shape \(4, 1, 2\), expected \(4, 4, 2\)"),
+        ("supervisor", _Transposed, r"step\(\)\[1\] shape \(2, 4\), expected \(4, 2\)"),
+        ("decision", _OneRowOfFlags, r"update\(\) shape \(4,\), expected \(4, 4\)"),
+    ],
+)
+def test_a_block_output_of_the_wrong_shape_stops_the_run_in_one_line(kind, block, said):
+    """numpy broadcast a controller's (4, 1, 2) into the team's inputs: the run went on to
+    'status: ok' with a formation error of 41 m and one overflow warning. Each output of the
+    general path is now checked: the run stops at its first period, naming the block."""
+    result = simulate(load_scenario("paper_case", {"duration": 2.0}), blocks={kind: block()})
+    assert not result.ok
+    assert re.fullmatch(
+        rf"onboard block {kind} \(.*{block.__name__}\) returned from {said}, at t = "
+        r"0\.\d\d s; the run stopped there and its records are kept",
+        str(result.error),
+    ), result.error
 
 
 def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):

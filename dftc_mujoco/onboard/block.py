@@ -104,3 +104,21 @@ class Block:
 
     def __repr__(self) -> str:
         return f"{type(self).__module__}.{type(self).__qualname__}()"
+
+
+class Misshapen(ValueError):
+    """What a block's method returned does not have the shape the period needs (the
+    general path checks each, :mod:`.general`): numpy would broadcast it into nonsense
+    and the run go on as if nothing were wrong. ``block`` is the block that returned it."""
+
+    def __init__(self, block: Block, method: str, got: tuple[int, ...], shape: tuple[int, ...]):
+        super().__init__(f"returned from {method} shape {got}, expected {shape},")
+        self.block = block
+
+
+def shaped(value: object, shape: tuple[int, ...], block: Block, method: str) -> np.ndarray:
+    """``value`` as an array of ``shape`` (Misshapen otherwise)."""
+    out = np.asarray(value)
+    if out.shape != shape:
+        raise Misshapen(block, method, out.shape, shape)
+    return out

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .block import shaped
 from .period import RAISED, SATURATED, SWITCHED
 
 
@@ -24,10 +25,15 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
     np.add(c, offsets, out=team.x_d)  # J⁻¹σ_d, the mission (eq. 14)
     np.add(c_dot, rates, out=team.xd_dot)
     before = np.array(team.supervisor.active, copy=True)
-    x_hat = team.observer.estimate()  # eq. 21
+    m = len(mem)
+    own, pairs, stacked = (m, 2), (m, m), (m, m, 2)  # what each output must be
+    ob, ctl, sup = team.observer, team.controller, team.supervisor
+    x_hat = shaped(ob.estimate(), stacked, ob, "estimate()")  # eq. 21
     team.x_hat = np.array(x_hat, dtype=float)
-    u_hat_g = team.controller.collective_input(x_hat, team.x_d, team.xd_dot)  # eq. 15
-    u_g = team.controller.own_input(u_hat_g)  # eq. 16
+    u_hat_g = shaped(
+        ctl.collective_input(x_hat, team.x_d, team.xd_dot), stacked, ctl, "collective_input()"
+    )  # eq. 15
+    u_g = shaped(ctl.own_input(u_hat_g), own, ctl, "own_input()")  # eq. 16
     mates = team._mates if team._sensed and cfg.teammate_safe > 0 else None
     if mates is not None and team._supervisor_sees_mates:
         u_mem, delta_u = team.supervisor.step(
@@ -35,8 +41,9 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
         )
     else:
         u_mem, delta_u = team.supervisor.step(x_own, u_g, team._obs_p, team._obs_d, team._obs_a)
-    u_mem = np.array(u_mem, dtype=float)  # the applied input (Remark 4.1), saturated here
-    delta_u = np.array(delta_u, dtype=float)
+    # the applied input (Remark 4.1), saturated here
+    u_mem = np.array(shaped(u_mem, own, sup, "step()[0]"), dtype=float)
+    delta_u = np.array(shaped(delta_u, own, sup, "step()[1]"), dtype=float)
     saturated = team.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem)
     if not whole:
         team.u[:] = 0.0  # an excluded robot is told to stay where it is
@@ -46,10 +53,13 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
         u_mem = team.u[mem]
         delta_u = u_mem - u_g
     if team.rounds.now:
-        r = team.observer.residual(x_own)  # eq. 35
+        r = shaped(ob.residual(x_own), stacked, ob, "residual()")  # eq. 35
         team.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         if cfg.fdir:  # what the detector judges by, on this period's messages (‖r‖ vs μ)
-            team.r_norm, team.mu = team.detector.judge(team.r_norm, team.mu, team.observer, x_own)
+            de = team.detector
+            score, bound = de.judge(team.r_norm, team.mu, team.observer, x_own)
+            team.r_norm = shaped(score, pairs, de, "judge()[0]")
+            team.mu = shaped(bound, pairs, de, "judge()[1]")
     else:  # between two rounds of the network only the integrals move
         r = np.zeros_like(team.x_hat)
     team.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
@@ -61,6 +71,7 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
             u_bar = team.estimator.step(x_m, team.u, hold=team._touch)
         else:
             u_bar = team.estimator.step(x_m, team.u)
+        u_bar = shaped(u_bar, team.u.shape, team.estimator, "step()")
         if not cfg.compensate:
             team.u_bar[:] = team.drive.command
         elif team.drive.lagged:  # ū = command − φ̂ (eq. 28); the estimator's is u − φ̂
@@ -68,7 +79,8 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
         else:
             team.u_bar[:] = u_bar
         if team.rounds.now:
-            team._raised = np.asarray(team.decision.update(team.r_norm, team.mu), bool)
+            raised = team.decision.update(team.r_norm, team.mu)
+            team._raised = np.asarray(shaped(raised, pairs, team.decision, "update()"), bool)
             if team._raised.any():  # eq. 39
                 code |= RAISED
     else:
