@@ -9,12 +9,12 @@ run that ends the run and keeps its records (:class:`~.errors.BlockError`); befo
 from __future__ import annotations
 
 from .errors import BlockError, InputError
-from .onboard.block import Block, Misshapen
+from .onboard.block import BadOutput, Block
 
 
 def _raising_block(exc: BaseException) -> Block | None:
     """The innermost onboard block an exception came through (by its frames' ``self``)."""
-    if isinstance(exc, Misshapen):  # the block that returned it
+    if isinstance(exc, BadOutput):  # the block that returned it
         return exc.block
     found = None
     tb = exc.__traceback__
@@ -28,14 +28,14 @@ def _raising_block(exc: BaseException) -> Block | None:
 
 def _raised(block: Block | None, exc: BaseException) -> str:
     """What ``block`` (None: unknown) raised, in words: ``onboard block K (module:Class)
-    raised E: the first line of its message`` (for a Misshapen output, ``... returned from
+    raised E: the first line of its message`` (for a BadOutput, ``... returned from
     its method shape (..), expected (..),``)."""
     where = (
         f"onboard block {block.kind} ({type(block).__module__}:{type(block).__qualname__})"
         if block is not None
         else "the team's step"
     )
-    if isinstance(exc, Misshapen):
+    if isinstance(exc, BadOutput):
         return f"{where} {exc}"
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
     return f"{where} raised {type(exc).__name__}{': ' + text if text else ''}"

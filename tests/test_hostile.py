@@ -356,6 +356,14 @@ class _OneAxis(paper.Controller):
         return super().collective_input(x_hat, x_d, xd_dot)[:, :1]
 
 
+class _LosesItself(paper.Controller):
+    def own_input(self, u_hat_g):
+        u = np.array(super().own_input(u_hat_g))
+        if self.t >= 1.0:
+            u[1, 0] = np.nan
+        return u
+
+
 class _Transposed(paper.Supervisor):
     def step(self, x, u_g, *args, **kwargs):
         u, delta = super().step(x, u_g, *args, **kwargs)
@@ -370,22 +378,38 @@ class _OneRowOfFlags(paper.Decision):
 @pytest.mark.parametrize(
     ("kind", "block", "said"),
     [
-        ("controller", _OneAxis, r"collective_input\(\) shape \(4, 1, 2\), expected \(4, 4, 2\)"),
-        ("supervisor", _Transposed, r"step\(\)\[1\] shape \(2, 4\), expected \(4, 2\)"),
-        ("decision", _OneRowOfFlags, r"update\(\) shape \(4,\), expected \(4, 4\)"),
+        (
+            "controller",
+            _OneAxis,
+            r"collective_input\(\) shape \(4, 1, 2\), expected \(4, 4, 2\), at t = 0\.00",
+        ),
+        (
+            "controller",
+            _LosesItself,
+            r"own_input\(\) nan at index \(1, 0\), expected a finite number, at t = 1\.00",
+        ),
+        (
+            "supervisor",
+            _Transposed,
+            r"step\(\)\[1\] shape \(2, 4\), expected \(4, 2\), at t = 0\.00",
+        ),
+        ("decision", _OneRowOfFlags, r"update\(\) shape \(4,\), expected \(4, 4\), at t = 0\.\d\d"),
     ],
 )
-def test_a_block_output_of_the_wrong_shape_stops_the_run_in_one_line(kind, block, said):
+def test_a_block_output_that_cannot_be_used_stops_the_run_in_one_line(kind, block, said):
     """numpy broadcast a controller's (4, 1, 2) into the team's inputs: the run went on to
-    'status: ok' with a formation error of 41 m and one overflow warning. Each output of the
-    general path is now checked: the run stops at its first period, naming the block."""
+    'status: ok' with a formation error of 41 m and one overflow warning. A NaN input ran
+    until MuJoCo's BADCTRL, which names no block. Each output of the general path is now
+    checked: the run stops at that period, naming the block, its method and what was wrong."""
     result = simulate(load_scenario("paper_case", {"duration": 2.0}), blocks={kind: block()})
     assert not result.ok
     assert re.fullmatch(
-        rf"onboard block {kind} \(.*{block.__name__}\) returned from {said}, at t = "
-        r"0\.\d\d s; the run stopped there and its records are kept",
+        rf"onboard block {kind} \(.*{block.__name__}\) returned from {said} s; the run "
+        "stopped there and its records are kept",
         str(result.error),
     ), result.error
+    if block is _LosesItself:  # the log keeps every period before
+        assert result.log["t"][-1] == pytest.approx(0.98)
 
 
 def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):

@@ -106,19 +106,32 @@ class Block:
         return f"{type(self).__module__}.{type(self).__qualname__}()"
 
 
-class Misshapen(ValueError):
-    """What a block's method returned does not have the shape the period needs (the
-    general path checks each, :mod:`.general`): numpy would broadcast it into nonsense
-    and the run go on as if nothing were wrong. ``block`` is the block that returned it."""
+class BadOutput(ValueError):
+    """What a block's method returned cannot be used (the general path checks each output,
+    :mod:`.general`): of another shape than the period needs (numpy would broadcast it into
+    nonsense and the run go on as if nothing were wrong), or not finite where it must be
+    (MuJoCo would stop the run later, at the actuators, blaming no block). ``block`` is the
+    block that returned it."""
 
-    def __init__(self, block: Block, method: str, got: tuple[int, ...], shape: tuple[int, ...]):
-        super().__init__(f"returned from {method} shape {got}, expected {shape},")
+    def __init__(self, block: Block, text: str) -> None:
+        super().__init__(text)
         self.block = block
 
 
 def shaped(value: object, shape: tuple[int, ...], block: Block, method: str) -> np.ndarray:
-    """``value`` as an array of ``shape`` (Misshapen otherwise)."""
-    out = np.asarray(value)
+    """``value`` as an array of ``shape`` (BadOutput otherwise)."""
+    out = value if type(value) is np.ndarray else np.asarray(value)
     if out.shape != shape:
-        raise Misshapen(block, method, out.shape, shape)
+        raise BadOutput(block, f"returned from {method} shape {out.shape}, expected {shape},")
     return out
+
+
+def blame_not_finite(outputs: list[tuple[np.ndarray, Block, str]]) -> None:
+    """BadOutput for the first of ``outputs`` ((value, block, method), in the order the
+    period computed them) that holds a value that is not finite; nothing if none does."""
+    for value, block, method in outputs:
+        bad = np.argwhere(~np.isfinite(value))
+        if len(bad):
+            where = tuple(int(j) for j in bad[0])
+            said = f"{value[where]} at index {where}, expected a finite number,"
+            raise BadOutput(block, f"returned from {method} {said}")

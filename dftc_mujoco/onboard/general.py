@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .block import shaped
+from .block import blame_not_finite, shaped
 from .period import RAISED, SATURATED, SWITCHED
 
 
@@ -85,4 +85,16 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
                 code |= RAISED
     else:
         team.u_bar[:] = team.drive.command
+    if not np.isfinite(team.u_bar).all():  # the commands: which block's output was not finite
+        est = team.estimator
+        blame_not_finite(
+            [
+                (x_hat, ob, "estimate()"),
+                (u_hat_g, ctl, "collective_input()"),
+                (u_g, ctl, "own_input()"),
+                (u_mem, sup, "step()[0]"),
+                (delta_u, sup, "step()[1]"),
+                *([(u_bar, est, "step()")] if cfg.fdir else []),
+            ]
+        )
     return code
