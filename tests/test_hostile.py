@@ -412,6 +412,39 @@ def test_a_block_output_that_cannot_be_used_stops_the_run_in_one_line(kind, bloc
         assert result.log["t"][-1] == pytest.approx(0.98)
 
 
+class _ForgetsExclusions(paper.Thresholds):
+    """The paper's thresholds, always on the 4 robots the team started with."""
+
+    def mu(self, t):
+        a = super().mu(t)
+        out = np.full((4, 4), np.inf)
+        out[: len(a), : len(a)] = a
+        return out
+
+
+class _GeneralToo(paper.Controller):
+    """The paper's controller, as a subclass: the team runs the general path."""
+
+
+@pytest.mark.parametrize("path", ["compiled", "general"])
+def test_a_rule_that_forgets_an_exclusion_stops_the_run_in_one_line(path):
+    """From robot 1's exclusion (t_r = 50.07 s) the team has 3 members and the rule still
+    returned 4 x 4 thresholds: the compiled period read them by its own count, silently (with a
+    smaller array it would have read past its end), and the general path blamed the
+    detector. Now the run stops at that round, naming the rule."""
+    blocks = {"thresholds": _ForgetsExclusions()}
+    if path == "general":
+        blocks["controller"] = _GeneralToo()
+    result = simulate(load_scenario("paper_case", {"duration": 55.0}), blocks=blocks)
+    assert result.summary["onboard"]["path"] == path
+    assert re.fullmatch(
+        r"onboard block thresholds \(.*_ForgetsExclusions\) returned from mu\(t\) shape "
+        r"\(4, 4\), expected \(3, 3\), at t = 50\.07 s; the run stopped there and its "
+        "records are kept",
+        str(result.error),
+    ), result.error
+
+
 def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):
     """Records a figure cannot draw (obstacles of three columns, as a drawing bug would meet
     them): the run's records are kept and the exit code is 1, with the traceback."""

@@ -30,7 +30,7 @@ import numpy as np
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
-from .block import Block, TeamConfig
+from .block import Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
@@ -122,6 +122,9 @@ class Team:
         self.supervisor = cast(Supervisor, chosen["supervisor"])
         self.estimator = cast(FaultEstimator, chosen["fault_estimator"])
         self.thresholds = cast(Thresholds, chosen["thresholds"])
+        # a rule of its own (M, M) array: its shape is checked each round (eq. 40's factors
+        # are the paper's own)
+        self._dense_rule = type(self.thresholds).mu is not Thresholds.mu
         self.decision = cast(Decision, chosen["decision"])
         self.detector = cast(Detector, chosen["detector"])
         self.members = np.arange(n)
@@ -308,11 +311,14 @@ class Team:
             self.events += radios.watch(t, self.rounds.index, self.members)
         else:
             t_rule = None
+        m = len(self.members)
         if t_rule is not None and self.compiled:  # the record (eq. 40: its factors)
             self._th = self.thresholds.record(t_rule)
+            if self._dense_rule and self._th.dense.shape != (m, m):  # read past a smaller one
+                shaped(self._th.dense, (m, m), self.thresholds, "mu(t)")
             self._mu, self._mu_t = None, t_rule  # mu written out only when read
         elif t_rule is not None:
-            self._mu = self.thresholds.mu(t_rule)
+            self._mu = shaped(self.thresholds.mu(t_rule), (m, m), self.thresholds, "mu(t)")
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
         else:
