@@ -445,6 +445,34 @@ def test_a_rule_that_forgets_an_exclusion_stops_the_run_in_one_line(path):
     ), result.error
 
 
+class _NaNAfterAnExclusion(paper.Thresholds):
+    """The paper's thresholds, scaled by each robot's share of a team of 4: 0/0 once a robot
+    has left (a rule's own bug after its restart)."""
+
+    def mu(self, t):
+        a = super().mu(t)
+        lost = 4 - len(a)
+        return a * (1 - lost) / (1 - lost) if lost else a
+
+
+@pytest.mark.parametrize("path", ["compiled", "general"])
+def test_a_rule_that_turns_nan_after_an_exclusion_stops_the_run_in_one_line(path):
+    """NaN thresholds flag nobody: after robot 1's exclusion the team would have gone on
+    blind, in silence. The rule's array is read entry by entry at the first round after
+    each exclusion (as at set-up), and the run stops there naming it."""
+    blocks = {"thresholds": _NaNAfterAnExclusion()}
+    if path == "general":
+        blocks["controller"] = _GeneralToo()
+    result = simulate(load_scenario("paper_case", {"duration": 55.0}), blocks=blocks)
+    assert result.summary["onboard"]["path"] == path
+    assert re.fullmatch(
+        r"onboard block thresholds \(.*_NaNAfterAnExclusion\) returned from mu\(t\) nan as "
+        r"robot 2's threshold on robot 2, expected a number ≥ 0 or \+inf, at t = 50\.07 s; the "
+        "run stopped there and its records are kept",
+        str(result.error),
+    ), result.error
+
+
 def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):
     """Records a figure cannot draw (obstacles of three columns, as a drawing bug would meet
     them): the run's records are kept and the exit code is 1, with the traceback."""

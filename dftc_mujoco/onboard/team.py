@@ -30,7 +30,7 @@ import numpy as np
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel, DriveRecord
-from .block import Block, TeamConfig, shaped
+from .block import BadOutput, Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
@@ -57,7 +57,7 @@ from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_lab
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
-from .thresholds.settling import Looked, settle_time
+from .thresholds.settling import Looked, bad_entry, settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -125,6 +125,7 @@ class Team:
         # a rule of its own (M, M) array: its shape is checked each round (eq. 40's factors
         # are the paper's own)
         self._dense_rule = type(self.thresholds).mu is not Thresholds.mu
+        self._look_rule = False  # read a rule's array entry by entry at the next round
         self.decision = cast(Decision, chosen["decision"])
         self.detector = cast(Detector, chosen["detector"])
         self.members = np.arange(n)
@@ -319,6 +320,12 @@ class Team:
             self._mu, self._mu_t = None, t_rule  # mu written out only when read
         elif t_rule is not None:
             self._mu = shaped(self.thresholds.mu(t_rule), (m, m), self.thresholds, "mu(t)")
+        if self._look_rule and t_rule is not None:  # the first round after an exclusion
+            self._look_rule = False
+            bad = bad_entry(self._th.dense if self.compiled else self.mu, self.members)
+            if bad:
+                said = f"returned from mu(t) {bad}, expected a number ≥ 0 or +inf,"
+                raise BadOutput(self.thresholds, said)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
         else:
@@ -628,6 +635,7 @@ class Team:
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
         self.members = self.members[keep]
+        self._look_rule = self._dense_rule  # its array after it restarts, as at set-up
         self.graph = self.graph.without(p, relay=self.config.excluded_relay)
         t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
         for name in ("observer", "controller", "supervisor", "thresholds", "decision", "detector"):

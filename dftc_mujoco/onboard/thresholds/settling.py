@@ -71,13 +71,22 @@ class Looked:
             )
         if self.looked < 2:
             self.looked += 1
-            bad = np.argwhere(~(out >= 0))  # negative, or NaN
-            if len(bad):
-                i, k = (int(self.members[j]) + 1 for j in bad[0])
+            bad = bad_entry(out, self.members)
+            if bad:
                 raise InputError(
-                    f"onboard.thresholds: {self.name}.mu({t:g}) returned {out[tuple(bad[0])]:g} "
-                    f"as robot {i}'s threshold on robot {k}; expected a number ≥ 0 (a threshold "
-                    "bounds a residual's norm), or +inf where the pair cannot be judged"
+                    f"onboard.thresholds: {self.name}.mu({t:g}) returned {bad}; expected a "
+                    "number ≥ 0 (a threshold bounds a residual's norm), or +inf where the pair "
+                    "cannot be judged"
                 )
             self.never_flags &= not np.isfinite(out).any()
         return out
+
+
+def bad_entry(mu: np.ndarray, members: np.ndarray) -> str | None:
+    """The first threshold of ``mu`` (M, M) that is negative or NaN, in words ("nan as robot
+    3's threshold on robot 2", robots by their number in the original team), or None."""
+    bad = np.argwhere(~(mu >= 0))
+    if not len(bad):
+        return None
+    i, k = (int(members[j]) + 1 for j in bad[0])
+    return f"{mu[tuple(bad[0])]:g} as robot {i}'s threshold on robot {k}"
