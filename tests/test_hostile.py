@@ -254,7 +254,8 @@ def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(
     """A plug-in controller raising at 1 s gave exit 1, a long traceback and no records.
     Raising in the first period left a log of no rows: drawing its paths raised IndexError
     after the report had named the records, and the traceback took the records with it."""
-    (tmp_path / "boom.py").write_text(
+    mod = f"boom{after}"  # a module of its own per case: Python keeps the first imported
+    (tmp_path / f"{mod}.py").write_text(
         "from dftc_mujoco.blocks.paper import Controller\n\n"
         "class Boom(Controller):\n"
         "    calls = 0\n\n"
@@ -266,13 +267,13 @@ def test_a_block_that_raises_stops_the_run_in_one_line_and_keeps_its_records(
     )
     scen = tmp_path / "s.toml"
     text = (Path(__file__).resolve().parent.parent / "scenarios" / "paper_case.toml").read_text()
-    scen.write_text(text.replace("[fdir]", '[onboard]\ncontroller = "boom:Boom"\n\n[fdir]'))
+    scen.write_text(text.replace("[fdir]", f'[onboard]\ncontroller = "{mod}:Boom"\n\n[fdir]'))
     out = tmp_path / "out"
     code = run.main([str(scen), "--out", str(out), "--no-video", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 3
     assert (
-        "onboard block controller (boom:Boom) raised ZeroDivisionError: the gain went to "
+        f"onboard block controller ({mod}:Boom) raised ZeroDivisionError: the gain went to "
         f"zero at t = {at} s" in err
     )
     assert "Traceback" not in err
