@@ -459,8 +459,7 @@ class _NaNAfterAnExclusion(paper.Thresholds):
 @pytest.mark.parametrize("path", ["compiled", "general"])
 def test_a_rule_that_turns_nan_after_an_exclusion_stops_the_run_in_one_line(path):
     """NaN thresholds flag nobody: after robot 1's exclusion the team would have gone on
-    blind, in silence. The rule's array is read entry by entry at the first round after
-    each exclusion (as at set-up), and the run stops there naming it."""
+    blind, in silence. The run stops at the first round of the new team, naming it."""
     blocks = {"thresholds": _NaNAfterAnExclusion()}
     if path == "general":
         blocks["controller"] = _GeneralToo()
@@ -470,6 +469,31 @@ def test_a_rule_that_turns_nan_after_an_exclusion_stops_the_run_in_one_line(path
         r"onboard block thresholds \(.*_NaNAfterAnExclusion\) returned from mu\(t\) nan as "
         r"robot 2's threshold on robot 2, expected a number ≥ 0 or \+inf, at t = 50\.07 s; the "
         "run stopped there and its records are kept",
+        str(result.error),
+    ), result.error
+
+
+class _NaNForAWhile(paper.Thresholds):
+    """NaN as robot 4's threshold on robot 2 from 20 to 25 s: set-up reads t = 0 and the
+    steady array, both fine."""
+
+    def mu(self, t):
+        out = super().mu(t).copy()
+        if 20.0 <= t < 25.0:
+            out[3, 1] = np.nan
+        return out
+
+
+def test_a_rule_that_turns_nan_for_a_while_stops_the_run_in_one_line():
+    """Robot 2's bias from 19 s could not be flagged by robot 4 while its threshold was NaN,
+    and nothing said so. A rule's array has its least entry read every round."""
+    result = simulate(
+        load_scenario("paper_case", {"duration": 30.0}), blocks={"thresholds": _NaNForAWhile()}
+    )
+    assert re.fullmatch(
+        r"onboard block thresholds \(.*_NaNForAWhile\) returned from mu\(t\) nan as robot 4's "
+        r"threshold on robot 2, expected a number ≥ 0 or \+inf, at t = 20\.00 s; the run "
+        "stopped there and its records are kept",
         str(result.error),
     ), result.error
 

@@ -122,10 +122,9 @@ class Team:
         self.supervisor = cast(Supervisor, chosen["supervisor"])
         self.estimator = cast(FaultEstimator, chosen["fault_estimator"])
         self.thresholds = cast(Thresholds, chosen["thresholds"])
-        # a rule of its own (M, M) array: its shape is checked each round (eq. 40's factors
-        # are the paper's own)
+        # a rule of its own (M, M) array: its shape and least entry are read each round
+        # (eq. 40's factors are the paper's own)
         self._dense_rule = type(self.thresholds).mu is not Thresholds.mu
-        self._look_rule = False  # read a rule's array entry by entry at the next round
         self.decision = cast(Decision, chosen["decision"])
         self.detector = cast(Detector, chosen["detector"])
         self.members = np.arange(n)
@@ -320,12 +319,11 @@ class Team:
             self._mu, self._mu_t = None, t_rule  # mu written out only when read
         elif t_rule is not None:
             self._mu = shaped(self.thresholds.mu(t_rule), (m, m), self.thresholds, "mu(t)")
-        if self._look_rule and t_rule is not None:  # the first round after an exclusion
-            self._look_rule = False
-            bad = bad_entry(self._th.dense if self.compiled else self.mu, self.members)
-            if bad:
-                said = f"returned from mu(t) {bad}, expected a number ≥ 0 or +inf,"
-                raise BadOutput(self.thresholds, said)
+        if self._dense_rule and t_rule is not None:  # a rule's own array, every round
+            mu = self._th.dense if self.compiled else self.mu
+            if not mu.min() >= 0:  # a negative or NaN entry flags everybody or nobody
+                said = f"{bad_entry(mu, self.members)}, expected a number ≥ 0 or +inf,"
+                raise BadOutput(self.thresholds, f"returned from mu(t) {said}")
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
         else:
@@ -635,7 +633,6 @@ class Team:
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
         self.members = self.members[keep]
-        self._look_rule = self._dense_rule  # its array after it restarts, as at set-up
         self.graph = self.graph.without(p, relay=self.config.excluded_relay)
         t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
         for name in ("observer", "controller", "supervisor", "thresholds", "decision", "detector"):
