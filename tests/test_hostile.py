@@ -427,25 +427,6 @@ class _GeneralToo(paper.Controller):
     """The paper's controller, as a subclass: the team runs the general path."""
 
 
-@pytest.mark.parametrize("path", ["compiled", "general"])
-def test_a_rule_that_forgets_an_exclusion_stops_the_run_in_one_line(path):
-    """From robot 1's exclusion (t_r = 50.07 s) the team has 3 members and the rule still
-    returned 4 x 4 thresholds: the compiled period read them by its own count, silently (with a
-    smaller array it would have read past its end), and the general path blamed the
-    detector. Now the run stops at that round, naming the rule."""
-    blocks = {"thresholds": _ForgetsExclusions()}
-    if path == "general":
-        blocks["controller"] = _GeneralToo()
-    result = simulate(load_scenario("paper_case", {"duration": 55.0}), blocks=blocks)
-    assert result.summary["onboard"]["path"] == path
-    assert re.fullmatch(
-        r"onboard block thresholds \(.*_ForgetsExclusions\) returned from mu\(t\) shape "
-        r"\(4, 4\), expected \(3, 3\), at t = 50\.07 s; the run stopped there and its "
-        "records are kept",
-        str(result.error),
-    ), result.error
-
-
 class _NaNAfterAnExclusion(paper.Thresholds):
     """The paper's thresholds, scaled by each robot's share of a team of 4: 0/0 once a robot
     has left (a rule's own bug after its restart)."""
@@ -457,18 +438,31 @@ class _NaNAfterAnExclusion(paper.Thresholds):
 
 
 @pytest.mark.parametrize("path", ["compiled", "general"])
-def test_a_rule_that_turns_nan_after_an_exclusion_stops_the_run_in_one_line(path):
-    """NaN thresholds flag nobody: after robot 1's exclusion the team would have gone on
-    blind, in silence. The run stops at the first round of the new team, naming it."""
-    blocks = {"thresholds": _NaNAfterAnExclusion()}
+@pytest.mark.parametrize(
+    ("rule", "said"),
+    [
+        (_ForgetsExclusions, r"shape \(4, 4\), expected \(3, 3\)"),
+        (
+            _NaNAfterAnExclusion,
+            r"nan as robot 2's threshold on robot 2, expected a number ≥ 0 or \+inf",
+        ),
+    ],
+    ids=["forgets-it", "nan-after-it"],
+)
+def test_a_rule_that_mishandles_an_exclusion_stops_the_run_in_one_line(path, rule, said):
+    """From robot 1's exclusion (t_r = 50.07 s) the team has 3 members. A rule still
+    returning 4 x 4 thresholds was read by the compiled period by its own count, silently
+    (with a smaller array it would have read past its end), and blamed on the detector by
+    the general path; a rule turning NaN flagged nobody and the team went on blind, in
+    silence. Now the run stops at the first round of the new team, naming the rule."""
+    blocks = {"thresholds": rule()}
     if path == "general":
         blocks["controller"] = _GeneralToo()
     result = simulate(load_scenario("paper_case", {"duration": 55.0}), blocks=blocks)
     assert result.summary["onboard"]["path"] == path
     assert re.fullmatch(
-        r"onboard block thresholds \(.*_NaNAfterAnExclusion\) returned from mu\(t\) nan as "
-        r"robot 2's threshold on robot 2, expected a number ≥ 0 or \+inf, at t = 50\.07 s; the "
-        "run stopped there and its records are kept",
+        rf"onboard block thresholds \(.*{rule.__name__}\) returned from mu\(t\) {said}, at "
+        r"t = 50\.07 s; the run stopped there and its records are kept",
         str(result.error),
     ), result.error
 
