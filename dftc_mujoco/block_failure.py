@@ -8,7 +8,7 @@ run that ends the run and keeps its records (:class:`~.errors.BlockError`); befo
 
 from __future__ import annotations
 
-from .errors import BlockError, InputError
+from .errors import BlockError, InputError, raised_line
 from .onboard.block import BadOutput, Block
 
 
@@ -37,8 +37,7 @@ def _raised(block: Block | None, exc: BaseException) -> str:
     )
     if isinstance(exc, BadOutput):
         return f"{where} {exc}"
-    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-    return f"{where} raised {type(exc).__name__}{': ' + text if text else ''}"
+    return f"{where} raised {raised_line(exc)}"
 
 
 def block_error(exc: BaseException, t: float) -> BlockError:

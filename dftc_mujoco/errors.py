@@ -35,6 +35,13 @@ def exit_interrupted(signum: int) -> int:
     return 128 + int(signum)
 
 
+def raised_line(exc: BaseException) -> str:
+    """``Kind: the first line of its message`` (``Kind`` alone when it has none): how a
+    user's own exception is quoted in a one-line error."""
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+
+
 class DftcError(Exception):
     """Base class of every error dftc-mujoco reports to a user."""
 

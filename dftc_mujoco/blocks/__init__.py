@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..errors import ScenarioError
+from ..errors import ScenarioError, raised_line
 
 #: the plug-in points, in the order a control period uses them
 BLOCKS = (
@@ -162,8 +162,6 @@ def create(
             f"{where}: cannot create {name!r} with onboard.params.{block}: {exc}"
         ) from None
     except Exception as exc:  # the block's own check of its parameters (or a bug in it)
-        text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         raise ScenarioError(
-            f"{where}: creating {name!r} with onboard.params.{block} raised "
-            f"{type(exc).__name__}{': ' + text if text else ''}"
+            f"{where}: creating {name!r} with onboard.params.{block} raised {raised_line(exc)}"
         ) from exc
