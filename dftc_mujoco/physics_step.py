@@ -76,7 +76,7 @@ class PhysicsStep:
         if self.any_driven:  # robots an outside policy drives (Simulation.drive())
             cmd[driven] = self.override[driven] + xi[driven]
         ctrl = self.adapter.command(cmd)
-        if self.faults.stuck.any():  # stuck actuators keep their command of onset
+        if self.faults.any_stuck:  # stuck actuators keep their command of onset
             ctrl = self.faults.hold(ctrl)
         return ctrl
 

@@ -21,6 +21,23 @@ ANTI_WINDUP_BAND = 0.05
 
 
 @njit(cache=True)
+def held(untouched, touching, hold_periods, hold):  # pragma: no cover - compiled
+    """The bumpers' hold on the estimator: ``untouched`` (N,) counts the periods each robot's
+    bumper has been off (one more each call, 0 while it touches), ``hold`` (N,) is whether
+    that count is below ``hold_periods``; returns how many bumpers touch now. One compiled
+    call instead of four numpy operations a period."""
+    count = 0
+    for i in range(untouched.shape[0]):
+        if touching[i]:
+            untouched[i] = 0.0
+            count += 1
+        else:
+            untouched[i] += 1.0
+        hold[i] = untouched[i] < hold_periods
+    return count
+
+
+@njit(cache=True)
 def estimate_faults(
     x_m, u, z, int_e, phi_hat, applied, K, g_inv, dt, limit, alpha, hold, u_bar
 ):  # pragma: no cover - compiled

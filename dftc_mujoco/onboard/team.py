@@ -34,7 +34,7 @@ from .block import BadOutput, Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
-from .fault_estimator import EstimatorRecord, FaultEstimator
+from .fault_estimator import EstimatorRecord, FaultEstimator, held
 from .general import general_period
 from .observer import Observer
 from .period import (
@@ -280,9 +280,7 @@ class Team:
         """
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
-            self._untouched += 1.0
-            self._untouched[touching] = 0.0
-            np.less(self._untouched, self._hold_periods, out=self._touch)
+            touched = held(self._untouched, touching, self._hold_periods, self._touch)
             if self.drive.lagged:
                 slot = self._k % self._window
                 if self._k >= self._window and self._touch.any():
@@ -290,7 +288,7 @@ class Team:
                     self.drive.v_hat[self._touch] = seen[self._touch]
                 self._x_past[slot] = x_m
                 self._k += 1
-            if touching.any():
+            if touched:
                 self.recovery.contact(t, np.flatnonzero(touching & self.active))
         if self.recovery.pending:
             self._exclusions_due(t)
@@ -298,7 +296,9 @@ class Team:
         if sensed_bodies is not None:
             if len(self.gone):
                 self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
-            if self.config.teammate_safe > 0:
+            if self.config.teammate_safe > 0 and len(self._mates) == self.n:  # every robot
+                self._mates[...] = sensed_bodies
+            elif self.config.teammate_safe > 0:
                 np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
         for b in self._timed:

@@ -64,6 +64,7 @@ class ActuatorFaults:
         self.just_ended: list[Fault] = []  # the faults that ended at the last apply()
         self._gain = np.ones(n)  # each robot's remaining effectiveness (loss_of_effectiveness)
         self.stuck = np.zeros(n, bool)  # robots whose actuators keep the command of onset
+        self.any_stuck = False  # stuck.any(), read every period
         self._stuck_ctrl: dict[int, np.ndarray] = {}
         if self.actuation.any_position and any(f.kind == "loss_of_effectiveness" for f in faults):
             raise InputError(
@@ -97,7 +98,7 @@ class ActuatorFaults:
                     stuck[f.robot] = True
         for robot in np.flatnonzero(self.stuck & ~stuck):
             self._stuck_ctrl.pop(int(robot), None)
-        self.stuck = stuck
+        self.stuck, self.any_stuck = stuck, bool(stuck.any())
         for robot in np.flatnonzero(stopped & ~self.stopped):
             self._stop_terms[int(robot)] = self.actuation.stop_terms(np.array([robot]))
         for robot in np.flatnonzero((~stopped & self.stopped) | (gain != self._gain)):
@@ -228,6 +229,7 @@ class ActuatorFaults:
         self.model.actuator_biastype[:] = biastype
         self.stopped[:] = False
         self.stuck[:] = False
+        self.any_stuck = False
         self._stuck_ctrl.clear()
         self._gain[:] = 1.0
         self.started = [False] * len(self.faults)

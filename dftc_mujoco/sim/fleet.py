@@ -168,6 +168,7 @@ class MixedFaults:
         self.parts = []
         n = sum(len(r) for r, _, _ in drive.parts)
         self.stuck = np.zeros(n, bool)
+        self.any_stuck = False  # stuck.any(), read every period
         self._global: dict[int, Any] = {}  # id of a group's fault -> the scenario's
         for robots_, d, cut in drive.parts:
             local = np.full(n, -1)
@@ -190,6 +191,7 @@ class MixedFaults:
                 new += [self._global[id(f)] for f in part.apply(t)]
                 self.just_ended += [self._global[id(f)] for f in part.just_ended]
             self.stuck[robots_] = part.stuck
+        self.any_stuck = bool(self.stuck.any())
         self.due = min(p.due for _, p, _ in self.parts)
         return new
 
@@ -213,3 +215,5 @@ class MixedFaults:
         """Every actuator back to its healthy parameters."""
         for _, part, _ in self.parts:
             part.clear()
+        self.stuck[:] = False
+        self.any_stuck = False
