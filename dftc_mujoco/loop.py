@@ -596,8 +596,8 @@ class Simulation:
         d["t"][row] = t
         d["x"][row] = x
         d["c_d"][row] = c
-        lim = self.command_limit  # what the drives were asked for, within their range
-        np.clip(cmd, -lim, lim, out=d["v_cmd"][row])
+        lim, v_cmd = self.command_limit, d["v_cmd"][row]  # what the drives were asked for,
+        np.minimum(np.maximum(cmd, -lim, out=v_cmd), lim, out=v_cmd)  # within their range
         assert self.plant is not None
         if pose is None:
             self.plant.poses(out=d["pose"][row])

@@ -60,6 +60,7 @@ class PhysicsStep:
         data = plant.data
         self.xpos = np.empty_like(data.xpos)
         self.xmat = np.empty_like(data.xmat)
+        self._live = (data.xpos, data.xmat)  # views into MjData's memory, taken once
         self.pose = np.empty((n, 3))
         self.k = 0
         self.xi = np.zeros((0, 2))
@@ -85,8 +86,7 @@ class PhysicsStep:
         data = self.plant.data
         ncon = data.ncon
         return Before(
-            data.xpos,
-            data.xmat,
+            *self._live,
             data.contact.geom if ncon else None,
             data.contact.dist if ncon else None,
             ncon,

@@ -138,11 +138,13 @@ class Plant:
         self._xi_state = _disk_sample(rng, self.n, self.xi_bar, False)
         # the drive writes the driven and the held actuators, in this order (drives.Drive;
         # a mixed team: each model's robots in turn, fleet.MixedDrive)
-        self._ctrl_index = (
+        self._ctrl_index: np.ndarray | slice = (
             scene.ctrl_index
             if len(scene.ctrl_index)
             else np.hstack([scene.actuator, scene.held]).ravel()
         )
+        if np.array_equal(self._ctrl_index, np.arange(self.data.ctrl.size)):  # every one, in order
+            self._ctrl_index = slice(None)  # a copy instead of a gather each period
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
         self._site_xpos = self.data.site_xpos
         self._xpos = self.data.xpos
