@@ -528,9 +528,13 @@ class Simulation:
                     k = k_end
         except SimulationError as exc:
             self.error = exc
+            if team.events:  # what the team did before the period failed (an exclusion at t_r)
+                self._take_team_events(k * dt)
             k += 1
             events.add(plant.time, "simulation_error", message=str(exc))
         finally:
+            if team.events:  # an interrupt in the middle of a period
+                self._take_team_events(k * dt)
             self.k = k
             bar.close()
             self._wall += time.perf_counter() - wall0

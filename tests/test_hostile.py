@@ -454,7 +454,8 @@ def test_a_rule_that_mishandles_an_exclusion_stops_the_run_in_one_line(path, rul
     returning 4 x 4 thresholds was read by the compiled period by its own count, silently
     (with a smaller array it would have read past its end), and blamed on the detector by
     the general path; a rule turning NaN flagged nobody and the team went on blind, in
-    silence. Now the run stops at the first round of the new team, naming the rule."""
+    silence. Now the run stops at the first round of the new team, naming the rule, and its
+    records keep the exclusion that began that period (they used to lose it)."""
     blocks = {"thresholds": rule()}
     if path == "general":
         blocks["controller"] = _GeneralToo()
@@ -465,6 +466,9 @@ def test_a_rule_that_mishandles_an_exclusion_stops_the_run_in_one_line(path, rul
         r"t = 50\.07 s; the run stopped there and its records are kept",
         str(result.error),
     ), result.error
+    kinds = [(e["kind"], e.get("robot")) for e in result.events.items if e["t"] > 50.0]
+    assert kinds == [("exclusion", 1), ("simulation_error", None)]
+    assert result.summary["exclusions"] == [{"robot": 1, "t": pytest.approx(50.07)}]
 
 
 class _NaNForAWhile(paper.Thresholds):
