@@ -206,7 +206,9 @@ class Simulation:
         x0 = plant.positions()
         x_m0 = x0 + self.noise.peek()[0]
         slots = self.path.position[0] + mission.formation_offsets(s.mission.formation, n)
-        meaning = getattr(blocks["thresholds"], "initial_error", "stacked")
+        meaning = premises.rule_meaning(
+            blocks["thresholds"], self.block_names["thresholds"], str(s.source)
+        )
         self.start_bound, refusal = premises.initial_error_bound(
             s.fdir.initial_error_bound, x0, slots, s.noise.eta_bar, meaning, str(s.source)
         )

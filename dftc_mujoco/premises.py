@@ -21,6 +21,7 @@ know the truth, the simulator does.
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .errors import SimulationError
+from .errors import InputError, SimulationError, raised_line
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 #: the premises, in the order the tables print them, with a one-line meaning each
@@ -110,6 +111,33 @@ def initial_error_bound(
         f"this scenario implies (robot {k + 1} starts {off:.4g} m from its planned slot; the "
         f"rule bounds {what}); set it to at least {math.ceil(implied * 1000) / 1000:g} or "
         '"auto"'
+    )
+
+
+#: what a thresholds rule's ``initial_error`` may say ``initial_error_bound`` bounds
+MEANINGS = ("stacked", "robot")
+
+
+def rule_meaning(rule: object, name: str, where: str) -> str:
+    """What ``fdir.initial_error_bound`` bounds for thresholds block ``rule`` (named
+    ``name``): its ``initial_error``, "stacked" where it declares none. A declaration that
+    cannot be read or says something else is refused in one line (it used to be read as
+    "stacked", in silence)."""
+    if inspect.getattr_static(rule, "initial_error", MEANINGS) is MEANINGS:
+        return "stacked"
+    try:
+        meaning = rule.initial_error  # type: ignore[attr-defined]
+    except Exception as exc:  # a property of the block's own that raises
+        raise InputError(
+            f"{where}: onboard block thresholds ({name}) raised {raised_line(exc)} when its "
+            "initial_error was read; nothing ran"
+        ) from exc
+    if isinstance(meaning, str) and meaning in MEANINGS:
+        return meaning
+    raise InputError(
+        f"{where}: onboard block thresholds ({name}) declares initial_error = {meaning!r}; "
+        'expected "stacked" (fdir.initial_error_bound bounds ‖ỹ*_k(0)‖ over every observer, '
+        'eq. 40) or "robot" (each robot\'s start distance from its planned slot)'
     )
 
 

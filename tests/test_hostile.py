@@ -352,6 +352,42 @@ def test_a_given_block_that_raises_before_the_run_names_itself():
     assert isinstance(info.value.__cause__, RuntimeError)
 
 
+class _SaysRobotCapitalised(paper.Thresholds):
+    initial_error = "Robot"
+
+
+class _CannotSay(paper.Thresholds):
+    @property
+    def initial_error(self):
+        return self.meaning  # an attribute the rule never set: AttributeError
+
+
+class _SaysNothing(paper.Thresholds):
+    initial_error = None
+
+
+@pytest.mark.parametrize(
+    ("rule", "said"),
+    [
+        (_SaysRobotCapitalised, r"declares initial_error = 'Robot'; expected \"stacked\" "),
+        (
+            _CannotSay,
+            r"raised AttributeError: .*'meaning' when its initial_error was read; nothing ran",
+        ),
+        (_SaysNothing, r"declares initial_error = None; expected \"stacked\" "),
+    ],
+    ids=["misspelt", "raises", "none"],
+)
+def test_a_rule_whose_initial_error_cannot_be_read_is_refused(rule, said):
+    """What ε̄ (fdir.initial_error_bound) bounds is the rule's own declaration: the stack of
+    every observer's error (eq. 40) or each robot's offset, √(N − 1) apart. A misspelt or
+    unreadable declaration was read as "stacked" in silence, and a rule meaning "robot" got
+    an ε̄ about √3 times too large on paper_case."""
+    s = load_scenario("paper_case", {"duration": 1.0})
+    with pytest.raises(InputError, match=rf"onboard block thresholds \(.*{rule.__name__}\) {said}"):
+        Simulation(s, blocks={"thresholds": rule()})
+
+
 class _OneAxis(paper.Controller):
     def collective_input(self, x_hat, x_d, xd_dot):
         return super().collective_input(x_hat, x_d, xd_dot)[:, :1]
