@@ -140,6 +140,15 @@ def preflight(
     def finding(key: str, message: str, refuse: bool) -> None:
         (out.refusals if refuse else out.warnings).append(f"{src}: {key}: {message}")
 
+    periods = s.duration / s.physics.control_period  # the run is a whole number of them
+    if abs(periods - round(periods)) > 1e-6:
+        finding(
+            "duration",
+            f"{s.duration:g} s is not a whole number of control periods "
+            f"({s.physics.control_period:g} s): the run ends at "
+            f"{round(periods) * s.physics.control_period:g} s",
+            False,
+        )
     # the formation, and the one re-planned without a robot: hulls must not overlap
     need = 2 * reach + CLEARANCE
     n = s.team.robots

@@ -55,6 +55,8 @@ def _variant(old: str, new: str) -> str:
         # a hang in the path's table, and an overflow of the substeps (found by fuzzing)
         ("ramp_time = 2.0", "ramp_time = 1e-9", ("mission.centroid.ramp_time: expected at least",)),
         ("timestep = 0.002", "timestep = 1e-300", ("physics.timestep: expected at least",)),
+        # shorter than a period: no period ran, and the video then failed with exit code 4
+        ("duration = 60.0", "duration = 0.004", ("duration: expected at least one control",)),
     ],
 )
 def test_a_meaningless_scenario_is_refused_before_simulating(tmp_path, capsys, old, new, needles):
@@ -64,6 +66,24 @@ def test_a_meaningless_scenario_is_refused_before_simulating(tmp_path, capsys, o
     assert run.main([str(path), "--no-video", "--no-progress", "--out", str(out)]) == EXIT_INPUT
     _one_error_line(capsys.readouterr().err, str(path), *needles)
     assert not out.exists()
+
+
+def test_a_duration_between_two_periods_is_said_to_end_at_the_later(tmp_path, capsys):
+    """The run is a whole number of control periods: 0.015 s ended at 0.02 s in silence."""
+    runs = {}
+    for d in ("0.015", "0.03"):  # 0.03 s is 2.9999999999999996 periods: whole
+        out = tmp_path / d
+        argv = ["paper_case", "--duration", d, "--no-video", "--no-progress", "--out", str(out)]
+        assert run.main(argv) == 0
+        runs[d] = (capsys.readouterr().out, open_run(out))
+    said, result = runs["0.015"]
+    assert result.log["t"][-1] == pytest.approx(0.02)
+    assert (
+        "WARNING: " + str(SCENARIOS / "paper_case.toml") + ": duration: 0.015 s is not a whole "
+        "number of control periods (0.01 s): the run ends at 0.02 s"
+    ) in said
+    said, result = runs["0.03"]
+    assert result.log["t"][-1] == pytest.approx(0.03) and "duration:" not in said
 
 
 def test_a_toml_file_nested_50000_deep_is_one_line(tmp_path, capsys):

@@ -113,6 +113,16 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
                     "([from, to], robots numbered from 1)",
                 )
     if (
+        physics is not None
+        and doc.ok("duration", "physics.control_period")
+        and duration < physics.control_period * (1 - 1e-9)
+    ):  # no period would run: the log would hold t = 0 alone
+        doc.record(
+            "duration",
+            f"expected at least one control period ({physics.control_period:g} s), got "
+            f"{duration:g}",
+        )
+    if (
         mission is not None
         and physics is not None
         and doc.ok("mission.centroid.ramp_time", "physics.control_period")
