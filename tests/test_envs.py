@@ -93,6 +93,20 @@ def test_a_policy_that_stops_its_robot_is_flagged_by_the_team(tmp_path):
     assert {f[3] for f in flags if f[6] == "2"} >= {"1", "3", "4"}
 
 
+def test_a_nan_action_is_refused_and_an_infinite_one_saturates():
+    """A policy's NaN drove its robot at 0 m/s in silence; ±inf is the drive's range."""
+    env = make_gym(_short(), robot=2)
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match=r"the action for robot 2 is \[nan, 0\.0\]: expected"):
+            env.step(np.array([np.nan, 0.0]))
+        env.step(np.array([np.inf, -np.inf]))
+        told = env.unwrapped.seats.sim._physics.override[1]
+        assert told.tolist() == [env.action_space.high[0], env.action_space.low[1]]
+    finally:
+        env.close()
+
+
 def test_a_robot_that_is_not_in_the_team_is_refused_in_one_line():
     from dftc_mujoco.errors import InputError
 

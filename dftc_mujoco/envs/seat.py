@@ -73,9 +73,14 @@ class Seats:
 
     def step(self, actions: dict[int, np.ndarray]) -> None:
         """One control period with each driven robot commanded ``actions[i]`` (clipped to
-        the drive's range)."""
+        the drive's range, ±inf too); a NaN is a policy's bug, refused (ValueError)."""
         for i, a in actions.items():
-            a = np.nan_to_num(np.asarray(a, dtype=float).reshape(2), nan=0.0)
+            a = np.asarray(a, dtype=float).reshape(2)
+            if np.isnan(a).any():  # it was driven at 0 m/s in silence
+                raise ValueError(
+                    f"the action for robot {i + 1} is {a.tolist()}: expected a planar velocity "
+                    f"in m/s (clipped to ±{self.limit:g})"
+                )
             self.sim.drive(i, np.clip(a, -self.limit, self.limit))
         self.snapshot = self.sim.step(1)
 
