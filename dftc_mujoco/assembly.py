@@ -209,12 +209,22 @@ def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
 def block_names(s: Scenario, given: Mapping[str, Any] | None) -> dict[str, str]:
     """The name of each block a run uses: the scenario's, or for a given instance its
     built-in name (``"paper"``, ...) when it is one, else ``module:Class``."""
+    _known(given)
     names = {k: getattr(s.onboard, k) for k in blocks_mod.BLOCKS}
     for k, b in (given or {}).items():
         cls = type(b)
         builtin = [n for n in blocks_mod.BUILTIN[k] if blocks_mod.load_class(k, n) is cls]
         names[k] = builtin[0] if builtin else f"{cls.__module__}:{cls.__qualname__}"
     return names
+
+
+def _known(given: Mapping[str, Any] | None) -> None:
+    """Refuse a given block under a name that is not a block's."""
+    unknown = sorted(set(given or {}) - set(blocks_mod.BLOCKS))
+    if unknown:
+        raise ScenarioError(
+            f"blocks: unknown block {unknown[0]!r}; expected one of {', '.join(blocks_mod.BLOCKS)}"
+        )
 
 
 def make_blocks(
@@ -226,11 +236,7 @@ def make_blocks(
     scenario file's folder, else from the folders ``search``.
     """
     given = dict(given or {})
-    unknown = sorted(set(given) - set(blocks_mod.BLOCKS))
-    if unknown:
-        raise ScenarioError(
-            f"blocks: unknown block {unknown[0]!r}; expected one of {', '.join(blocks_mod.BLOCKS)}"
-        )
+    _known(given)
     out: dict[str, Block] = {}
     for k in blocks_mod.BLOCKS:
         if k in given:

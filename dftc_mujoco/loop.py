@@ -79,6 +79,13 @@ class Simulation:
         search: Sequence[str | Path] = (),
     ) -> None:
         wall0 = time.perf_counter()
+        if not isinstance(scenario, Scenario):  # an AttributeError from deep inside before
+            raise TypeError(
+                f"Simulation(scenario): expected a Scenario (load_scenario(...)), got "
+                f"{type(scenario).__name__}"
+            )
+        if hook is not None and not callable(hook):  # it raised in the first period before
+            raise TypeError(f"Simulation(hook): expected hook(t, plant) or None, got {hook!r}")
         checks.check_memory(scenario)  # before anything big is allocated
         self.scenario = scenario
         self.hook = hook
@@ -130,9 +137,11 @@ class Simulation:
         """Start the run again from t = 0 (with another ``seed`` if given: a whole number
         ≥ 0)."""
         if seed is not None and (
-            isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0
+            isinstance(seed, bool)
+            or not isinstance(seed, int | np.integer)
+            or not 0 <= seed <= np.iinfo(np.int64).max
         ):
-            raise ValueError(f"reset(seed): expected a whole number ≥ 0, got {seed!r}")
+            raise ValueError(f"reset(seed): expected a whole number in 0..2**63 - 1, got {seed!r}")
         wall0 = time.perf_counter()
         if seed is not None:
             self.scenario = self.scenario.with_overrides(seed=seed)
@@ -348,18 +357,7 @@ class Simulation:
         disturbance ξ still adds to it); None gives it back to the team. Its onboard blocks
         run on as before, so what they see is a robot that does not follow its own commands
         (the environments of :mod:`dftc_mujoco.envs` drive robots this way)."""
-        if not 0 <= int(robot) < self.n:
-            raise ValueError(f"drive(robot): expected a robot in 0..{self.n - 1}, got {robot!r}")
-        physics = self._physics
-        if velocity is None:
-            physics.driven[robot] = False
-        else:
-            v = np.asarray(velocity, dtype=float).reshape(2)
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"drive(velocity): expected finite numbers, got {v.tolist()}")
-            physics.override[robot] = v
-            physics.driven[robot] = True
-        physics.any_driven = bool(physics.driven.any())
+        self._physics.drive(robot, velocity)
 
     def request_stop(self, reason: str) -> None:
         """Stop stepping before the next control period (safe from a signal handler):

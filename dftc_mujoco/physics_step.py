@@ -69,6 +69,28 @@ class PhysicsStep:
         self.error: BaseException | None = None
         self.before: Before | None = None
 
+    def drive(self, robot: int, velocity: np.ndarray | None) -> None:
+        """Robot ``robot`` (0-based) told ``velocity`` (planar, m/s) from outside the team
+        from the next period on; None gives it back (:meth:`.loop.Simulation.drive`)."""
+        n = len(self.driven)
+        if isinstance(robot, bool) or not isinstance(robot, int | np.integer) or not 0 <= robot < n:
+            raise ValueError(f"drive(robot): expected a robot in 0..{n - 1}, got {robot!r}")
+        if velocity is None:
+            self.driven[robot] = False
+        else:
+            try:
+                v = np.asarray(velocity, dtype=float).reshape(2)
+            except (TypeError, ValueError):  # numpy's own words named neither argument
+                raise ValueError(
+                    f"drive(velocity): expected a planar velocity of 2 numbers (m/s), got "
+                    f"{velocity!r}"
+                ) from None
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"drive(velocity): expected finite numbers, got {v.tolist()}")
+            self.override[robot] = v
+            self.driven[robot] = True
+        self.any_driven = bool(self.driven.any())
+
     def commands(self, xi: np.ndarray) -> np.ndarray:
         """The actuator commands for the team's ū plus the drives' errors ``xi`` (eq. 2)
         (robots driven from outside: their given velocity plus ``xi``), into :attr:`cmd`."""

@@ -228,6 +228,13 @@ def test_the_api_refuses_what_it_cannot_do_in_one_line(tmp_path):
             sim.step(bad)
     with pytest.raises(ValueError, match="reset\\(seed\\)"):  # ran seed 1
         sim.reset(seed=1.5)
+    with pytest.raises(ValueError, match=r"reset\(seed\): expected a whole number in 0\.\.2\*\*63"):
+        sim.reset(seed=2**70)  # an InputError about the "command line" before
+    with pytest.raises(ValueError, match=r"drive\(robot\): expected a robot in 0\.\.3, got 1\.5"):
+        sim.drive(1.5, [0.0, 0.0])  # numpy's IndexError before
+    for bad in ([1.0], "ab", [[1.0, 2.0, 3.0]]):  # numpy's reshape and conversion errors before
+        with pytest.raises(ValueError, match=r"drive\(velocity\): expected a planar velocity"):
+            sim.drive(0, bad)
     sim.close()
     with pytest.raises(RuntimeError, match="was closed"):  # AttributeError before
         sim.step()
@@ -240,6 +247,12 @@ def test_the_api_refuses_what_it_cannot_do_in_one_line(tmp_path):
         assert sim2.team.thresholds is falsy
     with pytest.raises(InputError, match="not a thresholds block"):
         Simulation(s, blocks={"thresholds": paper.Decision()})
+    with pytest.raises(InputError, match="unknown block 'ctrl'; expected one of observer"):
+        simulate(s, blocks={"ctrl": paper.Controller()})  # KeyError: 'ctrl' before
+    with pytest.raises(TypeError, match=r"Simulation\(scenario\): expected a Scenario"):
+        simulate(None)  # AttributeError from deep inside before
+    with pytest.raises(TypeError, match=r"Simulation\(hook\): expected hook\(t, plant\) or None"):
+        Simulation(s, hook=3)  # TypeError in the first period before
 
 
 def test_save_never_mixes_two_runs(tmp_path):
