@@ -249,6 +249,8 @@ def test_the_api_refuses_what_it_cannot_do_in_one_line(tmp_path):
         Simulation(s, blocks={"thresholds": paper.Decision()})
     with pytest.raises(InputError, match="unknown block 'ctrl'; expected one of observer"):
         simulate(s, blocks={"ctrl": paper.Controller()})  # KeyError: 'ctrl' before
+    with pytest.raises(TypeError, match=r"overrides: expected a mapping of dotted keys"):
+        load_scenario("paper_case", [("gains.ko", 2)])  # AttributeError: 'list' ... 'items'
     with pytest.raises(TypeError, match=r"Simulation\(scenario\): expected a Scenario"):
         simulate(None)  # AttributeError from deep inside before
     with pytest.raises(TypeError, match=r"Simulation\(hook\): expected hook\(t, plant\) or None"):

@@ -461,6 +461,11 @@ def apply_overrides(
             (``"duration.x"``) or indexes past an array's end; every such key is
             reported, one line each.
     """
+    if not isinstance(overrides, Mapping):  # an AttributeError ('items') before
+        raise TypeError(
+            f"overrides: expected a mapping of dotted keys to values, such as "
+            f'{{"gains.ko": 3}}, got {type(overrides).__name__}'
+        )
     out = copy.deepcopy(data)
     problems = []
     for key, value in overrides.items():
