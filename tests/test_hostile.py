@@ -152,6 +152,14 @@ def test_campaign_specs_that_mean_nothing_are_refused(tmp_path, capsys):
     spec.write_text('name = "c"\nscenario = "paper_case"\nruns = 2\n[vary]\nseed = false\n')
     assert campaign_cli.main([str(spec), "--out", str(tmp_path / "c")]) == EXIT_INPUT
     _one_error_line(capsys.readouterr().err, "every one of the 2 runs would be the same scenario")
+    spec.write_text(
+        'name = "c"\nscenario = "paper_case"\nruns = 2\n[vary]\nfault_time = [5.0, 1.0]\n'
+    )
+    assert campaign_cli.main([str(spec), "--out", str(tmp_path / "c")]) == EXIT_INPUT
+    # the range as written, not numpy's repr ([np.float64(5.0), np.float64(1.0)])
+    _one_error_line(
+        capsys.readouterr().err, "vary.fault_time: expected 0 <= low <= high, got [5.0, 1.0]"
+    )
 
 
 def test_a_ray_timeout_must_be_a_time_and_needs_ray(tmp_path, capsys):

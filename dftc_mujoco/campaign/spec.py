@@ -202,7 +202,7 @@ def _vary(t: Table) -> dict[str, Any]:
         if key in t.data:
             lo_hi = t.array(key, (2,), what="a [low, high] range")
             if lo_hi[0] > lo_hi[1] or lo_hi[0] < 0:
-                t.fail(key, f"expected 0 <= low <= high, got {list(lo_hi)}")
+                t.fail(key, f"expected 0 <= low <= high, got {lo_hi.tolist()}")
             v[key] = [float(lo_hi[0]), float(lo_hi[1])]
     if "robots" in t.data:
         ns = t.raw("robots")
