@@ -116,6 +116,7 @@ def initial_error_bound(
 
 #: what a thresholds rule's ``initial_error`` may say ``initial_error_bound`` bounds
 MEANINGS = ("stacked", "robot")
+_ABSENT = object()  # a rule that declares no initial_error
 
 
 def rule_meaning(rule: object, name: str, where: str) -> str:
@@ -123,7 +124,7 @@ def rule_meaning(rule: object, name: str, where: str) -> str:
     ``name``): its ``initial_error``, "stacked" where it declares none. A declaration that
     cannot be read or says something else is refused in one line (it used to be read as
     "stacked", in silence)."""
-    if inspect.getattr_static(rule, "initial_error", MEANINGS) is MEANINGS:
+    if inspect.getattr_static(rule, "initial_error", _ABSENT) is _ABSENT:
         return "stacked"
     try:
         meaning = rule.initial_error  # type: ignore[attr-defined]

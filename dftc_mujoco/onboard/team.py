@@ -296,10 +296,11 @@ class Team:
         if sensed_bodies is not None:
             if len(self.gone):
                 self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
-            if self.config.teammate_safe > 0 and len(self._mates) == self.n:  # every robot
-                self._mates[...] = sensed_bodies
-            elif self.config.teammate_safe > 0:
-                np.take(sensed_bodies, self.members, axis=0, out=self._mates)
+            if self.config.teammate_safe > 0:
+                if len(self._mates) == self.n:  # every robot a member: a copy, not a gather
+                    self._mates[...] = sensed_bodies
+                else:
+                    np.take(sensed_bodies, self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
         for b in self._timed:
             b.t = t
