@@ -661,6 +661,33 @@ def test_integer_timers_flag_where_the_time_sums_did(mode):
             assert np.array_equal(d.flag, flag)
 
 
+@pytest.mark.parametrize("need", [1, 127, 128, 300])
+def test_timers_hold_their_window_in_the_smallest_integer_type(need):
+    """A window of up to 127 rounds keeps its timers in one byte, a longer one in four; in
+    either, a residual above for twice the window raises the flag at round ``need`` exactly,
+    and the same time below lowers it at round ``need`` (a timer that wrapped past the
+    type's range would lower it at once or never)."""
+    from dftc_mujoco.onboard.decision import Decision
+
+    dt = 0.01
+    d = Decision.standalone(2, window=need * dt - 5e-10, dt=dt)
+    assert d.record().need == need
+    assert d.timer.dtype == (np.int8 if need <= 127 else np.int32)
+    mu, r = np.ones((2, 2)), np.zeros((2, 2))
+    raised_at = lowered_at = None
+    for k in range(1, 4 * need + 1):
+        r[0, 1] = 2.0 if k <= 2 * need else 0.0
+        d.update(r, mu)
+        if d.raised[0, 1]:
+            assert raised_at is None
+            raised_at = k
+        if raised_at and lowered_at is None and not d.flag[0, 1]:
+            lowered_at = k
+    assert raised_at == need
+    assert lowered_at == 2 * need + need
+    assert abs(int(d.timer[0, 1])) == need
+
+
 def test_the_settled_thresholds_are_an_array_of_their_own():
     """eq. 40 once settled is kept apart from the array written for an earlier time: the
     settling time T_s compares every time's thresholds with the settled ones, and with one

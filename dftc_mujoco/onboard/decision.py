@@ -35,6 +35,14 @@ def count_for(window: float, dt: float) -> int:
     return c
 
 
+def timer_type(need: int) -> type:
+    """The integer type of the timers for a window of ``need`` rounds: they stay within
+    ±max(need, 1) (:func:`tick`), so one byte holds the usual windows (the default 0.2 s at
+    0.01 s: 20 rounds). The timers are the decision's one N × N array read and written every
+    round: at N = 1000, 2 MB a round in int8 against 8 MB in int32."""
+    return np.int8 if need <= np.iinfo(np.int8).max else np.int32
+
+
 @njit(inline="always")
 def tick(c, over, need):  # pragma: no cover - compiled
     """A timer after one more round: rounds above (> 0) or not above (< 0) the threshold,
@@ -149,7 +157,7 @@ def decide(r_norm, th, dec):  # pragma: no cover - compiled
 class DecisionRecord(NamedTuple):
     """What the compiled period (:mod:`.period`) reads and writes of the decision."""
 
-    timer: np.ndarray  # (M, M) int32: rounds above (> 0) or not above (< 0) the threshold
+    timer: np.ndarray  # (M, M) int8 or int32 (timer_type): rounds above (> 0) or not (< 0)
     flag: np.ndarray  # (M, M) robot i flags robot k
     need: int  # rounds a condition must hold: the window (:func:`count_for`)
     exclusive: int  # the isolation mode (ISOLATION)
@@ -192,7 +200,8 @@ class Decision(Block):
     def _allocate(self, n: int) -> None:
         # np.full writes every page now: np.zeros leaves them to the first read, and the
         # decision of eq. 39 then paid page faults every period (31-35 ms at N = 1000)
-        self.timer = np.full((n, n), 0, dtype=np.int32)
+        kind = timer_type(count_for(self.window, self.dt))
+        self.timer: np.ndarray = np.full((n, n), 0, dtype=kind)
         self.flag = np.full((n, n), False)
         self._raised = np.full((n, n), False)
         self._raised_rows = np.full(n, False)
