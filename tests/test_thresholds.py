@@ -706,6 +706,57 @@ def test_the_settled_thresholds_are_an_array_of_their_own():
     assert team.settle_time(60.0) > 1.0
 
 
+def test_settle_time_from_eq40_factors_is_the_arrays():
+    """T_s of the paper's rule read from eq. 40's factors (no (M, M) array per instant) is
+    the one its arrays give, on random strongly connected graphs of uneven in-degree, a ring,
+    a graph with robots no bound covers (+inf columns), uneven start bounds, a restart after
+    t = 0 from bounds below steady, and tolerances from 0 to 50 %."""
+    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.onboard.thresholds import Thresholds
+    from dftc_mujoco.onboard.thresholds.settling import settle_time
+
+    rng = np.random.default_rng(4)
+    graphs = [random_strongly_connected(n, d, rng) for n, d in ((5, 1), (12, 3), (40, 2))]
+    graphs += [ring_with_chords(30, (2, 5)), Graph(4, ((0, 1), (1, 2), (2, 1), (1, 3)))]
+    seen = set()
+    for graph in graphs:
+        for tolerance in (0.0, 0.01, 0.1, 0.5):
+            for t0 in (0.0, 3.0):  # bounds that fall to steady, and (t0 > 0) that rise to it
+                y0 = rng.uniform(0.05, 3.0, graph.n) if t0 == 0 else np.full(graph.n, 1e-3)
+                y0[0] *= 1 if t0 else 3.0  # robot 0's column the last to settle, on the ring
+                th = Thresholds.for_graph(graph, 3.0, 0.001, 0.02, y0, t0=t0)
+                assert th.factors_at(1.0) is not None
+                by_arrays = settle_time(th.mu, 0.01, 60.0, tolerance)
+                by_factors = settle_time(th.mu, 0.01, 60.0, tolerance, th.factors_at)
+                assert by_factors == by_arrays, (graph.n, tolerance, t0)
+                seen.add(by_arrays)
+                if tolerance == 0.1:
+                    _within_matches_at_every_boundary(th)
+    assert len(seen) > 10 and float("inf") in seen  # instants all over the grid, and never
+
+
+def _within_matches_at_every_boundary(th):
+    """The factored comparison against the arrays' at scales one ulp either side of every
+    entry's own boundary (below 1 too: a bound that rises to steady binds on the diagonal)."""
+    from dftc_mujoco.onboard.thresholds.settling import (
+        _within,
+        _within_factored,
+        by_coefficient,
+    )
+
+    steady = th.mu(1e9).copy()
+    finite = np.isfinite(steady)
+    ref = th.factors_at(1e9)
+    first, second = by_coefficient(ref.coef)
+    for t in (th.t0, th.t0 + 0.2, th.t0 + 2.0, th.t0 + 20.0):
+        mu_t, now = th.mu(t).copy(), th.factors_at(t)
+        for edge in np.unique((mu_t[finite] - 1e-12) / steady[finite]):
+            for scale in (np.nextafter(edge, 0.0), edge, np.nextafter(edge, np.inf)):
+                expected = _within(mu_t, steady * scale + 1e-12, finite)
+                args = (now.coef, now.bound, ref.bound, now.finite, now.eta, scale)
+                assert _within_factored(*args, first, second) == expected, (t, scale)
+
+
 def _team_of(graph):
     from dftc_mujoco.onboard.locality import demo_team
 

@@ -199,7 +199,9 @@ class Team:
         rule = type(self.thresholds)
         mu = Looked(self.thresholds.mu, self.members, f"{rule.__module__}:{rule.__qualname__}")
         mu(0.0)  # the first array of the run, checked too
-        settled = settle_time(mu, self.config.dt, horizon, tolerance)
+        th = self.thresholds
+        factors = th.factors_at if isinstance(th, Thresholds) else None  # eq. 40, unwritten
+        settled = settle_time(mu, self.config.dt, horizon, tolerance, factors)
         self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
         self.never_flags = mu.never_flags
         return settled

@@ -220,6 +220,16 @@ class Thresholds(Block):
             self._record_settled, self._record_t = True, np.nan
         return self._record
 
+    def factors_at(self, t: float) -> ThresholdRecord | None:
+        """ⁱμ_k(t) as eq. 40's factors, the numbers :meth:`mu` writes out (the same bound of
+        ‖ỹ*_k(t)‖), for a reader that need not write the (M, M) array; None for a rule that
+        overrides :meth:`mu`."""
+        if type(self).mu is not Thresholds.mu:
+            return None
+        rec = self._record
+        bound = self._bound_at(t)
+        return ThresholdRecord(rec.dense, rec.coef, bound, rec.finite, rec.eta)
+
     def _bound_at(self, t: float) -> np.ndarray:
         """The bound of ‖ỹ*_k(t)‖ (:func:`bound_of`; not the record's array); kept from the
         first call at or past the settling time on (every transient term is then below
