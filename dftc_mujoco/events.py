@@ -27,6 +27,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
     "systemic_anomaly_over": ("robots",),
     "detection_not_guaranteed": ("robot", "until"),
+    "detection_past_end": ("robot", "left", "dt_d_max"),
     "detection_horizon": ("value", "before"),
     "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
     "warning": ("message",),
@@ -119,6 +120,11 @@ def describe(e: Mapping[str, Any]) -> str:
         return (
             f"robot {r}'s fault comes before the thresholds settle: its detection within "
             f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
+        )
+    if k == "detection_past_end":
+        return (
+            f"robot {r}'s fault leaves {e['left']:.2f} s of the run, less than Δt_d,max = "
+            f"{e['dt_d_max']:.2f} s: eq. 46 does not promise its detection before the end"
         )
     if k == "systemic_anomaly_over":
         return "systemic anomaly over: no robot is flagged by a teammate any more"

@@ -463,6 +463,13 @@ class Simulation:
                                     if np.isfinite(self.settle_time)
                                     else None,
                                 )
+                            left = round(steps * dt - t, 6)  # the run left after its onset
+                            if left < team.recovery.dt_d_max:  # eq. 46's window passes the end
+                                limit = round(team.recovery.dt_d_max, 6)
+                                events.add(
+                                    t, "detection_past_end", robot=f.robot + 1, left=left,
+                                    dt_d_max=limit,
+                                )  # fmt: skip
                         for f in faults.just_ended:
                             events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
                     plant.positions(out=x)

@@ -165,6 +165,29 @@ def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain()
     assert late.summary["dt_d_max"]["settle_time"] < 41.8
 
 
+def test_a_fault_too_close_to_the_end_for_eq46s_window_is_said_so():
+    """Eq. 46 promises a detection within Δt_d,max of the fault: a run that ends sooner
+    leaves an undetected fault unexplained unless it says so. paper_case cut to 43 s (its
+    stop at 41.8 s, Δt_d,max 5 s) gets one ``detection_past_end`` event with the time left,
+    in words in the event table; cut to 48 s, and in full, none."""
+    from dftc_mujoco.events import describe
+
+    short = simulate(load_scenario("paper_case", {"duration": 43.0}))
+    (note,) = short.events.of_kind("detection_past_end")
+    assert note == {
+        "t": 41.8,
+        "kind": "detection_past_end",
+        "robot": 1,
+        "left": pytest.approx(1.2, abs=1e-6),
+        "dt_d_max": 5.0,
+    }
+    assert short.summary["detections"] == [] and short.summary["exclusions"] == []
+    assert "leaves 1.20 s of the run, less than Δt_d,max = 5.00 s" in describe(note)
+    for duration in (48.0, 60.0):
+        done = simulate(load_scenario("paper_case", {"duration": duration}))
+        assert done.events.of_kind("detection_past_end") == []
+
+
 def test_a_contact_postpones_the_exclusion_past_the_settle_time():
     """Contacts from T_s + Δt_d,max before the first flag on postpone t_r to the last
     contact + T_s + Δt_d,max; a later contact postpones it again; one before that window
