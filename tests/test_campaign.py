@@ -302,6 +302,22 @@ def _tiny_variant(tmp_path: Path, name: str, old: str, new: str) -> Path:
     return path
 
 
+def test_more_workers_than_cpus_are_said_before_running(tmp_path, capsys):
+    """--workers beyond the machine's CPUs used to start that many processes in silence
+    (200 of a 200-run spec on 2 cores, each with its own MuJoCo and team): it is said
+    first, before anything else is looked at (here an --out that is a file, exit 5)."""
+    many = (os.cpu_count() or 1) + 1
+    taken = tmp_path / "a_file"
+    taken.write_text("")
+    args = [str(TINY), "--workers", str(many), "--out", str(taken), "--no-progress"]
+    assert campaign_main(args) == 5
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"note: --workers {many} is more than the {many - 1} CPUs here")
+    assert len(err) == 2 and "names a file, not a folder" in err[1]
+    assert campaign_main([*args[:1], "--workers", str(many - 1), *args[3:]]) == 5
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_a_campaign_folder_belongs_to_one_spec(tmp_path, capsys):
     """Two specs used to merge silently into one --out ("6/6 runs recorded (2 new)",
     30 s rows beside 60 s rows, spec.toml overwritten)."""

@@ -88,6 +88,14 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
             if args.workers < 1:
                 raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
+            cpus = os.cpu_count() or 1
+            if args.ray is None and args.workers > cpus:  # said: each is a process of its own
+                print(
+                    f"note: --workers {args.workers} is more than the {cpus} CPUs here: the "
+                    "runs share them, each worker a process with its own memory (one worker "
+                    "per run at most)",
+                    file=sys.stderr,
+                )
             if args.ray_timeout is not None:
                 if args.ray is None:
                     raise ScenarioError("--ray-timeout: only with --ray")
