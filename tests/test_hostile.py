@@ -160,6 +160,16 @@ def test_campaign_specs_that_mean_nothing_are_refused(tmp_path, capsys):
     _one_error_line(
         capsys.readouterr().err, "vary.fault_time: expected 0 <= low <= high, got [5.0, 1.0]"
     )
+    # every run a bias of 0 (no fault, counted as one): it ran 80 such runs of bias_sweep
+    spec.write_text(
+        'name = "c"\nscenario = "paper_case"\nruns = 2\n[vary]\nfault_kind = ["bias"]\n'
+        "bias_magnitude = [0.0, 0.0]\n"
+    )
+    assert campaign_cli.main([str(spec), "--out", str(tmp_path / "c")]) == EXIT_INPUT
+    _one_error_line(
+        capsys.readouterr().err,
+        "vary.bias_magnitude: expected high > 0 (a bias of 0 is no fault), got [0.0, 0.0]",
+    )
 
 
 def test_a_ray_timeout_must_be_a_time_and_needs_ray(tmp_path, capsys):

@@ -203,6 +203,8 @@ def _vary(t: Table) -> dict[str, Any]:
             lo_hi = t.array(key, (2,), what="a [low, high] range")
             if lo_hi[0] > lo_hi[1] or lo_hi[0] < 0:
                 t.fail(key, f"expected 0 <= low <= high, got {lo_hi.tolist()}")
+            elif key == "bias_magnitude" and lo_hi[1] == 0:
+                t.fail(key, f"expected high > 0 (a bias of 0 is no fault), got {lo_hi.tolist()}")
             v[key] = [float(lo_hi[0]), float(lo_hi[1])]
     if "robots" in t.data:
         ns = t.raw("robots")
