@@ -160,7 +160,7 @@ def test_campaign_specs_that_mean_nothing_are_refused(tmp_path, capsys):
     _one_error_line(
         capsys.readouterr().err, "vary.fault_time: expected 0 <= low <= high, got [5.0, 1.0]"
     )
-    # every run a bias of 0 (no fault, counted as one): it ran 80 such runs of bias_sweep
+    # every run a bias of 0 (no fault, counted as one): such a campaign ran without a word
     spec.write_text(
         'name = "c"\nscenario = "paper_case"\nruns = 2\n[vary]\nfault_kind = ["bias"]\n'
         "bias_magnitude = [0.0, 0.0]\n"
