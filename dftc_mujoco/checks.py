@@ -249,15 +249,7 @@ def preflight(
             continue
         size = float(np.abs(f.value).max())
         key = f"faults[{k + 1}].value"
-        if size == 0.0:
-            finding(
-                key,
-                f"a bias of 0 m/s changes no command: robot {f.robot + 1} stays healthy but is "
-                "counted as the faulty one (a teammate's flag on it counts as a detection, not a "
-                "false alarm); give the bias a size or remove the fault",
-                refuse=False,
-            )
-        elif size > cap:
+        if size > cap:
             finding(
                 key,
                 f"a bias of {size:g} m/s is {size / cap * FAULT_CAP:.0f} times the "

@@ -82,22 +82,6 @@ def test_fault_free_run_at_noise_bounds_has_no_detection(seed):
     assert r.summary["margin"] < 1
 
 
-def test_a_bias_of_zero_is_said_to_be_no_fault():
-    """A bias fault of [0, 0] m/s ran in silence: a "fault" event, a robot counted as the
-    faulty one, and any teammate's flag on it counted as a detection. It is warned before
-    the run; the run goes on and nobody is flagged."""
-    d = scenario_dict()
-    d["faults"] = [{"robot": 2, "kind": "bias", "t": 5.0, "value": [0.0, 0.0]}]
-    d["duration"] = 10.0
-    out = loop.simulate(make(d)).summary
-    assert out["warnings"] == [
-        "<test>: faults[1].value: a bias of 0 m/s changes no command: robot 2 stays healthy "
-        "but is counted as the faulty one (a teammate's flag on it counts as a detection, not "
-        "a false alarm); give the bias a size or remove the fault"
-    ]
-    assert out["detections"] == [] and out["exclusions"] == []
-
-
 def test_bias_too_large_to_compensate_is_isolated_like_a_stop():
     d = scenario_dict()
     # robot 1's y actuator gains -1.6 m/s (away from the team): beyond the ±1 m/s range

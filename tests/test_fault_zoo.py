@@ -82,6 +82,11 @@ def test_zoo_faults_are_checked_in_one_line():
     assert "faults[1].end: expected a time after t = 5 s" in refused(
         {"robot": 1, "kind": "stop", "t": 5.0, "end": 4.0}
     )
+    # a fault of size 0 changes nothing, yet its robot counted as the faulty one (it ran)
+    for kind in ("bias", "drift", "sensor_bias", "sensor_drift"):
+        assert "faults[1].value: expected a nonzero [x, y] pair ([0, 0] is no fault)" in refused(
+            {"robot": 2, "kind": kind, "t": 5.0, "value": [0.0, 0.0]}
+        )
 
 
 def test_a_loss_of_effectiveness_on_position_servos_is_refused():

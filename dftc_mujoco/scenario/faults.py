@@ -37,6 +37,7 @@ def read_fault(t: Table, n: int | None, duration: float | None) -> Fault | Radio
     if kind in SENSOR_FAULTS:
         unit = "m" if kind == "sensor_bias" else "m/s"
         value = t.array("value", (N_DIM,), what=f"an [x, y] pair in {unit}")
+        _not_zero(t, value)
         end = _fault_end(t, at)
         t.finish()
         return Fault(robot - 1, kind, at, value, 0.0, end)
@@ -49,6 +50,7 @@ def read_fault(t: Table, n: int | None, duration: float | None) -> Fault | Radio
         return Fault(robot - 1, kind, at, _ro([g, g]), 0.0, end)
     if kind == "drift":
         rate = t.array("value", (N_DIM,), what="an [x, y] pair in m/s²")
+        _not_zero(t, rate)
         t.finish()
         return Fault(robot - 1, kind, at, rate, 0.0, end)
     if kind == "stuck":
@@ -61,6 +63,7 @@ def read_fault(t: Table, n: int | None, duration: float | None) -> Fault | Radio
         return Fault(robot - 1, kind, at, _ro([0.0, 0.0]), 0.0, end, period, duty)
     if kind == "bias":
         value = t.array("value", (N_DIM,), what="an [x, y] pair in m/s")
+        _not_zero(t, value)
         tau = t.number("time_constant", 0.0, low=0.0, strict_low=False)
         fault = Fault(robot - 1, kind, at, value, tau, end)
     else:  # a stop fault has no bias; zeros are accepted (Scenario.to_dict writes them)
@@ -77,6 +80,14 @@ def read_fault(t: Table, n: int | None, duration: float | None) -> Fault | Radio
         fault = Fault(robot - 1, kind, at, end=end)
     t.finish()
     return fault
+
+
+def _not_zero(t: Table, value: np.ndarray) -> None:
+    """A bias, drift or sensor fault of [0, 0] changes nothing, yet its robot would count as
+    the faulty one (a teammate's flag on it a detection, not a false alarm): refused, as a
+    loss of effectiveness of 1 is."""
+    if t.ok("value") and not np.any(value):
+        t.report("value", "expected a nonzero [x, y] pair ([0, 0] is no fault)")
 
 
 def _fault_end(t: Table, at: float) -> float:
