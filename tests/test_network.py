@@ -307,6 +307,10 @@ def test_the_network_table_is_checked_in_one_line_per_problem():
         {"network.p_bad": 0.1}
     )
     assert "network.loss: every message would be lost" in problems({"network.loss": 1.0})
+    # a bound of 0 dropped nothing in silence (0 of 501 messages lost at loss = 0.3)
+    assert "network.max_consecutive_losses: 0 lets no message be lost" in problems(
+        {"network.loss": 0.3, "network.max_consecutive_losses": 0}
+    )
     assert "network.links[1].link: expected a loss, a latency or both" in problems(
         {"network.links": [{"link": [1, 2]}]}
     )
