@@ -102,7 +102,7 @@ def read_network(t: Table, physics: Physics | None, faults: tuple[RadioFault, ..
         and (loss >= 1 or (model == "gilbert_elliott" and burst["p_good"] == 0))
     ):
         t.report("loss", "every message would be lost: give max_consecutive_losses")
-    if bound == 0 and net.lossy:  # the channel would then drop nothing: say which one holds
+    if bound == 0 and net.lossy:  # a bound of 0 would drop none of the losses asked for
         t.report(
             "max_consecutive_losses",
             "0 lets no message be lost, which cancels the losses given (loss, loss_model or "
