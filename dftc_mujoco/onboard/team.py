@@ -29,6 +29,7 @@ import numpy as np
 
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
+from .addresses import address_table
 from .applied import DriveModel, DriveRecord
 from .block import BadOutput, Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
@@ -44,6 +45,7 @@ from .period import (
     PeriodInputs,
     begin,
     commands,
+    flat_arguments,
     integrate,
     team_period_flat,
     team_rows,
@@ -410,7 +412,7 @@ class Team:
                     code |= RAISED
             finally:
                 integrate(ob, buf)
-        else:  # one compiled call, the records passed field by field (team_period_flat)
+        else:  # one compiled call, the records taken apart (team_period_flat)
             code = team_period_flat(*inputs, *self._flat_records())
             if beside is not None:
                 beside()
@@ -420,11 +422,15 @@ class Team:
         return code
 
     def _flat_records(self) -> tuple:
-        """Every record but the period's inputs, field by field, in team_period_flat's order.
-        Their arrays change only at an exclusion (the cache is emptied then), ŷ and ŷ⁺ swap
-        every period and a thresholds rule may hand out a new ⁱμ_k: the tuples are kept per
-        (ŷ, μ, range reading), at most a few. Each holds its arrays, so no id is reused."""
-        key = (id(self.observer.y_hat), id(self._th.dense), self._sensed)
+        """Every record but the period's inputs, taken apart as team_period_flat takes them
+        (:func:`.period.flat_arguments`): the table of their arrays' addresses, ⁱμ_k's array,
+        the timers and the numbers. Their arrays change only at an exclusion (ŷ is then new),
+        ŷ and ŷ⁺ swap every period and the thresholds' record changes from a dense array to
+        eq. 40's factors: the arguments are kept per (ŷ, factors, range reading), at most a
+        few, each entry with the arrays its table points into (:mod:`.addresses`), so they
+        live as long as the table and no id is reused. ⁱμ_k's own array, which a rule may
+        hand out anew each round, is passed as it is."""
+        key = (id(self.observer.y_hat), id(self._th.coef), self._sensed)
         flat = self._flat.get(key)
         if flat is None:
             if len(self._flat) >= 4:
@@ -436,8 +442,9 @@ class Team:
                 self.decision.record(),
                 self._buffers,
             )
-            flat = self._flat[key] = tuple(v for r in records for v in r)
-        return flat
+            arrays, passed = flat_arguments(records)
+            flat = self._flat[key] = (arrays, (address_table(arrays), *passed))
+        return (flat[1][0], self._th.dense, *flat[1][2:])
 
     def _records(
         self,

@@ -1,0 +1,83 @@
+"""Arrays handed to compiled code by address (:mod:`dftc_mujoco.onboard.addresses`): the views
+are the caller's memory, a row that is not what its reader expects raises, and the team's
+compiled period takes its records' arrays that way."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit, types
+
+from dftc_mujoco.loop import Simulation
+from dftc_mujoco.onboard.addresses import address_table, view1, view2, view3
+from dftc_mujoco.onboard.period import team_period_flat
+from tests.conftest import make, scenario_dict
+
+
+@njit
+def _touch(table):
+    """Read every array of the table and write into it: 1-D bool, 2-D int64, 3-D float64,
+    1-D int8."""
+    flags, counts, values, small = (
+        view1(table, 0, np.bool_),
+        view2(table, 1, np.int64),
+        view3(table, 2, np.float64),
+        view1(table, 3, np.int8),
+    )
+    flags[1] = not flags[1]
+    counts[2, 1] += 7
+    values[1, 2, 0] = values.sum()
+    small[-1] = -small[0]
+    return values.shape[0] * 100 + values.shape[1] * 10 + values.shape[2]
+
+
+def test_views_are_the_callers_arrays():
+    flags = np.array([True, False, True])
+    counts = np.arange(6).reshape(3, 2)
+    values = np.arange(24, dtype=float).reshape(2, 3, 4)
+    small = np.array([5, 0], np.int8)
+    total = values.sum()
+    table = address_table([flags, counts, values, small])
+    assert table.dtype == np.int64 and table.shape == (4, 6)
+    assert _touch(table) == 234  # the shape came through
+    assert flags.tolist() == [True, True, True]
+    assert counts[2, 1] == 5 + 7 and counts.sum() == 15 + 7
+    assert values[1, 2, 0] == total
+    assert small.tolist() == [5, -5]
+
+
+@pytest.mark.parametrize(
+    "wrong",
+    [
+        np.zeros(3, np.int32),  # int32 where bool is read
+        np.zeros((3, 1), bool),  # 2-D where 1-D is read
+    ],
+)
+def test_a_row_that_is_not_what_its_reader_expects_raises(wrong):
+    arrays = [wrong, np.zeros((3, 2), np.int64), np.zeros((2, 3, 4)), np.zeros(2, np.int8)]
+    with pytest.raises(TypeError, match="does not hold the array its reader expects"):
+        _touch(address_table(arrays))
+
+
+def test_an_array_that_is_not_contiguous_is_refused():
+    strided = np.zeros((4, 4))[:, 1]
+    with pytest.raises(ValueError, match=r"array 1 .*expected a C-contiguous"):
+        address_table([np.zeros(2), strided])
+    with pytest.raises(ValueError, match="at most 3 dimensions"):
+        address_table([np.zeros((1, 1, 1, 1))])
+
+
+def test_the_team_period_takes_its_records_by_address():
+    """The compiled period's arrays are its inputs, the table, μ and the timers; every cached
+    table points into the arrays kept beside it (they live as long as the table)."""
+    with Simulation(make(scenario_dict())) as sim:
+        sim.step(5)
+        team = sim.team
+    assert team.path == "compiled"
+    (signature,) = team_period_flat.signatures
+    arrays = [a for a in signature if isinstance(a, types.Array)]
+    assert len(arrays) == 9 and len(signature) == 34
+    assert team._flat
+    for kept, (table, *_) in team._flat.values():
+        assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]
+        assert table[:, 1].tolist() == [a.dtype.num for a in kept]
