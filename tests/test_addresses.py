@@ -4,6 +4,8 @@ compiled period takes its records' arrays that way."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 from numba import njit, types
@@ -78,6 +80,24 @@ def test_the_team_period_takes_its_records_by_address():
     arrays = [a for a in signature if isinstance(a, types.Array)]
     assert len(arrays) == 9 and len(signature) == 34
     assert team._flat
-    for kept, (table, *_) in team._flat.values():
+    for kept, table, *_ in team._flat.values():
         assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]
         assert table[:, 1].tolist() == [a.dtype.num for a in kept]
+
+
+def test_a_copied_team_builds_its_own_tables():
+    """``copy.deepcopy`` copies a team's arrays, not the addresses written in its tables: the
+    copy starts without tables, and its periods leave the original's state alone."""
+    with Simulation(make(scenario_dict())) as sim:
+        sim.step(5)
+        team = sim.team
+        assert team._flat
+        copied = copy.deepcopy(team)
+        assert not copied._flat
+        before = [a.copy() for a in (team.observer.y_hat, team.x_hat, team.u)]
+        x_m = sim._x_m + 0.3
+        copied.step(0.05, x_m, np.array([0.5, 0.0]), np.array([0.1, 0.0]))
+        after = (team.observer.y_hat, team.x_hat, team.u)
+        assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
+        for kept, table, *_ in copied._flat.values():
+            assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]

@@ -11,13 +11,14 @@ of an int64 table; the compiled side rebuilds the arrays as views (:func:`view1`
 :func:`view2`, :func:`view3`: about 5 ns each) and checks each row's dtype and ndim against
 what it reads there, so a table that does not match its reader raises instead of reading
 wrong memory. The views do not own their memory: **the caller keeps the arrays alive as
-long as the table** (:meth:`.team.Team._flat_records` keeps them in the same cache entry),
-and they must not be returned or stored by compiled code.
+long as the table** (:class:`Tables` keeps them in the same entry), and they must not be
+returned or stored by compiled code.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import carray, njit, types
@@ -40,6 +41,21 @@ def address_table(arrays: Sequence[np.ndarray]) -> np.ndarray:
         table[k, :SHAPE] = a.__array_interface__["data"][0], a.dtype.num, a.ndim
         table[k, SHAPE : SHAPE + a.ndim] = a.shape
     return table
+
+
+class Tables(dict):
+    """Tables kept with the arrays they point into, by the caller's key. A copy is empty: a
+    copied table would still point into the original's arrays (``copy.deepcopy`` of a team
+    copies its arrays but not the addresses written in its tables), and pickling keeps none."""
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Tables:
+        return Tables()
+
+    def __copy__(self) -> Tables:
+        return Tables()
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (Tables, ())
 
 
 @intrinsic

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
-from .addresses import address_table
+from .addresses import Tables, address_table
 from .applied import DriveModel, DriveRecord
 from .block import BadOutput, Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
@@ -241,7 +241,7 @@ class Team:
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
         )
         self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
-        self._flat: dict[tuple[int, int, bool], tuple] = {}  # see _flat_records
+        self._flat = Tables()  # see _flat_records
         self._buffers = PeriodBuffers(
             self.x_own,
             self.x_d,
@@ -427,9 +427,9 @@ class Team:
         the timers and the numbers. Their arrays change only at an exclusion (ŷ is then new),
         ŷ and ŷ⁺ swap every period and the thresholds' record changes from a dense array to
         eq. 40's factors: the arguments are kept per (ŷ, factors, range reading), at most a
-        few, each entry with the arrays its table points into (:mod:`.addresses`), so they
-        live as long as the table and no id is reused. ⁱμ_k's own array, which a rule may
-        hand out anew each round, is passed as it is."""
+        few, each entry with the arrays its table points into (:class:`.addresses.Tables`: a
+        copied team starts without), so they live as long as the table and no id is reused.
+        ⁱμ_k's own array, which a rule may hand out anew each round, is passed as it is."""
         key = (id(self.observer.y_hat), id(self._th.coef), self._sensed)
         flat = self._flat.get(key)
         if flat is None:
@@ -442,9 +442,9 @@ class Team:
                 self.decision.record(),
                 self._buffers,
             )
-            arrays, passed = flat_arguments(records)
-            flat = self._flat[key] = (arrays, (address_table(arrays), *passed))
-        return (flat[1][0], self._th.dense, *flat[1][2:])
+            arrays, (_, timer, *numbers) = flat_arguments(records)  # ⁱμ_k: at each call
+            flat = self._flat[key] = (arrays, address_table(arrays), timer, *numbers)
+        return (flat[1], self._th.dense, *flat[2:])
 
     def _records(
         self,
