@@ -114,6 +114,16 @@ yaw = "joint_th"
             "drive",
             "needs a free joint",
         ),
+        # a G of 0 ran as the paper's 0.01 without a word (gains.G = 0 itself is refused)
+        (
+            lambda t: t + "[calibration]\ncompensation_G = 0\n",
+            "calibration.compensation_G",
+            "expected a number > 0, got 0",
+        ),
+        # an empty name ran, its events reading "two  robots need ..."
+        (lambda t: 'name = " "\n' + t, "name", "got an empty one"),
+        # a folder was "no such file"
+        (lambda t: t.replace(str(DATA / "holobase" / "holobase.xml"), str(DATA)), "mjcf", "folder"),
     ],
 )
 def test_robot_file_problems_are_one_line_naming_file_and_key(tmp_path, change, key, message):
@@ -145,6 +155,19 @@ def test_an_unknown_key_lists_every_key_the_robot_file_accepts(tmp_path, change,
     with pytest.raises(ScenarioError) as info:
         robots.get(str(path))
     assert str(info.value) == f"{path}: {key}: unknown key (known keys here: {known})"
+
+
+def test_a_robot_path_that_is_a_folder_or_nowhere_says_where_it_looked(tmp_path):
+    """A folder given as the robot was "no such robot file", and a missing file named only the
+    first of the folders looked in."""
+    with pytest.raises(ScenarioError, match=r"^--robot: '.*' is a folder \(.*\), expected a robot"):
+        robots.get(str(tmp_path), "--robot")
+    with pytest.raises(ScenarioError) as info:
+        robots.get("sub/bot.robot.toml", "team.robot_model", base=tmp_path)
+    assert str(info.value) == (
+        "team.robot_model: no such robot file 'sub/bot.robot.toml' "
+        f"(looked in {Path.cwd() / 'sub'} and {tmp_path / 'sub'})"
+    )
 
 
 def test_a_bad_robot_file_on_the_command_line_is_one_line_exit_2(tmp_path):

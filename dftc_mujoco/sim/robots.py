@@ -176,7 +176,14 @@ def resolve(name: str, where: str = "team.robot_model", base: Path | None = None
     for c in candidates:
         if c.is_file():
             return c.resolve()
-    raise ScenarioError(f"{where}: no such robot file {name!r} (looked in {candidates[0].parent})")
+    for c in candidates:
+        if c.is_dir():
+            raise ScenarioError(
+                f"{where}: {name!r} is a folder ({c.resolve()}), expected a robot file"
+                f" NAME{ROBOT_SUFFIX} or an MJCF file"
+            )
+    looked = " and ".join(dict.fromkeys(str(c.parent) for c in candidates))
+    raise ScenarioError(f"{where}: no such robot file {name!r} (looked in {looked})")
 
 
 def get(name: str, where: str = "team.robot_model", base: Path | None = None) -> RobotModel:
@@ -212,6 +219,8 @@ def _load_robot_file(path: Path) -> RobotModel:
     keyframe = t.string("keyframe", default=None) if "keyframe" in data else None
     max_speed = t.number("max_speed", low=0.0) if "max_speed" in data else None
     name = t.string("name", path.name.removesuffix(ROBOT_SUFFIX).removesuffix(".toml"))
+    if "name" in data and isinstance(data["name"], str) and not name.strip():
+        t.report("name", "expected a name to show in events and captions, got an empty one")
     params: dict[str, float] = {}
     if "mesh_density" in data:
         params["mesh_density"] = t.number("mesh_density", low=0.0)
@@ -271,8 +280,9 @@ def _load_robot_file(path: Path) -> RobotModel:
     if "calibration" in data:
         c = t.table("calibration")
         for key in CALIBRATION_KEYS:
-            if key in c.data:
-                calibration[key] = c.number(key, low=0.0, strict_low=False)
+            if key in c.data:  # a G of 0 is no gain (eq. 30): the calibration writes none then
+                strict = key == "compensation_G"
+                calibration[key] = c.number(key, low=0.0, strict_low=strict)
         c.used.update(CALIBRATION_KEYS)
         c.finish()
     # the optional keys, so that a misspelt one is told what it could be
@@ -280,6 +290,8 @@ def _load_robot_file(path: Path) -> RobotModel:
     t.finish()
     doc.raise_problems()
     mjcf = (path.parent / mjcf_name).resolve()
+    if mjcf.is_dir():
+        raise ScenarioError(f"{path}: mjcf: {mjcf} is a folder, expected an MJCF file in it")
     if not mjcf.is_file():
         raise ScenarioError(f"{path}: mjcf: no such file {mjcf}")
     robot = RobotModel(
