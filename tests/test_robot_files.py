@@ -472,6 +472,16 @@ def test_calibrate_refuses_a_calibration_table_it_cannot_replace_before_measurin
     assert time.perf_counter() - start < 5.0 and path.read_bytes() == before
 
 
+@pytest.mark.parametrize("runs", ["0", "-3"])
+def test_calibrate_refuses_fewer_than_one_drift_run_before_measuring(capsys, runs):
+    """--runs 0 and --runs -3 measured one run and said "1 fault-free runs"."""
+    start = time.perf_counter()
+    assert calibrate.main(["disk", "--runs", runs]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: --runs: expected at least 1 fault-free run, got {runs}\n"
+    assert time.perf_counter() - start < 5.0  # nothing measured
+
+
 def test_calibrate_applies_set_to_every_measurement(capsys):
     """--set reaches the compensation check and the detectability line, not only the
     drift runs: at G = 0.02 the diffdrive's loop is calm and paper_case with block_row

@@ -42,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = p.parse_args(argv)
     try:
+        if args.runs < 1:  # it ran one run without a word
+            raise ScenarioError(f"--runs: expected at least 1 fault-free run, got {args.runs}")
         overrides = parse_overrides(args.overrides)  # bad input fails before measuring
         from ..scenario import load_scenario
 
@@ -70,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         if path is not None:  # the drift runs then see the robot's new mismatch
             write(path, cal)
         try:
-            d = drift(args.model, args.scenario, overrides, max(1, args.runs))
+            d = drift(args.model, args.scenario, overrides, args.runs)
         except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is
             d = None
             first = str(exc).splitlines()[0]
