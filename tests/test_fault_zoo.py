@@ -89,6 +89,46 @@ def test_zoo_faults_are_checked_in_one_line():
         )
 
 
+@pytest.mark.parametrize(
+    ("fault", "line"),
+    [
+        # acted 10 ms, a whole control period
+        (
+            {"kind": "bias", "t": 20.0, "end": 20.005, "value": [0.5, 0.0]},
+            "faults[1].end: the bias fault: it lasts 0.005 s, less than a control period",
+        ),
+        # between two instants: a fault and a fault_ended event at 20.01 s, and no action
+        (
+            {"kind": "stop", "t": 20.001, "end": 20.002},
+            "faults[1].end: the stop fault: it lasts 0.001 s, less than a control period",
+        ),
+        # 1.5 ms on of every 5 ms acted at every instant: a stop
+        (
+            {"kind": "intermittent", "t": 20.0, "period": 0.005, "duty": 0.3},
+            "faults[1].duty: the intermittent fault: its on windows (0.0015 s of every 0.005 s)",
+        ),
+        (
+            {"kind": "intermittent", "t": 20.0, "period": 1.0, "duty": 0.995},
+            "faults[1].duty: the intermittent fault: its off windows (0.005 s of every 1 s)",
+        ),
+        (
+            {"kind": "sensor_bias", "t": 25.995, "value": [0.2, 0.0]},
+            "faults[1].t: the sensor_bias fault: the run ends at 26 s before a control instant",
+        ),
+    ],
+)
+def test_a_fault_the_control_instants_cannot_carry_is_refused(fault, line):
+    """The faults switch at the control instants (every 0.01 s here): a fault shorter than a
+    period, windows shorter than one, or a start after the last instant ran without a word,
+    acting for a whole period, at every instant, or not at all."""
+    with pytest.raises(ScenarioError) as e:
+        load_scenario("paper_case", {"duration": 26.0, "faults": [{"robot": 1, **fault}]})
+    assert str(e.value).count("\n") == 0 and line in str(e.value), str(e.value)
+    kept = {**fault, "t": 20.0, "end": 20.01} if fault["kind"] != "intermittent" else fault
+    if fault["kind"] != "intermittent":  # one period is enough
+        load_scenario("paper_case", {"duration": 26.0, "faults": [{"robot": 1, **kept}]})
+
+
 def test_a_loss_of_effectiveness_on_position_servos_is_refused():
     s = load_scenario(
         "paper_case",

@@ -3,6 +3,8 @@ faults and radio faults (:mod:`.parts`), each kind with the keys it reads."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..tomlcheck import N_DIM, Table, _ro
@@ -98,3 +100,41 @@ def _fault_end(t: Table, at: float) -> float:
     if t.ok("t", "end") and end <= at:
         t.report("end", f"expected a time after t = {at:g} s, got {end:g}")
     return end
+
+
+def timing_problem(f: Fault, h: float, duration: float) -> tuple[str, str] | None:
+    """The key and why fault ``f`` cannot act as written with control period ``h`` in a run
+    of ``duration``, or None. The faults switch at the control instants k·h
+    (:mod:`~dftc_mujoco.sim.faults`, :mod:`~dftc_mujoco.sim.sensors`): a fault shorter than a
+    period, or an intermittent one whose on or off windows are, would act for a whole period
+    or not at all (a 5 ms bias acted 10 ms; 1.5 ms on of every 5 ms acted at every instant);
+    one that spans no instant before the end changes nothing, yet its robot would count as
+    the faulty one, as a fault of size 0 would."""
+    short = h * (1 - 1e-9)
+    if f.end - f.t < short:
+        return "end", (
+            f"it lasts {f.end - f.t:g} s, less than a control period ({h:g} s), at whose "
+            f"instants the faults switch: expected end >= t + {h:g}"
+        )
+    if f.kind == "intermittent":
+        on = f.duty * f.period
+        if on < short:
+            return "duty", (
+                f"its on windows ({on:g} s of every {f.period:g} s) are shorter than a control "
+                f"period ({h:g} s), at whose instants the faults switch: expected period × duty "
+                f">= {h:g} s"
+            )
+        if 0 < f.period - on < short:
+            return "duty", (
+                f"its off windows ({f.period - on:g} s of every {f.period:g} s) are shorter than "
+                f"a control period ({h:g} s), at whose instants the faults switch: expected "
+                f"period × (1 - duty) >= {h:g} s, or duty = 1"
+            )
+    k = math.ceil(f.t / h)  # the first instant k·h at or after t, as the loop computes it
+    k += (k * h < f.t) - ((k - 1) * h >= f.t)
+    if k * h >= duration:
+        return "t", (
+            f"the run ends at {duration:g} s before a control instant (every {h:g} s) at or "
+            f"after t = {f.t:g} s: it would never act"
+        )
+    return None

@@ -16,7 +16,7 @@ from ..graph import Graph
 from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
 from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
 from ..tomlcheck import number_or_word as _number_or_word
-from .faults import read_fault
+from .faults import read_fault, timing_problem
 from .network import read_network
 from .parts import (
     Fault,
@@ -122,6 +122,13 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
             f"expected at least one control period ({physics.control_period:g} s), got "
             f"{duration:g}",
         )
+    if physics is not None and doc.ok("duration", "physics.control_period"):
+        for k, f in enumerate(all_faults or ()):  # the table's place among [[faults]]
+            if isinstance(f, Fault):
+                timing = timing_problem(f, physics.control_period, duration)
+                if timing is not None:
+                    key, why = timing
+                    doc.record(f"faults[{k + 1}].{key}", f"the {f.kind} fault: {why}")
     if (
         mission is not None
         and physics is not None
