@@ -227,3 +227,16 @@ def test_faults_left_alone_between_their_switches_act_as_if_re_evaluated_every_p
     changed = np.flatnonzero(np.any(np.diff(p_skip, axis=0) != 0, axis=1)) + 1
     assert {300, 500, 600, 650, 900, 950} <= set(changed.tolist())
     assert len(changed) > 400  # the bias moves every period from 2 s (at least until 10 s)
+
+
+def test_a_fault_after_the_end_is_one_line():
+    """The reader says a fault after the end once: the control instants' check stays quiet
+    about it (it said the same fault "would never act" on a second line)."""
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(
+            "paper_case", {"duration": 30.0, "faults": [{"robot": 1, "kind": "stop", "t": 41.8}]}
+        )
+    assert str(e.value).endswith(
+        "faults[1].t: fault at 41.8 s is after the end of the run (duration = 30 s)"
+    )
+    assert str(e.value).count("\n") == 0

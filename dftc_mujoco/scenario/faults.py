@@ -110,6 +110,8 @@ def timing_problem(f: Fault, h: float, duration: float) -> tuple[str, str] | Non
     or not at all (a 5 ms bias acted 10 ms; 1.5 ms on of every 5 ms acted at every instant);
     one that spans no instant before the end changes nothing, yet its robot would count as
     the faulty one, as a fault of size 0 would."""
+    if f.t >= duration:  # read_fault said so
+        return None
     short = h * (1 - 1e-9)
     if f.end - f.t < short:
         return "end", (
