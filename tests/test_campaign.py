@@ -386,6 +386,20 @@ def test_campaign_output_problems_are_one_line_exit_5(tmp_path, capsys):
         (("base", "duration = [oops"), "not valid TOML"),
         (("base", b'name = "caf\xe9"\n'), "not UTF-8 text"),
         (("base", "robots_typo = 3\n"), "robots_typo"),
+        # keys no drawn fault reads, and team sizes with the base's edge list: they ran
+        # ignored, or failed as run 1's "not strongly connected" graph
+        (
+            ('fault_kind = ["stop"]\n', ""),
+            "vary.faulty_robot: no run reads it: vary.fault_kind is not given",
+        ),
+        (
+            ('faulty_robot = "any"', 'faulty_robot = "any"\nbias_magnitude = [0.1, 0.3]'),
+            "vary.bias_magnitude: no run reads it: vary.fault_kind draws only stop",
+        ),
+        (
+            ('faulty_robot = "any"', 'faulty_robot = "any"\nrobots = [4, 8]'),
+            "vary.robots: the base scenario's team.graph lists the edges of its 4 robots",
+        ),
     ],
 )
 def test_bad_campaign_inputs_are_one_line_before_running(tmp_path, capsys, change, expect):

@@ -117,6 +117,7 @@ def load(path: str | Path) -> Spec:
         vary["methods"] = dict(methods)
     top.finish()
     _check_faulty_robots(path, vary, base)
+    _check_team_sizes(path, vary, base, overrides)
     spec = Spec(name, description, base, str(base_file), runs, seed, overrides, vary, str(path))
     scenario_for(spec, draw(spec, 0))  # the scenarios it makes must be valid
     _check_variety(spec)
@@ -148,6 +149,28 @@ def _check_faulty_robots(path: Path, vary: dict[str, Any], base: dict[str, Any])
                 f"{path}: vary.faulty_robot: none of robots {robots} exists in a team of {n} "
                 f"(vary.robots = {vary['robots']}); give at least one from 1 to {n}"
             )
+
+
+def _check_team_sizes(
+    path: Path, vary: dict[str, Any], base: dict[str, Any], overrides: dict[str, Any]
+) -> None:
+    """``vary.robots`` without ``vary.graph_family`` keeps the base scenario's team.graph: an
+    edge list is written for the base's N robots (it failed later as "not strongly
+    connected", naming a run)."""
+    if "robots" not in vary or "graph_family" in vary:
+        return
+    team = copy.deepcopy(base.get("team", {}))
+    if isinstance(team, dict):
+        _merge(team, overrides.get("team", {}) if isinstance(overrides.get("team"), dict) else {})
+    graph = team.get("graph") if isinstance(team, dict) else None
+    if isinstance(graph, list):
+        n = team.get("robots")
+        raise ScenarioError(
+            f"{path}: vary.robots: the base scenario's team.graph lists the edges of its {n} "
+            f"robots, and team sizes {vary['robots']} keep it; expected vary.graph_family "
+            f"({', '.join(FAMILIES)}), or a generated team.graph in [set] (e.g. "
+            '{family = "random", in_degree = 2})'
+        )
 
 
 def _check_variety(spec: Spec) -> None:
@@ -206,6 +229,23 @@ def _vary(t: Table) -> dict[str, Any]:
             elif key == "bias_magnitude" and lo_hi[1] == 0:
                 t.fail(key, f"expected high > 0 (a bias of 0 is no fault), got {lo_hi.tolist()}")
             v[key] = [float(lo_hi[0]), float(lo_hi[1])]
+    kinds = set(v.get("fault_kind", ()))
+    for key, users in (
+        ("faulty_robot", {"stop", "bias", "two_stops", "silent", *ZOO_KINDS}),
+        ("fault_time", {"stop", "bias", "two_stops", "silent", *ZOO_KINDS}),
+        ("bias_magnitude", {"bias", "sensor_bias", "sensor_drift"}),
+    ):  # a key no drawn fault reads was ignored without a word
+        if key in t.data and not kinds & users:
+            drawn = (
+                f"draws only {', '.join(sorted(kinds))}"
+                if kinds
+                else "is not given (the base scenario's faults run as written)"
+            )
+            t.fail(
+                key,
+                f"no run reads it: vary.fault_kind {drawn}; expected fault_kind to include "
+                f"one of {', '.join(sorted(users))}",
+            )
     if "robots" in t.data:
         ns = t.raw("robots")
         if (
