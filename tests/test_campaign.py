@@ -11,7 +11,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from dftc_mujoco.campaign import report, runner, spec
+from dftc_mujoco.campaign import cluster, report, runner, spec
 from dftc_mujoco.campaign.__main__ import main as campaign_main
 from dftc_mujoco.errors import ScenarioError
 
@@ -575,3 +575,15 @@ def test_methods_meet_the_same_draws_and_are_reported_side_by_side(tmp_path):
     path.write_text(path.read_text().replace("runs = 4", "runs = 3"))
     with pytest.raises(ScenarioError, match="runs: expected a multiple of the 2 methods"):
         spec.load(path)
+
+
+def test_a_client_server_that_gave_up_on_the_driver_says_what_to_do():
+    """Ray's client server on a loaded head gives up on a driver's own server after 30 s; the
+    one line said only "Initialization failure from server" (seen in CI, 2026-11-27)."""
+    exc = ConnectionAbortedError("Initialization failure from server:\nTraceback ...")
+    line = cluster._explain("ray://192.0.2.2:41477", exc, "")
+    assert line.startswith(
+        "--ray: cannot join ray://192.0.2.2:41477: Initialization failure from server: (the "
+        "head's Ray client server did not start this driver's server in time"
+    )
+    assert "try again" in line and "\n" not in line

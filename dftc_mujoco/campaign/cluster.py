@@ -233,6 +233,11 @@ def _explain(shown: str, exc: BaseException, said: str) -> str:
     ):
         return f"--ray: cannot join {shown}: {AUTH_HINT}"
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if "Initialization failure from server" in first:  # Ray's client server, on the head
+        first += (
+            " (the head's Ray client server did not start this driver's server in time, as on"
+            " a loaded head: try again, or run the campaign on the head with --ray auto)"
+        )
     return f"--ray: cannot join {shown}: {first}"
 
 
