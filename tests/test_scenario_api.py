@@ -77,6 +77,8 @@ def test_apply_overrides_copies_and_creates_tables():
         ({"faults.3.t": 1.0}, "faults.3.t: expected an index 1..2 into the array faults"),
         ({"faults.first.t": 1.0}, "faults.first.t: expected an index 1..2"),
         ({"gains..ko": 1.0}, 'gains..ko: expected a dotted key such as "gains.ko"'),
+        # it was "faults[0]: unknown key"
+        ({"faults[0].t": 1.0}, 'items numbered from 1 after a dot (e.g. "faults.1.t")'),
     ],
 )
 def test_bad_override_keys_are_named(overrides, expected):

@@ -482,6 +482,11 @@ def _override(data: dict[str, Any], key: Any, value: Any) -> str | None:
     parts = key.split(".") if isinstance(key, str) else []
     if not parts or not all(parts):
         return f'expected a dotted key such as "gains.ko", got {key!r}'
+    if any("[" in p or "]" in p for p in parts):  # faults[0].t: it was "unknown key faults[0]"
+        return (
+            "expected a dotted key, an array's items numbered from 1 after a dot (e.g. "
+            f'"faults.1.t"), got {key!r}'
+        )
     node: Any = data
     for depth, part in enumerate(parts):
         last = depth == len(parts) - 1
