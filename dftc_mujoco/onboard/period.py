@@ -337,7 +337,7 @@ def team_period_flat(
 ):  # fmt: skip  # pragma: no cover - compiled
     """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
     building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 42,
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 40,
     about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
     thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
     or int32, :func:`~.decision.timer_type`); then the records' numbers, in their order.
@@ -375,7 +375,7 @@ def team_period_flat(
     return team_period(inp, ob, ControllerRecord(kc), sup, seen, drive, est, th, dec, out)
 
 
-#: the records :func:`team_period` takes, in order (``team_period_flat`` slices them)
+#: the records :func:`team_period` takes, in order (``team_period_flat`` rebuilds them)
 RECORDS = (
     PeriodInputs,
     ObserverRecord,
@@ -397,13 +397,13 @@ def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:
     """The records after :class:`PeriodInputs`, in :data:`RECORDS`' order, taken apart as
     :func:`team_period_flat` takes them: (the arrays of its table, (``mu``, ``timer``, the
     numbers))."""
-    tabled, mu, timer, numbers = [], None, None, []
+    tabled: list[np.ndarray] = []
+    passed: dict[str, np.ndarray] = {}
+    numbers: list[object] = []
     for record in records:
         for name, value in zip(record._fields, record, strict=True):
-            if (type(record), name) == (ThresholdRecord, "dense"):
-                mu = value
-            elif (type(record), name) == (DecisionRecord, "timer"):
-                timer = value
+            if (type(record), name) in PASSED:
+                passed[name] = value
             elif isinstance(value, np.ndarray):
                 tabled.append(value)
             else:
@@ -411,4 +411,4 @@ def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:
     if len(tabled) != TABLED:  # pragma: no cover - a record gained or lost an array
         said = f"the records hold {len(tabled)} arrays to table"
         raise TypeError(f"team_period_flat reads {TABLED} from its table, {said}")
-    return tabled, (mu, timer, *numbers)
+    return tabled, (passed["dense"], passed["timer"], *numbers)
