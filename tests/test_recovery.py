@@ -4,6 +4,8 @@ teammates, respects the fault hypothesis, and Δt_d,max follows the graph (issue
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -388,3 +390,21 @@ def test_a_healthy_robot_pushed_on_a_thinned_graph_is_not_excluded():
     waited = [e for e in summary["events"] if e.get("reason") == "decaying"]
     assert {e["robot"] for e in waited} == {15, 16}
     assert all(e["ratio"] < 0.9 * e["was"] for e in waited)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="open: a healthy robot whose drive could not follow its first commands (premises "
+    "mismatch and saturation broken at the start) is excluded when its teammates' residuals "
+    "sit at their thresholds for seconds (tests/data/start_up_exclusion.toml)",
+)
+def test_a_start_up_the_drive_cannot_follow_excludes_nobody():
+    """The one healthy exclusion of 1000 untuned runs (campaigns/no_false_exclusion.toml at
+    seed 31, run 94): no fault, yet robot 12 is excluded at 4.59 s, flagged only while the
+    premises were violated. Kept as a known failure until the recovery tells a start-up the
+    drive could not follow from a fault; strict, so a fix shows here."""
+    path = Path(__file__).parent / "data" / "start_up_exclusion.toml"
+    r = simulate(load_scenario(str(path)))
+    flags = [e for e in r.events.items if e["kind"] == "detection" and e["robot"] == 12]
+    assert flags and all(e["premises"] for e in flags)  # every flag while a premise broke
+    assert not [e for e in r.events.items if e["kind"] == "exclusion"]
