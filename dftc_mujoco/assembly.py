@@ -62,29 +62,36 @@ def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:
     return float(g or PAPER_G) * np.eye(2)
 
 
-def input_limit(s: Scenario, robot: robots.RobotModel | None, command_limit: float) -> float:
+def compensation_bound(s: Scenario, robot: robots.RobotModel | None) -> float:
+    """Φ̄: the bound on a healthy robot's ‖φ̂‖ (the fault estimator's ℓ1 gain from η̄ and ξ̄,
+    with the drive's lag); inf without FDIR or compensation, or where the estimator's loop is
+    unstable (refused elsewhere)."""
+    if not (s.fdir.enabled and s.fdir.compensate):
+        return np.inf
+    try:
+        return estimator_gain(
+            np.asarray(s.gains.K),
+            effective_G(s, robot),
+            s.physics.control_period,
+            s.noise.eta_bar,
+            effective_xi_bar(s, robot),
+            lag=drive_lag(s, robot),
+        )
+    except ScenarioError:  # an unstable estimator loop is refused elsewhere
+        return np.inf
+
+
+def input_limit(command_limit: float, phi_bar: float, nominal: bool) -> float:
     """Per-axis range of the applied nominal input (``onboard/applied.py``).
 
     The command range less the compensation's headroom: a healthy robot's ‖φ̂‖ stays
-    within Φ̄ (the fault estimator's ℓ1 gain from η̄ and ξ̄), so ū = u − φ̂ stays within the
-    range the drive delivers; at least half the range is kept for the mission.
-    ``fdir.input = "nominal"`` returns inf (no saturation).
+    within Φ̄ (``phi_bar``, :func:`compensation_bound`; inf: no compensation), so
+    ū = u − φ̂ stays within the range the drive delivers; at least half the range is kept
+    for the mission. ``nominal`` (``fdir.input = "nominal"``) returns inf (no saturation).
     """
-    if s.fdir.input == "nominal" or not np.isfinite(command_limit):
+    if nominal or not np.isfinite(command_limit):
         return np.inf
-    headroom = 0.0
-    if s.fdir.enabled and s.fdir.compensate:
-        try:
-            headroom = estimator_gain(
-                np.asarray(s.gains.K),
-                effective_G(s, robot),
-                s.physics.control_period,
-                s.noise.eta_bar,
-                effective_xi_bar(s, robot),
-                lag=drive_lag(s, robot),
-            )
-        except ScenarioError:  # an unstable estimator loop is refused elsewhere
-            headroom = 0.0
+    headroom = phi_bar if np.isfinite(phi_bar) else 0.0
     return max(command_limit - headroom, 0.5 * command_limit)
 
 
@@ -121,7 +128,8 @@ def team_config(
         hull = reach if robot is not None else 0.1  # without a model: the built-in disk's
         auto = 2 * hull + CLEARANCE  # two hulls apart by the clearance
         mate_safe = auto if sup.teammate_distance == "auto" else float(sup.teammate_distance)
-    applied = input_limit(s, robot, command_limit)
+    phi_bar = compensation_bound(s, robot)
+    applied = input_limit(command_limit, phi_bar, s.fdir.input == "nominal")
     seamless = seamless_margin(s.gains.theta, applied)
     return TeamConfig(
         graph=s.team.graph,
@@ -162,6 +170,8 @@ def team_config(
         teammate_activation=mate_safe + seamless if mate_safe > 0 else 0.0,
         self_exclusion=f.self_exclusion,
         postpone_on_contact=f.postpone_on_contact,
+        confirm_by_estimate=f.confirm_by_estimate,
+        phi_bar=phi_bar,
         excluded_relay=f.excluded_relay,
         networked=not s.network.ideal,
         sighting_tolerance=sighting_tolerance(s),

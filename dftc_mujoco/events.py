@@ -23,7 +23,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "exclusion_scheduled": ("robot", "t_r"),
     "exclusion": ("robot", "flagged_by", "detected_by"),
     "exclusion_cancelled": ("robot", "detected_by", "reason"),
-    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was"),
+    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was", "phi_bar"),
     "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
     "systemic_anomaly_over": ("robots",),
     "detection_not_guaranteed": ("robot", "until"),
@@ -96,6 +96,13 @@ def describe(e: Mapping[str, Any]) -> str:
         return f"robot {r} kept at t_r: {why}"
     if k == "exclusion_postponed":
         when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
+        if e.get("reason") == "estimate":
+            return (
+                f"robot {r}'s exclusion postponed to {when}: its own fault estimate stayed within "
+                f"its healthy bound Φ̄ = {e['phi_bar']:.3g} m/s and its command within range "
+                "since its first flag, so its flags are the trace of a broken premise, not an "
+                "actuator's fault (judged again each Δt_d,max while flagged)"
+            )
         if e.get("reason") == "decaying":
             return (
                 f"robot {r}'s exclusion postponed to {when}: its teammates' largest residual/"

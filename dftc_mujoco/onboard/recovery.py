@@ -59,6 +59,7 @@ class Recovery:
         # robot -> (t, its largest residual/threshold among teammates) when a contact last
         # postponed it: a contact's transient decays, a fault's signature does not
         self.ratio_at: dict[int, tuple[float, float]] = {}
+        self.waiting: set[int] = set()  # robots whose own estimate has not confirmed yet
 
     def flagged(self, t: float, pairs: Iterable[tuple[int, int]]) -> list[dict[str, Any]]:
         """Robot ``by`` raised a flag on ``robot`` at ``t`` for each pair: a ``detection``
@@ -182,6 +183,29 @@ class Recovery:
             was=round(float(r0), 4),
         )
 
+    def unconfirmed(self, t: float, robot: int, phi_bar: float) -> dict[str, Any] | None:
+        """At t_r: ``robot`` is still flagged but its own fault estimate stayed within Φ̄
+        (``phi_bar``) and its command within range since its first flag
+        (:mod:`.estimate_alarm`): its signal moved as a healthy robot's, and the flags are the
+        observers' memory of an earlier break of the premises. It is judged again Δt_d,max
+        later (and kept once nobody flags it); an ``exclusion_postponed`` event (``reason =
+        "estimate"``) the first time in a row, None after."""
+        t_r = t + self.dt_d_max
+        self.pending[robot] = t_r
+        self.first_detection[robot] = t
+        self.since[robot] = t - self.settle - self.dt_d_max  # a new window for contacts too
+        if robot in self.waiting:
+            return None
+        self.waiting.add(robot)
+        return make(
+            t,
+            "exclusion_postponed",
+            robot=robot + 1,
+            reason="estimate",
+            t_r=t_r if np.isfinite(t_r) else None,
+            phi_bar=round(float(phi_bar), 4),
+        )
+
     def detectors(self, robot: int) -> list[int]:
         """Every robot that ever flagged ``robot`` (1-based, sorted)."""
         return sorted(by + 1 for by, k in self.detected if k == robot)
@@ -199,10 +223,12 @@ class Recovery:
         self.detected = {(b, k) for b, k in self.detected if k != robot}
         self.since.pop(robot, None)
         self.ratio_at.pop(robot, None)
+        self.waiting.discard(robot)
         return event
 
     def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:
         """The ``exclusion`` event of ``robot``, still flagged at t_r by ``flaggers``."""
+        self.waiting.discard(robot)
         return make(
             t,
             "exclusion",

@@ -35,6 +35,7 @@ from .block import BadOutput, Block, TeamConfig, shaped
 from .controller import Controller, ControllerRecord
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
+from .estimate_alarm import EstimateAlarm
 from .fault_estimator import EstimatorRecord, FaultEstimator, held
 from .general import general_period
 from .observer import Observer
@@ -162,6 +163,8 @@ class Team:
         self.recovery = Recovery(
             self.dt_d_max, config.max_faults, config.self_exclusion, config.postpone_on_contact
         )
+        # each robot's own alarm from its fault estimate confirms its exclusion
+        self.alarm = EstimateAlarm.of(config, n, getattr(self.thresholds, "phi_bar", None))
         self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
         self._sensed = False  # the last period had range-sensor readings
         # a plug-in supervisor whose step() predates teammate avoidance is called without it
@@ -335,6 +338,8 @@ class Team:
             code = general_period(self, x_m, c, c_dot, offsets, rates)
             if beside is not None:
                 beside()
+        if self.alarm.on:
+            self.alarm.step(self.estimator.phi_hat, self.u_bar)
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
         if self.sighting is not None and sensed_bodies is not None:
@@ -568,7 +573,10 @@ class Team:
         """Detection events for first flags; schedule exclusions (eq. 43)."""
         mem = self.members
         pairs = ((int(mem[i]), int(mem[k])) for i, k in zip(*np.nonzero(raised), strict=True))
-        self.events.extend(self.recovery.flagged(t, pairs))
+        for event in self.recovery.flagged(t, pairs):
+            if event["kind"] == "exclusion_scheduled":  # its own alarm counts from now
+                self.alarm.restart(event["robot"] - 1)
+            self.events.append(event)
 
     def _hypothesis(self, t: float) -> None:
         """A ``systemic_anomaly`` begins or ends: more robots flagged by teammates now (and
@@ -604,6 +612,12 @@ class Team:
             later = self.recovery.postpone(t, robot, self._worst_ratio(p))
             if later is not None:  # a contact may explain the flags: wait Δt_d,max past it
                 self.events.append(later)
+                continue
+            heard = self.radios is None or not self.radios.silent_robot[robot]
+            if not self.alarm.confirms(robot, heard):  # a healthy signal: judge it again later
+                said = self.recovery.unconfirmed(t, robot, self.alarm.phi_bar)
+                if said is not None:
+                    self.events.append(said)
                 continue
             last_pair = len(self.members) <= 2  # one robot would be left: no team, no mission
             if last_pair:

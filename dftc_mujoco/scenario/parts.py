@@ -259,6 +259,10 @@ class Fdir:
     max_faults: int | str = "auto"
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     postpone_on_contact: bool = True  # a bumper contact postpones the exclusion instant t_r
+    # exclude a flagged robot only if its own fault estimate left its healthy bound Φ̄ (or its
+    # command the drive's range) for a decision window since its first flag
+    # (onboard/estimate_alarm.py)
+    confirm_by_estimate: bool = True
     excluded_relay: bool = False  # an excluded robot keeps relaying its neighbours' messages
 
 

@@ -567,6 +567,7 @@ def _fdir(t: Table) -> Fdir:
         max_faults=_max_faults(t),
         self_exclusion=t.boolean("self_exclusion", False),
         postpone_on_contact=t.boolean("postpone_on_contact", True),
+        confirm_by_estimate=t.boolean("confirm_by_estimate", True),
         excluded_relay=t.boolean("excluded_relay", False),
     )
     t.finish()
