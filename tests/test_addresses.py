@@ -79,7 +79,7 @@ def test_the_team_period_takes_its_records_by_address():
     assert team_period_flat.signatures  # one per argument types met so far in this process
     for signature in team_period_flat.signatures:
         arrays = [a for a in signature if isinstance(a, types.Array)]
-        assert len(arrays) == 9 and len(signature) == 34
+        assert len(arrays) == 9 and len(signature) == 38
     assert team._flat
     for kept, table, *_ in team._flat.values():
         assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]

@@ -197,14 +197,17 @@ def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
 def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monkeypatch):
     """The compiled period composes the blocks' own compiled functions: same numbers,
     bit for bit, through obstacles, saturation, anti-windup, a detection and an exclusion."""
-    fast, x = _team(n, obstacles=obstacles, command_limit=1.0)
+    fast, x = _team(n, obstacles=obstacles, command_limit=1.0, phi_bar=0.2)
     monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", False)
-    slow, _ = _team(n, obstacles=obstacles, command_limit=1.0)
+    slow, _ = _team(n, obstacles=obstacles, command_limit=1.0, phi_bar=0.2)
     assert (fast.path, slow.path) == ("compiled", "general")
     v = np.array([0.0, 0.1]) if obstacles else np.array([0.1, 0.0])
     _run_side_by_side(fast, slow, x, v, seed=n)
     assert list(fast.members) == list(slow.members)
     assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
+    # each robot's own alarm (estimate_alarm.py): the same timers, and up on the faulty one
+    assert fast.alarm.on and np.array_equal(fast.alarm.timer, slow.alarm.timer)
+    assert np.array_equal(fast.alarm.seen, slow.alarm.seen) and fast.alarm.seen.any()
     copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)
 
 

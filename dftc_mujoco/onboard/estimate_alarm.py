@@ -25,6 +25,8 @@ another Δt_d,max, and is cancelled once nobody flags it.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -53,6 +55,18 @@ def watch_estimates(phi_hat, u_bar, phi_bar, limit, need, timer, alarm, seen):  
             seen[i] = True
 
 
+class AlarmRecord(NamedTuple):
+    """What the compiled period (:mod:`.period`) reads and writes of the alarms."""
+
+    timer: np.ndarray  # (N,) int32, periods out (> 0) or in (< 0), as the decision's timers
+    alarm: np.ndarray  # (N,) bool, each robot's own alarm
+    seen: np.ndarray  # (N,) bool, up since the recovery last asked
+    phi_bar: float  # Φ̄ [m/s]
+    limit: float  # the per-axis command range [m/s]
+    need: int  # the window in control periods
+    on: bool  # watched (fdir.confirm_by_estimate, with compensation and a finite Φ̄)
+
+
 class EstimateAlarm:
     """Every robot's own alarm (original robot axis): ‖φ̂‖ > Φ̄ or ū out of range for
     ``need`` periods in a row. ``on``: the recovery asks it (:meth:`confirms`)."""
@@ -77,8 +91,15 @@ class EstimateAlarm:
         on = config.confirm_by_estimate and config.fdir and config.compensate
         return cls(n, phi_bar, config.command_limit, need, on)
 
+    def record(self) -> AlarmRecord:
+        """The state the compiled period updates (:func:`watch_estimates` after ū)."""
+        return AlarmRecord(
+            self.timer, self.alarm, self.seen, self.phi_bar, self.limit, self.need, self.on
+        )
+
     def step(self, phi_hat: np.ndarray, u_bar: np.ndarray) -> None:
-        """One control period, after the estimators and the commands."""
+        """One control period, after the estimators and the commands (the general path;
+        the compiled period runs it in :func:`.period.deliver`)."""
         watch_estimates(
             phi_hat, u_bar, self.phi_bar, self.limit, self.need, self.timer, self.alarm, self.seen
         )

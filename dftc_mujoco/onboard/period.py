@@ -38,6 +38,7 @@ from .addresses import view1, view2, view3
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
 from .decision import DecisionRecord, decide_row
+from .estimate_alarm import AlarmRecord, watch_estimates
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
     ObserverRecord,
@@ -220,11 +221,13 @@ def deliver(
     inp: PeriodInputs,
     drive: DriveRecord,
     est: EstimatorRecord,
+    alarm: AlarmRecord,
     out: PeriodBuffers,
 ) -> None:  # pragma: no cover - compiled
     """Stage 3: the inputs on the robot axis (an excluded robot is told to stay), the drive's
-    lag and (with FDIR) every robot's fault estimator and ū (eqs. 28-31): the commands are
-    out, and the physics may advance while the pass runs."""
+    lag and (with FDIR) every robot's fault estimator and ū (eqs. 28-31) and its own alarm
+    (:mod:`.estimate_alarm`): the commands are out, and the physics may advance while the
+    pass runs."""
     rows, u, u_mem, du, u_bar, command = (
         inp.rows,
         out.u,
@@ -269,6 +272,9 @@ def deliver(
     for r in range(u.shape[0]):
         for d in range(2):
             u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
+    if alarm.on:
+        a = alarm
+        watch_estimates(est.phi_hat, u_bar, a.phi_bar, a.limit, a.need, a.timer, a.alarm, a.seen)
 
 
 @njit(cache=True)
@@ -284,13 +290,14 @@ def commands(
     seen: Surroundings,
     drive: DriveRecord,
     est: EstimatorRecord,
+    alarm: AlarmRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
     """Stages 2-3, after :func:`begin`: :func:`act` and :func:`deliver`, every robot's
     commands; returns SWITCHED | SATURATED bits. They read and write nothing the pass over
     the N × N state (:func:`team_rows`) does, so the two may run at once."""
     code = act(inp, sup, seen, drive, out)
-    deliver(inp, drive, est, out)
+    deliver(inp, drive, est, alarm, out)
     return code
 
 
@@ -303,6 +310,7 @@ def team_period(
     seen: Surroundings,
     drive: DriveRecord,
     est: EstimatorRecord,
+    alarm: AlarmRecord,
     th: ThresholdRecord,
     dec: DecisionRecord,
     out: PeriodBuffers,
@@ -322,7 +330,7 @@ def team_period(
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
     begin(inp, ob, ctl, out)
-    code = commands(inp, sup, seen, drive, est, out)
+    code = commands(inp, sup, seen, drive, est, alarm, out)
     raised = team_rows(inp, ob, ctl, th, dec, out, 0, inp.rows.shape[0], 0)
     integrate(ob, out)
     return code | RAISED if raised else code
@@ -333,11 +341,12 @@ def team_period_flat(
     x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
     table, mu, timer,
     networked, ko, dt, dt_o, kc, theta, release, mate_safe, mate_act,
-    input_limit, accel_step, lag_a, lag_b, dt_est, limit, alpha, compensate, eta, need, exclusive,
+    input_limit, accel_step, lag_a, lag_b, dt_est, limit, alpha, compensate,
+    phi_bar, alarm_limit, alarm_need, alarm_on, eta, need, exclusive,
 ):  # fmt: skip  # pragma: no cover - compiled
     """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
     building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 40,
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 43,
     about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
     thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
     or int32, :func:`~.decision.timer_type`); then the records' numbers, in their order.
@@ -362,17 +371,23 @@ def team_period_flat(
         view2(table, 19, f8), view2(table, 20, f8), dt_est, limit, alpha,
         view1(table, 21, b1), compensate,
     )  # fmt: skip
-    th = ThresholdRecord(mu, view1(table, 22, f8), view1(table, 23, f8), view1(table, 24, b1), eta)
+    i4 = np.int32
+    alarm = AlarmRecord(
+        view1(table, 22, i4), view1(table, 23, b1), view1(table, 24, b1), phi_bar, alarm_limit,
+        alarm_need, alarm_on,
+    )  # fmt: skip
+    th = ThresholdRecord(mu, view1(table, 25, f8), view1(table, 26, f8), view1(table, 27, b1), eta)
     dec = DecisionRecord(
-        timer, view2(table, 25, b1), need, exclusive, view1(table, 26, i8), view2(table, 27, b1),
-        view1(table, 28, b1),
+        timer, view2(table, 28, b1), need, exclusive, view1(table, 29, i8), view2(table, 30, b1),
+        view1(table, 31, b1),
     )  # fmt: skip
     out = PeriodBuffers(
-        view2(table, 29, f8), view2(table, 30, f8), view2(table, 31, f8), view3(table, 32, f8),
-        view2(table, 33, f8), view2(table, 34, f8), view2(table, 35, f8), view2(table, 36, f8),
-        view2(table, 37, f8), view2(table, 38, f8), view2(table, 39, f8),
+        view2(table, 32, f8), view2(table, 33, f8), view2(table, 34, f8), view3(table, 35, f8),
+        view2(table, 36, f8), view2(table, 37, f8), view2(table, 38, f8), view2(table, 39, f8),
+        view2(table, 40, f8), view2(table, 41, f8), view2(table, 42, f8),
     )  # fmt: skip
-    return team_period(inp, ob, ControllerRecord(kc), sup, seen, drive, est, th, dec, out)
+    ctl = ControllerRecord(kc)
+    return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
 
 
 #: the records :func:`team_period` takes, in order (``team_period_flat`` rebuilds them)
@@ -384,13 +399,14 @@ RECORDS = (
     Surroundings,
     DriveRecord,
     EstimatorRecord,
+    AlarmRecord,
     ThresholdRecord,
     DecisionRecord,
     PeriodBuffers,
 )
 #: the fields team_period_flat takes as arguments, not by address (see there)
 PASSED = {(ThresholdRecord, "dense"), (DecisionRecord, "timer")}
-TABLED = 40  # the records' arrays team_period_flat reads from its table
+TABLED = 43  # the records' arrays team_period_flat reads from its table
 
 
 def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:

@@ -30,13 +30,13 @@ import numpy as np
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .addresses import Tables, address_table
-from .applied import DriveModel, DriveRecord
+from .applied import DriveModel
 from .block import BadOutput, Block, TeamConfig, shaped
-from .controller import Controller, ControllerRecord
+from .controller import Controller
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
 from .estimate_alarm import EstimateAlarm
-from .fault_estimator import EstimatorRecord, FaultEstimator, held
+from .fault_estimator import FaultEstimator, held
 from .general import general_period
 from .observer import Observer
 from .period import (
@@ -56,7 +56,7 @@ from .recovery import Recovery, split_event
 from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .streaming import streams
-from .supervisor import Supervisor, SupervisorRecord, Surroundings, obstacle_label
+from .supervisor import Supervisor, Surroundings, obstacle_label
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
@@ -338,7 +338,7 @@ class Team:
             code = general_period(self, x_m, c, c_dot, offsets, rates)
             if beside is not None:
                 beside()
-        if self.alarm.on:
+        if self.alarm.on and not self.compiled:  # the compiled period runs it after ū
             self.alarm.step(self.estimator.phi_hat, self.u_bar)
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
@@ -399,7 +399,7 @@ class Team:
         if sharing is not None:  # a large team: the pass shared, the commands beside it
             inp, buf, th = PeriodInputs(*inputs), self._buffers, self._th
             ob, dec = self.observer.record(), self.decision.record()
-            ctl, sup, seen, drive, est = self._records()
+            ctl, sup, seen, drive, est, alarm = self._records()
             begin(inp, ob, ctl, buf)  # each robot's own block of the state, before it moves
             code = 0
 
@@ -408,7 +408,7 @@ class Team:
 
             def command_then_beside() -> None:  # in this thread while helpers take rows
                 nonlocal code
-                code = commands(inp, sup, seen, drive, est, buf)
+                code = commands(inp, sup, seen, drive, est, alarm, buf)
                 if beside is not None:
                     beside()
 
@@ -451,17 +451,16 @@ class Team:
             flat = self._flat[key] = (arrays, address_table(arrays), timer, *numbers)
         return (flat[1], self._th.dense, *flat[2:])
 
-    def _records(
-        self,
-    ) -> tuple[ControllerRecord, SupervisorRecord, Surroundings, DriveRecord, EstimatorRecord]:
+    def _records(self) -> tuple[Any, ...]:
         """The records that change only at an exclusion (and with the range sensor's
-        reading): controller, supervisor, surroundings, drive, fault estimator."""
+        reading): controller, supervisor, surroundings, drive, fault estimator, alarms."""
         return (
             self.controller.record(),
             self.supervisor.record(self._sensed),
             self._seen,
             self.drive.record(),
             self.estimator.record(self._touch),
+            self.alarm.record(),
         )
 
     # ------------------------------------------------------------------ outputs

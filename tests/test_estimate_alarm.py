@@ -1,0 +1,57 @@
+"""Each robot's own alarm from its fault estimate (onboard/estimate_alarm.py), which confirms
+an exclusion: raised after a decision window out of Φ̄ (or with ū out of range), lowered after
+as long back in, and what the recovery asks of it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.onboard.estimate_alarm import EstimateAlarm
+
+
+def _run(alarm: EstimateAlarm, phi: list[float], u_bar: float = 0.0) -> list[bool]:
+    """Robot 0's alarm after each period with ‖φ̂‖ = ``phi[j]`` (robot 1 stays at 0)."""
+    ups = []
+    for p in phi:
+        phi_hat = np.array([[p, 0.0], [0.0, 0.0]])
+        alarm.step(phi_hat, np.array([[u_bar, 0.0], [0.0, 0.0]]))
+        ups.append(bool(alarm.alarm[0]))
+    return ups
+
+
+def test_the_alarm_needs_a_whole_window_out_and_as_long_back_in():
+    alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=3)
+    # two periods out, one in, three out: up at the third of the three
+    assert _run(alarm, [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]) == [False] * 5 + [True]
+    # down after three periods back within Φ̄, not before
+    assert _run(alarm, [0.1, 0.1, 0.1]) == [True, True, False]
+    assert not alarm.alarm[1] and not alarm.seen[1]  # robot 1 never left its bound
+
+
+def test_a_command_out_of_range_counts_as_out_even_with_a_small_estimate():
+    alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=2)
+    assert _run(alarm, [0.05, 0.05], u_bar=0.75) == [False, True]
+    assert _run(alarm, [0.05, 0.05], u_bar=0.69) == [True, False]
+
+
+def test_confirms_says_whether_the_alarm_was_up_since_the_last_question():
+    alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=2)
+    alarm.restart(0)
+    _run(alarm, [0.3, 0.3, 0.0, 0.0])  # up at the 2nd period, down at the 4th
+    assert not alarm.alarm[0]
+    assert alarm.confirms(0)  # it was up in between
+    assert not alarm.confirms(0)  # and not since that question
+    assert alarm.confirms(0, heard=False)  # unheard (a silent radio) is not healthy
+    off = EstimateAlarm(2, phi_bar=np.inf, limit=0.7, need=2)
+    assert not off.on and off.confirms(0)  # no bound known: the check is off
+
+
+def test_a_stopped_robot_is_still_excluded_and_its_alarm_was_up():
+    """The paper's case: robot 1 stops at 41.8 s. Its own estimate winds past Φ̄ and its
+    command leaves the range, so the check confirms the exclusion at the same instant as
+    eq. 43 alone (the default Δt_d,max of 5 s: 50.07 s)."""
+    s = load_scenario("paper_case", {"duration": 52.0})
+    r = simulate(s)
+    assert [(e["robot"], round(e["t"], 2)) for e in r.events.of_kind("exclusion")] == [(1, 50.07)]
+    assert not r.events.of_kind("exclusion_postponed")
