@@ -75,7 +75,7 @@ class EstimateAlarm:
         self.phi_bar = float(phi_bar)
         self.limit = float(limit)
         self.need = int(need)
-        self.on = bool(on) and np.isfinite(self.phi_bar)
+        self.on = bool(on and np.isfinite(self.phi_bar))  # a Python bool, as numba unboxes it
         self.timer = np.zeros(n, np.int32)
         self.alarm = np.zeros(n, bool)
         self.seen = np.zeros(n, bool)
