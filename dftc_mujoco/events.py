@@ -98,10 +98,11 @@ def describe(e: Mapping[str, Any]) -> str:
         when = f"t_r = {e['t_r']:.2f} s" if e["t_r"] is not None else "after this run"
         if e.get("reason") == "estimate":
             return (
-                f"robot {r}'s exclusion postponed to {when}: its own fault estimate stayed within "
-                f"its healthy bound Φ̄ = {e['phi_bar']:.3g} m/s and its command within range "
-                "since its first flag, so its flags are the trace of a broken premise, not an "
-                "actuator's fault (judged again each Δt_d,max while flagged)"
+                f"robot {r}'s exclusion postponed to {when}: since its first flag its own fault "
+                f"estimate has not stayed beyond its healthy bound Φ̄ = {e['phi_bar']:.3g} m/s, "
+                "nor its command beyond range, for a decision window, so its flags are the trace "
+                "of a broken premise, not an actuator's fault (judged again each Δt_d,max while "
+                "flagged)"
             )
         if e.get("reason") == "decaying":
             return (

@@ -184,10 +184,10 @@ class Recovery:
         )
 
     def unconfirmed(self, t: float, robot: int, phi_bar: float) -> dict[str, Any] | None:
-        """At t_r: ``robot`` is still flagged but its own fault estimate stayed within Φ̄
-        (``phi_bar``) and its command within range since its first flag
-        (:mod:`.estimate_alarm`): its signal moved as a healthy robot's, and the flags are the
-        observers' memory of an earlier break of the premises. It is judged again Δt_d,max
+        """At t_r: ``robot`` is still flagged, but since its first flag its own fault estimate
+        has not stayed beyond Φ̄ (``phi_bar``), nor its command beyond range, for a decision
+        window (:mod:`.estimate_alarm`): its signal moved as a healthy robot's, and the flags
+        are the observers' memory of an earlier break of the premises. It is judged again Δt_d,max
         later (and kept once nobody flags it); an ``exclusion_postponed`` event (``reason =
         "estimate"``) the first time in a row, None after."""
         t_r = t + self.dt_d_max
