@@ -37,13 +37,14 @@ class Drive(_Enveloped):
         self.phi_bar_param = phi_bar
 
     def _setup(self, config: TeamConfig) -> None:
-        self.phi_bar = (
-            float(self.phi_bar_param)
-            if self.phi_bar_param is not None
-            else estimator_gain(
+        if self.phi_bar_param is not None:
+            self.phi_bar = float(self.phi_bar_param)
+        elif np.isfinite(config.phi_bar):  # the assembly's Φ̄, from these very inputs
+            self.phi_bar = float(config.phi_bar)
+        else:  # a configuration built by hand
+            self.phi_bar = estimator_gain(
                 config.K, config.G, config.dt, config.eta_bar, config.xi_bar, lag=config.lag
             )
-        )
         self.offset = float(np.linalg.norm(self.G, 2)) * self.phi_bar
 
     def _structured(self, n: int, y0: float) -> Start:
