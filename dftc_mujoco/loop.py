@@ -453,14 +453,15 @@ class Simulation:
                                 t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
                             )
                             monitor.watched[f.robot] = False  # the fault is to be detected
-                            if t < self.settle_time:  # outside eq. 46's domain
+                            if t < team.settles_at:  # outside eq. 46's domain (T_s, or
+                                # the restarted rule's since the last exclusion)
                                 events.add(
                                     t,
                                     "detection_not_guaranteed",
                                     robot=f.robot + 1,
                                     # None: the thresholds do not settle within the run
-                                    until=self.settle_time
-                                    if np.isfinite(self.settle_time)
+                                    until=team.settles_at
+                                    if np.isfinite(team.settles_at)
                                     else None,
                                 )
                             left = round(steps * dt - t, 6)  # the run left after its onset

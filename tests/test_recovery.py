@@ -171,6 +171,36 @@ def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain()
     assert late.summary["dt_d_max"]["settle_time"] < 41.8
 
 
+def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_time():
+    """An exclusion restarts the thresholds from the residuals' bound, a new transient (l1:
+    up to 16 times steady on 16 hexbots in a ring, seed 31's run 302): a stop 1.8 s after
+    the first exclusion is reported outside eq. 46's domain until the restarted rule's own
+    T_s, and the campaign's facts leave it out; a stop after that T_s is inside."""
+    from dftc_mujoco.campaign.task import fault_facts
+
+    def two_stops(second: float):
+        faults = [
+            {"robot": 1, "kind": "stop", "t": 15.0},
+            {"robot": 2, "kind": "stop", "t": second},
+        ]
+        over = {"onboard.thresholds": "l1", "fdir.dt_d_max": "auto", "faults": faults}
+        return simulate(load_scenario("paper_case", {**over, "duration": 30.0}))
+
+    soon, later = two_stops(18.0), two_stops(21.0)
+    (gone,) = soon.summary["exclusions"]
+    (restart,) = soon.summary["dt_d_max"]["settle_after_exclusions"]
+    assert gone["robot"] == 1 and restart["t"] == gone["t"] < 18.0
+    t_s = restart["settle_time"]
+    assert 18.0 < t_s < 21.0 and t_s > soon.summary["dt_d_max"]["settle_time"]
+    (note,) = soon.events.of_kind("detection_not_guaranteed")
+    assert note["robot"] == 2 and note["t"] == 18.0 and note["until"] == t_s
+    first, second = fault_facts(soon.summary)
+    assert first["after_settle"] and not second["after_settle"] and not second["in_domain"]
+    assert later.summary["dt_d_max"]["settle_after_exclusions"] == [restart]  # the same run so far
+    assert later.events.of_kind("detection_not_guaranteed") == []
+    assert [f["after_settle"] for f in fault_facts(later.summary)] == [True, True]
+
+
 def test_a_fault_too_close_to_the_end_for_eq46s_window_is_said_so():
     """Eq. 46 promises a detection within Δt_d,max of the fault: a run that ends sooner
     leaves an undetected fault unexplained unless it says so. paper_case cut to 43 s (its

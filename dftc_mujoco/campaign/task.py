@@ -76,7 +76,11 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
             if later["t"] < t_f:
                 dt = later["value"]
                 promised = later.get("predicted_delays_max") is not None
-        settled = settle is not None and t_f >= settle
+        since = settle  # T_s, or the restarted rule's after the last exclusion before t_f
+        for later in horizon.get("settle_after_exclusions", []):
+            if later["t"] <= t_f:
+                since = later["settle_time"]
+        settled = since is not None and t_f >= since
         told = f.get("command")  # the speed the robot was told at onset: a stop's size
         reference = horizon.get("reference_fault")
         on = [

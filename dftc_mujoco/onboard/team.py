@@ -57,10 +57,11 @@ from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .streaming import streams
 from .supervisor import Supervisor, Surroundings, obstacle_label
+from .team_axis import expand, place
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
-from .thresholds.settling import Looked, bad_entry, settle_time
+from .thresholds.settling import bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -193,22 +194,22 @@ class Team:
         self._norms_kept = True  # the last period wrote r_norm (see _compiled)
         self._mu_t = 0.0
         self.never_flags = False  # the thresholds are +inf everywhere (settle_time looks)
+        self.horizon: float | None = None  # the run's duration, once settle_time has looked
+        self.settles_at = 0.0  # T_s: faults from then on are in eq. 46's domain
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
         self.x_d[:] = prior
 
-    def settle_time(self, horizon: float, tolerance: float = 0.1) -> float:
-        """T_s of the team's thresholds (:func:`~.thresholds.settling.settle_time`), up to
-        ``horizon`` [s]; the recovery waits it after a contact."""
-        rule = type(self.thresholds)
-        mu = Looked(self.thresholds.mu, self.members, f"{rule.__module__}:{rule.__qualname__}")
-        mu(0.0)  # the first array of the run, checked too
-        th = self.thresholds
-        factors = th.factors_at if isinstance(th, Thresholds) else None  # eq. 40, unwritten
-        settled = settle_time(mu, self.config.dt, horizon, tolerance, factors)
+    def settle_time(self, horizon: float) -> float:
+        """T_s of the team's thresholds (:func:`~.thresholds.settling.rule_settle_time`), up
+        to ``horizon`` [s]: eq. 46's domain from here on; the recovery waits it after a contact."""
+        self.horizon = horizon  # each exclusion's restarted rule settles anew within it
+        settled, self.never_flags = rule_settle_time(
+            self.thresholds, self.members, self.config.dt, horizon
+        )
         self.recovery.settle = settled  # waited after a contact (inf: not within the horizon)
-        self.never_flags = mu.never_flags
+        self.settles_at = settled
         return settled
 
     @property
@@ -499,13 +500,13 @@ class Team:
             "u": self.u,
             "u_bar": self.u_bar,
             "phi_hat": self.phi_hat,
-            "x_hat": _expand(self.x_hat, mem, n, square=True),
-            "x_d": _expand(self.x_d, mem, n),
-            "residual": _expand(self.r_norm, mem, n, square=True),
-            "threshold": _expand(self.mu, mem, n, square=True),
-            "flag": _expand(flag, mem, n, square=True, fill=False),
-            "flagged": _expand(flagged, mem, n, fill=False),
-            "reactive": _expand(self.reactive, mem, n, fill=False),
+            "x_hat": expand(self.x_hat, mem, n, square=True),
+            "x_d": expand(self.x_d, mem, n),
+            "residual": expand(self.r_norm, mem, n, square=True),
+            "threshold": expand(self.mu, mem, n, square=True),
+            "flag": expand(flag, mem, n, square=True, fill=False),
+            "flagged": expand(flagged, mem, n, fill=False),
+            "reactive": expand(self.reactive, mem, n, fill=False),
             "active": self.active,
         }
 
@@ -515,22 +516,22 @@ class Team:
         """Write the period's outputs into row ``row`` of preallocated log arrays (original
         robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``); the N × N
         ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1."""
-        mem = self.members  # after an exclusion: onto the original axis (_place)
+        mem = self.members  # after an exclusion: onto the original axis (place)
         log["u"][row] = self.u
         log["active"][row] = self.active
-        _place(log["x_d"][row], self.x_d, mem)
+        place(log["x_d"][row], self.x_d, mem)
         reactive, flagged = self._logged
         np.greater_equal(self.supervisor.active, 0, out=reactive)
         flagged_by_teammates(np.asarray(self.flag, bool), flagged)
-        _place(log["reactive"][row], reactive, mem, fill=False)
-        _place(log["flagged"][row], flagged, mem, fill=False)
+        place(log["reactive"][row], reactive, mem, fill=False)
+        place(log["flagged"][row], flagged, mem, fill=False)
         if fdir:
             log["phi_hat"][row] = self.phi_hat
         if row_nn >= 0:
-            _place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
-            _place(log["residual"][row_nn], self.r_norm, mem, square=True)
+            place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
+            place(log["residual"][row_nn], self.r_norm, mem, square=True)
             if fdir:
-                _place(log["threshold"][row_nn], self.mu, mem, square=True)
+                place(log["threshold"][row_nn], self.mu, mem, square=True)
 
     def avoiding(self) -> np.ndarray:
         """What each robot avoids, on the original axis: cylinder o as o, robot j (excluded,
@@ -548,7 +549,7 @@ class Team:
 
     def _switches(self, t: float) -> None:
         """reactive_on / reactive_off events for the robots whose behaviour changed."""
-        now = _expand(self.reactive, self.members, self.n, fill=False)
+        now = expand(self.reactive, self.members, self.n, fill=False)
         changed = np.flatnonzero(now != self._reactive)
         if not len(changed):
             return
@@ -664,36 +665,17 @@ class Team:
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
+        if self.horizon is not None:  # eq. 46's domain: from the restarted rule's T_s on
+            self.settles_at = rule_settle_time(
+                self.thresholds, self.members, cfg.dt, self.horizon, t_rule
+            )[0]
+            at = self.settles_at if np.isfinite(self.settles_at) else None
+            self.dt_d_max_info.setdefault("settle_after_exclusions", []).append(
+                {"t": t, "settle_time": at}
+            )
         if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
             before = self.dt_d_max
             self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
-
-
-def _expand(
-    a: np.ndarray, members: np.ndarray, n: int, square: bool = False, fill: Any = np.nan
-) -> np.ndarray:
-    """Place a members-indexed array on the original robot axis (both first axes if ``square``)."""
-    if len(members) == n:
-        return a  # the whole team: no copy (callers copy what they keep)
-    lead = (n, n) if square else (n,)
-    out = np.empty((*lead, *a.shape[len(lead) :]), dtype=bool if fill is False else float)
-    _place(out, a, members, square, fill)
-    return out
-
-
-def _place(
-    out: np.ndarray, a: np.ndarray, members: np.ndarray, square: bool = False, fill: Any = np.nan
-) -> None:
-    """Write a members-indexed array into ``out`` on the original robot axis (both first axes
-    if ``square``), ``fill`` for the robots that are not members."""
-    if len(members) == len(out):  # the whole team: a copy
-        out[...] = a
-        return
-    out[...] = fill
-    if square:
-        out[members[:, None], members[None, :]] = a
-    else:
-        out[members] = a

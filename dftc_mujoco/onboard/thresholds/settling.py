@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from ...errors import InputError
-from .paper import ThresholdRecord, factored_at
+from .paper import ThresholdRecord, Thresholds, factored_at
 
 
 @njit(cache=True)
@@ -62,11 +62,13 @@ def settle_time(
     horizon: float,
     tolerance: float = 0.1,
     factors: Callable[[float], ThresholdRecord | None] | None = None,
+    start: float = 0.0,
 ) -> float:
     """T_s of the rule whose thresholds at t are ``mu(t)``, sampled on a geometric grid of
-    at most 96 instants (multiples of the control period ``dt``) up to ``horizon`` [s]: the first
-    instant from which every later one has every finite threshold within ``tolerance`` of
-    its value at t = 1e9 s; inf if the last one has not. ``factors(t)``, where it gives a
+    at most 96 instants (``start`` plus multiples of the control period ``dt``) up to
+    ``horizon`` [s]: the first instant from which every later one has every finite threshold
+    within ``tolerance`` of its value at t = 1e9 s; inf if the last one has not (a rule
+    restarted at ``start``, after an exclusion, settles anew). ``factors(t)``, where it gives a
     record: the same thresholds as eq. 40's factors (:meth:`.Thresholds.factors_at`), read
     instead of ``mu(t)``'s (M, M) arrays with the same numbers (at N = 1000, 96 arrays of
     8 MB written and read: 0.13 s of the set-up)."""
@@ -75,7 +77,8 @@ def settle_time(
     if not finite.any():
         return float("inf")
     scale = 1 + tolerance
-    grid = np.unique(np.round(np.geomspace(dt, max(horizon, dt), 96) / dt) * dt)
+    span = max(horizon - start, dt)
+    grid = start + np.unique(np.round(np.geomspace(dt, span, 96) / dt) * dt)
     ref = factors(1e9) if factors is not None else None
     if factors is not None and ref is not None:
         first, second = by_coefficient(ref.coef)
@@ -99,6 +102,19 @@ def settle_time(
         else:
             break
     return settled
+
+
+def rule_settle_time(
+    rule: object, members: np.ndarray, dt: float, horizon: float, start: float = 0.0
+) -> tuple[float, bool]:
+    """T_s (:func:`settle_time`, 10 % of steady) of a team's thresholds block ``rule``, as
+    started (or restarted) at ``start``, its arrays checked (:class:`Looked`), read from eq.
+    40's factors where it is the paper's rule; and whether it can never flag anybody."""
+    kind = type(rule)
+    mu = Looked(rule.mu, members, f"{kind.__module__}:{kind.__qualname__}")  # type: ignore[attr-defined]
+    mu(start)  # the first array of the rule, checked too
+    factors = rule.factors_at if isinstance(rule, Thresholds) else None  # eq. 40, unwritten
+    return settle_time(mu, dt, horizon, 0.1, factors, start), mu.never_flags
 
 
 class Looked:
