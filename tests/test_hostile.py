@@ -538,17 +538,21 @@ class _NaNAfterAnExclusion(paper.Thresholds):
     ],
     ids=["forgets-it", "nan-after-it"],
 )
-def test_a_rule_that_mishandles_an_exclusion_stops_the_run_in_one_line(path, rule, said):
+@pytest.mark.parametrize("dt_d_max", [5.0, "auto"])
+def test_a_rule_that_mishandles_an_exclusion_stops_the_run_in_one_line(path, rule, said, dt_d_max):
     """From robot 1's exclusion (t_r = 50.07 s) the team has 3 members. A rule still
     returning 4 x 4 thresholds was read by the compiled period by its own count, silently
     (with a smaller array it would have read past its end), and blamed on the detector by
     the general path; a rule turning NaN flagged nobody and the team went on blind, in
     silence. Now the run stops at the first round of the new team, naming the rule, and its
-    records keep the exclusion that began that period (they used to lose it)."""
+    records keep the exclusion that began that period (they used to lose it). With
+    Δt_d,max "auto" the reduced graph's horizon read the rule before the exclusion's event,
+    and a wrong shape was a numpy broadcasting error."""
     blocks = {"thresholds": rule()}
     if path == "general":
         blocks["controller"] = _GeneralToo()
-    result = simulate(load_scenario("paper_case", {"duration": 55.0}), blocks=blocks)
+    over = {"duration": 55.0, "fdir.dt_d_max": dt_d_max}  # eq. 40's "auto" falls back to 5 s
+    result = simulate(load_scenario("paper_case", over), blocks=blocks)
     assert result.summary["onboard"]["path"] == path
     assert re.fullmatch(
         rf"onboard block thresholds \(.*{rule.__name__}\) returned from mu\(t\) {said}, at "

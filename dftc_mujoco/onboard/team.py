@@ -625,6 +625,8 @@ class Team:
             else:
                 self._exclude(t, p)
             self.events.append(self.recovery.exclusion(t, robot, flaggers))
+            if not last_pair:
+                self._after_exclusion(t)
             if last_pair:
                 left = [int(k) + 1 for k in self.members if k != robot]
                 self.ended = f"the team was reduced to robot {left[0]} alone"
@@ -646,6 +648,24 @@ class Team:
         ratio = ratio[np.isfinite(ratio)]
         return float(ratio.max()) if len(ratio) else float("nan")
 
+    def _after_exclusion(self, t: float) -> None:
+        """Eq. 46 for the team left after an exclusion at ``t``: its domain from the
+        restarted rule's own T_s on (its thresholds start again from the residuals' bound, a
+        new transient), and ``"auto"`` Δt_d,max on the reduced graph."""
+        cfg = self.config
+        if self.horizon is not None:  # the restarted rule read (and checked) first
+            looked = self.thresholds, self.members, cfg.dt, self.horizon
+            self.settles_at = rule_settle_time(*looked, self.rounds.restart_time(t), True)[0]
+            at = self.settles_at if np.isfinite(self.settles_at) else None
+            said = {"t": t, "settle_time": at}
+            self.dt_d_max_info.setdefault("settle_after_exclusions", []).append(said)
+        if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
+            before = self.dt_d_max
+            self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
+            self.recovery.dt_d_max = self.dt_d_max
+            self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
+            self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
+
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
         keep = np.delete(np.arange(len(self.members)), p)
@@ -665,17 +685,3 @@ class Team:
         cfg = self.config
         target = replan(cfg.formation, old_offsets[keep])
         self.plan = FormationPlan(old_offsets[keep], target, t0=t, blend=cfg.replan_time)
-        if self.horizon is not None:  # eq. 46's domain: from the restarted rule's T_s on
-            self.settles_at = rule_settle_time(
-                self.thresholds, self.members, cfg.dt, self.horizon, t_rule
-            )[0]
-            at = self.settles_at if np.isfinite(self.settles_at) else None
-            self.dt_d_max_info.setdefault("settle_after_exclusions", []).append(
-                {"t": t, "settle_time": at}
-            )
-        if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
-            before = self.dt_d_max
-            self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
-            self.recovery.dt_d_max = self.dt_d_max
-            self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
-            self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))

@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from ...errors import InputError
+from ..block import BadOutput, Block
 from .paper import ThresholdRecord, Thresholds, factored_at
 
 
@@ -105,13 +106,20 @@ def settle_time(
 
 
 def rule_settle_time(
-    rule: object, members: np.ndarray, dt: float, horizon: float, start: float = 0.0
+    rule: Block,
+    members: np.ndarray,
+    dt: float,
+    horizon: float,
+    start: float = 0.0,
+    running: bool = False,
 ) -> tuple[float, bool]:
     """T_s (:func:`settle_time`, 10 % of steady) of a team's thresholds block ``rule``, as
-    started (or restarted) at ``start``, its arrays checked (:class:`Looked`), read from eq.
-    40's factors where it is the paper's rule; and whether it can never flag anybody."""
+    started (or restarted, ``running``: during the run) at ``start``, its arrays checked
+    (:class:`Looked`), read from eq. 40's factors where it is the paper's rule; and whether
+    it can never flag anybody."""
     kind = type(rule)
-    mu = Looked(rule.mu, members, f"{kind.__module__}:{kind.__qualname__}")  # type: ignore[attr-defined]
+    name = f"{kind.__module__}:{kind.__qualname__}"
+    mu = Looked(rule.mu, members, name, rule if running else None)  # type: ignore[attr-defined]
     mu(start)  # the first array of the rule, checked too
     factors = rule.factors_at if isinstance(rule, Thresholds) else None  # eq. 40, unwritten
     return settle_time(mu, dt, horizon, 0.1, factors, start), mu.never_flags
@@ -122,10 +130,18 @@ class Looked:
     numbers (InputError, one line, otherwise); in the first two arrays read (t = 0 and
     :func:`settle_time`'s steady one, O(M²) each) every entry ≥ 0, +inf where a pair cannot
     be judged: a threshold bounds a residual's norm, and a negative or NaN one flags
-    everybody or nobody. ``never_flags``: both were +inf everywhere."""
+    everybody or nobody. ``never_flags``: both were +inf everywhere. With ``block`` (a rule
+    read during the run, restarted after an exclusion) what it cannot use is that block's
+    :class:`~..block.BadOutput`, as the period says it, not bad input."""
 
-    def __init__(self, mu: Callable[[float], object], members: np.ndarray, name: str) -> None:
-        self.rule, self.members, self.name = mu, members, name
+    def __init__(
+        self,
+        mu: Callable[[float], object],
+        members: np.ndarray,
+        name: str,
+        block: Block | None = None,
+    ) -> None:
+        self.rule, self.members, self.name, self.block = mu, members, name, block
         self.looked = 0
         self.never_flags = True
 
@@ -137,6 +153,8 @@ class Looked:
             out = None
         if out is None or out.shape != (m, m):
             what = f"shape {out.shape}" if out is not None else type(got).__name__
+            if self.block is not None:  # during the run: the block's output, as the period says
+                raise BadOutput(self.block, f"returned from mu(t) {what}, expected {(m, m)},")
             raise InputError(
                 f"onboard.thresholds: {self.name}.mu(t) returned {what}; expected an array of "
                 f"numbers of shape ({m}, {m}): row i robot i's thresholds, column k robot k's"
@@ -144,6 +162,9 @@ class Looked:
         if self.looked < 2:
             self.looked += 1
             bad = bad_entry(out, self.members)
+            if bad and self.block is not None:
+                said = f"{bad}, expected a number ≥ 0 or +inf,"
+                raise BadOutput(self.block, f"returned from mu(t) {said}")
             if bad:
                 raise InputError(
                     f"onboard.thresholds: {self.name}.mu({t:g}) returned {bad}; expected a "
