@@ -625,13 +625,12 @@ class Team:
             else:
                 self._exclude(t, p)
             self.events.append(self.recovery.exclusion(t, robot, flaggers))
-            if not last_pair:
-                self._after_exclusion(t)
             if last_pair:
                 left = [int(k) + 1 for k in self.members if k != robot]
                 self.ended = f"the team was reduced to robot {left[0]} alone"
                 self.events.append(make(t, "mission_ended", reason=self.ended, robots=left))
                 return
+            self._after_exclusion(t)
             if not self.graph.is_strongly_connected():
                 self.events.append(split_event(t, self.graph, self.members))
 
