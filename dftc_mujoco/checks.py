@@ -326,7 +326,15 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
         g = float(np.linalg.eigvalsh(np.asarray(G, float)).min())
         k = float(np.linalg.eigvalsh(np.asarray(s.gains.K, float)).max())
         gain = h * (1.0 / g + k)  # eqs. 28-31 at period h: e⁺ = (1 − h(1/G + K)) e + ...
-        if gain >= 2.0:
+        if h * k >= 2.0:  # K alone: no G makes it stable
+            finding(
+                "gains.K",
+                f"K = {k:g} makes the fault estimator's compensation loop unstable at "
+                f"control_period = {h:g} s whatever G is (control_period·K = {h * k:.3g}, "
+                f"expected < 2): expected K < {2.0 / h:.3g} (the paper's is 3)",
+                refuse=True,
+            )
+        elif gain >= 2.0:
             need = h / (2.0 - h * k) if h * k < 2.0 else math.inf
             finding(
                 "gains.G",

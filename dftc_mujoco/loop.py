@@ -460,9 +460,7 @@ class Simulation:
                                     "detection_not_guaranteed",
                                     robot=f.robot + 1,
                                     # None: the thresholds do not settle within the run
-                                    until=team.settles_at
-                                    if np.isfinite(team.settles_at)
-                                    else None,
+                                    until=team.settles_at if np.isfinite(team.settles_at) else None,
                                 )
                             left = round(steps * dt - t, 6)  # the run left after its onset
                             if left < team.recovery.dt_d_max:  # eq. 46's window passes the end

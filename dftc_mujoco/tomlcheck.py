@@ -270,13 +270,17 @@ class Table:
         what = "a positive number" + (', "auto"' if auto else "") + " or a 2x2 matrix"
         try:
             v = self.raw(name)
-            if isinstance(v, int | float) and not isinstance(v, bool):
-                if not v > 0:
-                    self.fail(name, f"expected {what}, got {v}")
-                return _ro(float(v) * np.eye(N_DIM))
-            m = _numeric_array(v)
-            if m is None or m.shape != (N_DIM, N_DIM):
+            scalar = isinstance(v, int | float) and not isinstance(v, bool)
+            if scalar and not (v > 0 and math.isfinite(v)):
+                self.fail(name, f"expected {what}, got {v}")
+            m = np.array(float(v)) if scalar else _numeric_array(v)
+            if m is None or m.shape not in ((), (N_DIM, N_DIM)):
                 self.fail(name, f"expected {what}, got {describe(v)}")
+            if np.abs(m).max() > MAGNITUDE:  # as number() says it (an inf fails above)
+                said = f"{np.abs(m).max():g}{_HUGE}"
+                self.fail(name, f"expected numbers within ±{MAGNITUDE:g}, got {said}")
+            if m.shape == ():
+                return _ro(float(m) * np.eye(N_DIM))
             if (
                 not np.all(np.isfinite(m))
                 or not np.allclose(m, m.T)

@@ -48,6 +48,11 @@ def _variant(old: str, new: str) -> str:
         # G of 1e-4: fault estimates 27-54 m/s wrong; 1e-300: a summary that could not be saved
         ('G = "auto"', "G = 1e-4", ("gains.G", "expected G > 0.00508")),
         ('G = "auto"', "G = 1e-300", ("gains.G", "unstable")),
+        # found by fuzzing: K = inf was a LinAlgError traceback, a huge K was blamed on G,
+        # and G = 1e300 ran with an overflow warning (compensation off, in silence)
+        ("K = 3.0 ", "K = inf ", ("gains.K", "expected a positive number")),
+        ("K = 3.0 ", "K = 1e6 ", ("gains.K", "whatever G is", "expected K < 200")),
+        ('G = "auto"', "G = 1e300", ("gains.G", "expected numbers within ±1e+09")),
         # every robot was excluded
         ("[fdir]", "[fdir]\nexcluded_safe_distance = 1000.0", ("fdir.excluded_safe_distance",)),
         # numbers that passed the finite check overflowed later
