@@ -124,6 +124,14 @@ yaw = "joint_th"
         (lambda t: 'name = " "\n' + t, "name", "got an empty one"),
         # a folder was "no such file"
         (lambda t: t.replace(str(DATA / "holobase" / "holobase.xml"), str(DATA)), "mjcf", "folder"),
+        # found by fuzzing: a file MuJoCo has no reader for printed MuJoCo's own WARNING first
+        (
+            lambda t: t.replace(
+                str(DATA / "holobase" / "holobase.xml"), str(DATA / "make_meshes.py")
+            ),
+            "mjcf",
+            "a .xml (MJCF) or .urdf file, got 'make_meshes.py'",
+        ),
     ],
 )
 def test_robot_file_problems_are_one_line_naming_file_and_key(tmp_path, change, key, message):

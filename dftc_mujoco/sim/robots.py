@@ -374,6 +374,10 @@ def _load_legacy(path: Path) -> RobotModel:
 def _read_spec(mjcf: Path, owner: Path, key: str | None) -> mujoco.MjSpec:
     """MjSpec of ``mjcf`` with asset paths absolute (so that it can be attached anywhere)."""
     where = f"{owner}: {key}" if key else str(owner)
+    if mjcf.suffix not in (".xml", ".urdf"):  # MuJoCo picks its reader by the suffix alone
+        raise ScenarioError(
+            f"{where}: MuJoCo reads a model from a .xml (MJCF) or .urdf file, got {mjcf.name!r}"
+        )
     try:
         spec = mujoco.MjSpec.from_file(str(mjcf))
     except Exception as exc:
