@@ -138,3 +138,24 @@ def test_no_module_is_beyond_what_a_reader_holds():
     """No module of the package is over 700 lines (the scenario hub was 1,570)."""
     sizes = {p: len(p.read_text(encoding="utf-8").splitlines()) for p in PACKAGE.rglob("*.py")}
     assert max(sizes.values()) <= 700, sorted(sizes.items(), key=lambda kv: -kv[1])[:3]
+
+
+def test_every_module_has_a_row_in_the_readmes_layout_table():
+    """README's "How the code is organised" table says where each concept lives: every
+    module of the package is named there, by its path, by its folder's row (``render/``) or
+    by its name in a row that groups several (one was missing a row for a session, the
+    estimate alarm; twelve older modules had none)."""
+    import re
+
+    readme = (PACKAGE.parent / "README.md").read_text(encoding="utf-8")
+    start = readme.index("| module | holds | paper |")
+    table = readme[start : readme.index("\n\n", start)]
+    named = set(re.findall(r"`([^`]+)`", " ".join(r.split("|")[1] for r in table.splitlines())))
+    missing = []
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE).as_posix()
+        folder = rel.rsplit("/", 1)[0] + "/" if "/" in rel else ""
+        if path.name in ("__init__.py", "__main__.py") or {rel, folder, path.name} & named:
+            continue
+        missing.append(rel)
+    assert not missing, sorted(missing)
