@@ -73,6 +73,42 @@ def test_a_meaningless_scenario_is_refused_before_simulating(tmp_path, capsys, o
     assert not out.exists()
 
 
+HOSTILE = [-1, 0, 0.5, 1e308, 1e-300, float("nan"), float("inf"), -float("inf"), 10**30, "",
+           "x", True, [], [1, 2, 3], {}, [[0, 0]]]  # fmt: skip
+
+
+def _leaf_keys(table: dict, prefix: str = "") -> list[str]:
+    out = []
+    for key, value in table.items():
+        if isinstance(value, dict):
+            out += _leaf_keys(value, f"{prefix}{key}.")
+        elif not (isinstance(value, list) and value and isinstance(value[0], dict)):
+            out.append(prefix + key)
+    return out
+
+
+def test_every_key_of_paper_case_with_hostile_values_is_refused_or_runs():
+    """Each leaf key of paper_case set in turn to each hostile value, then 0.3 s run: the
+    package's own one-line error or a run, never another exception (the sweep over the three
+    shipped scenarios, 1605 cases, found an infinite gains.K raising numpy's LinAlgError)."""
+    import tomllib
+
+    from dftc_mujoco.errors import DftcError
+
+    keys = [k for k in _leaf_keys(tomllib.loads(GOOD)) if k not in ("duration", "name")]
+    assert len(keys) >= 20
+    other = []
+    for key in keys:
+        for value in HOSTILE:
+            try:
+                simulate(load_scenario("paper_case", {key: value, "duration": 0.3}))
+            except DftcError:
+                pass
+            except Exception as exc:  # what a user would see as a traceback
+                other.append(f"{key} = {value!r}: {type(exc).__name__}: {exc}")
+    assert not other, other[:5]
+
+
 def test_a_duration_between_two_periods_is_said_to_end_at_the_later(tmp_path, capsys):
     """The run is a whole number of control periods: 0.015 s ended at 0.02 s in silence."""
     runs = {}
