@@ -26,7 +26,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was", "phi_bar"),
     "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
     "systemic_anomaly_over": ("robots",),
-    "detection_not_guaranteed": ("robot", "until"),
+    "detection_not_guaranteed": ("robot", "until", "restarted"),
     "detection_past_end": ("robot", "left", "dt_d_max"),
     "detection_horizon": ("value", "before"),
     "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
@@ -125,8 +125,10 @@ def describe(e: Mapping[str, Any]) -> str:
     if k == "detection_not_guaranteed":
         until = e["until"]
         when = f"{until:.2f} s" if until is not None else "after the end of the run"
+        again = e.get("restarted")  # the exclusion whose restarted thresholds these are
+        after = f" again after the exclusion at {again:.2f} s" if again is not None else ""
         return (
-            f"robot {r}'s fault comes before the thresholds settle: its detection within "
+            f"robot {r}'s fault comes before the thresholds settle{after}: its detection within "
             f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
         )
     if k == "detection_past_end":

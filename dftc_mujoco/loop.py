@@ -461,6 +461,7 @@ class Simulation:
                                     robot=f.robot + 1,
                                     # None: the thresholds do not settle within the run
                                     until=team.settles_at if np.isfinite(team.settles_at) else None,
+                                    restarted=team.restarted_at,
                                 )
                             left = round(steps * dt - t, 6)  # the run left after its onset
                             if left < team.recovery.dt_d_max:  # eq. 46's window passes the end

@@ -177,6 +177,7 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     the first exclusion is reported outside eq. 46's domain until the restarted rule's own
     T_s, and the campaign's facts leave it out; a stop after that T_s is inside."""
     from dftc_mujoco.campaign.task import fault_facts
+    from dftc_mujoco.events import describe
 
     def two_stops(second: float):
         faults = [
@@ -194,6 +195,8 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     assert 18.0 < t_s < 21.0 and t_s > soon.summary["dt_d_max"]["settle_time"]
     (note,) = soon.events.of_kind("detection_not_guaranteed")
     assert note["robot"] == 2 and note["t"] == 18.0 and note["until"] == t_s
+    assert note["restarted"] == gone["t"]  # says why: the exclusion restarted the thresholds
+    assert f"settle again after the exclusion at {gone['t']:.2f} s" in describe(note)
     first, second = fault_facts(soon.summary)
     assert first["after_settle"] and not second["after_settle"] and not second["in_domain"]
     assert later.summary["dt_d_max"]["settle_after_exclusions"] == [restart]  # the same run so far

@@ -196,6 +196,7 @@ class Team:
         self.never_flags = False  # the thresholds are +inf everywhere (settle_time looks)
         self.horizon: float | None = None  # the run's duration, once settle_time has looked
         self.settles_at = 0.0  # T_s: faults from then on are in eq. 46's domain
+        self.restarted_at: float | None = None  # the last exclusion, which restarted the rule
         self._resize()
         # what the team shows before its first period: the robots' first estimates and slots
         np.copyto(self.x_hat, self.observer.estimate())
@@ -655,6 +656,7 @@ class Team:
         if self.horizon is not None:  # the restarted rule read (and checked) first
             looked = self.thresholds, self.members, cfg.dt, self.horizon
             self.settles_at = rule_settle_time(*looked, self.rounds.restart_time(t), True)[0]
+            self.restarted_at = t
             at = self.settles_at if np.isfinite(self.settles_at) else None
             said = {"t": t, "settle_time": at}
             self.dt_d_max_info.setdefault("settle_after_exclusions", []).append(said)
