@@ -126,11 +126,11 @@ def rule_settle_time(
 
 
 class Looked:
-    """A thresholds rule's ``mu(t)`` as read before the run, checked: an (M, M) array of
-    numbers (InputError, one line, otherwise); in the first two arrays read (t = 0 and
-    :func:`settle_time`'s steady one, O(M²) each) every entry ≥ 0, +inf where a pair cannot
-    be judged: a threshold bounds a residual's norm, and a negative or NaN one flags
-    everybody or nobody. ``never_flags``: both were +inf everywhere. With ``block`` (a rule
+    """A thresholds rule's ``mu(t)`` as read for its settle time, checked: an (M, M) array of
+    numbers (InputError, one line, otherwise); in the first two arrays read (its start, t = 0
+    or a restart, and :func:`settle_time`'s steady one, O(M²) each) every entry ≥ 0, +inf
+    where a pair cannot be judged: a threshold bounds a residual's norm, and a negative or
+    NaN one flags everybody or nobody. ``never_flags``: both were +inf everywhere. With ``block`` (a rule
     read during the run, restarted after an exclusion) what it cannot use is that block's
     :class:`~..block.BadOutput`, as the period says it, not bad input."""
 
