@@ -130,9 +130,9 @@ class Looked:
     numbers (InputError, one line, otherwise); in the first two arrays read (its start, t = 0
     or a restart, and :func:`settle_time`'s steady one, O(M²) each) every entry ≥ 0, +inf
     where a pair cannot be judged: a threshold bounds a residual's norm, and a negative or
-    NaN one flags everybody or nobody. ``never_flags``: both were +inf everywhere. With ``block`` (a rule
-    read during the run, restarted after an exclusion) what it cannot use is that block's
-    :class:`~..block.BadOutput`, as the period says it, not bad input."""
+    NaN one flags everybody or nobody. ``never_flags``: both were +inf everywhere. With
+    ``block`` (a rule read during the run, restarted after an exclusion) what it cannot use
+    is that block's :class:`~..block.BadOutput`, as the period says it, not bad input."""
 
     def __init__(
         self,
