@@ -31,7 +31,7 @@ from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
 from .addresses import Tables, address_table
 from .applied import DriveModel
-from .block import BadOutput, Block, TeamConfig, shaped
+from .block import Block, TeamConfig, shaped
 from .controller import Controller
 from .decision import Decision, flagged_by_teammates
 from .detector import Detector
@@ -61,7 +61,7 @@ from .team_axis import expand, place
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
-from .thresholds.settling import bad_entry, rule_settle_time
+from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
 
@@ -332,8 +332,7 @@ class Team:
         if self._dense_rule and t_rule is not None:  # a rule's own array, every round
             mu = self._th.dense if self.compiled else self.mu
             if not mu.min() >= 0:  # a negative or NaN entry flags everybody or nobody
-                said = f"{bad_entry(mu, self.members)}, expected a number ≥ 0 or +inf,"
-                raise BadOutput(self.thresholds, f"returned from mu(t) {said}")
+                refuse_bad_entry(mu, self.members, self.thresholds)
         if self.compiled:
             code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
         else:
@@ -654,8 +653,10 @@ class Team:
         new transient), and ``"auto"`` Δt_d,max on the reduced graph."""
         cfg = self.config
         if self.horizon is not None:  # the restarted rule read (and checked) first
-            looked = self.thresholds, self.members, cfg.dt, self.horizon
-            self.settles_at = rule_settle_time(*looked, self.rounds.restart_time(t), True)[0]
+            start = self.rounds.restart_time(t)  # as _exclude restarted it
+            self.settles_at, _ = rule_settle_time(
+                self.thresholds, self.members, cfg.dt, self.horizon, start, running=True
+            )
             self.restarted_at = t
             at = self.settles_at if np.isfinite(self.settles_at) else None
             said = {"t": t, "settle_time": at}

@@ -153,7 +153,7 @@ class Looked:
             out = None
         if out is None or out.shape != (m, m):
             what = f"shape {out.shape}" if out is not None else type(got).__name__
-            if self.block is not None:  # during the run: the block's output, as the period says
+            if self.block is not None:  # during the run: as the period says it (block.shaped)
                 raise BadOutput(self.block, f"returned from mu(t) {what}, expected {(m, m)},")
             raise InputError(
                 f"onboard.thresholds: {self.name}.mu(t) returned {what}; expected an array of "
@@ -161,11 +161,9 @@ class Looked:
             )
         if self.looked < 2:
             self.looked += 1
-            bad = bad_entry(out, self.members)
-            if bad and self.block is not None:
-                said = f"{bad}, expected a number ≥ 0 or +inf,"
-                raise BadOutput(self.block, f"returned from mu(t) {said}")
-            if bad:
+            if self.block is not None:  # during the run: as the period says it
+                refuse_bad_entry(out, self.members, self.block)
+            elif bad := bad_entry(out, self.members):
                 raise InputError(
                     f"onboard.thresholds: {self.name}.mu({t:g}) returned {bad}; expected a "
                     "number ≥ 0 (a threshold bounds a residual's norm), or +inf where the pair "
@@ -173,6 +171,14 @@ class Looked:
                 )
             self.never_flags &= not np.isfinite(out).any()
         return out
+
+
+def refuse_bad_entry(mu: np.ndarray, members: np.ndarray, block: Block) -> None:
+    """``block``'s :class:`~..block.BadOutput` for the first threshold of ``mu`` (M, M) that is
+    negative or NaN (:func:`bad_entry`); nothing if there is none."""
+    bad = bad_entry(mu, members)
+    if bad:
+        raise BadOutput(block, f"returned from mu(t) {bad}, expected a number ≥ 0 or +inf,")
 
 
 def bad_entry(mu: np.ndarray, members: np.ndarray) -> str | None:
