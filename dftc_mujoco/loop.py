@@ -41,6 +41,7 @@ from .results import RunResult, summarize
 from .scenario import Scenario
 from .sim import fleet, scene
 from .sim.bumpers import Bumpers
+from .sim.faults import Fault
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
 from .snapshot import Snapshot
@@ -445,24 +446,16 @@ class Simulation:
                     if self.stopped is not None:  # request_stop(): end before this period
                         break
                     t = k * dt
+                    onsets: Sequence[Fault] = ()  # the faults that begin this period
                     if t >= faults.due:
-                        for f in faults.apply(t):
+                        onsets = faults.apply(t)
+                        for f in onsets:
                             # the speed it was told last: a stop's size at onset (eq. 46)
                             told = float(np.hypot(*team.drive.command[f.robot]))
                             events.add(
                                 t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
                             )
                             monitor.watched[f.robot] = False  # the fault is to be detected
-                            if t < team.settles_at:  # outside eq. 46's domain (T_s, or
-                                # the restarted rule's since the last exclusion)
-                                events.add(
-                                    t,
-                                    "detection_not_guaranteed",
-                                    robot=f.robot + 1,
-                                    # None: the thresholds do not settle within the run
-                                    until=team.settles_at if np.isfinite(team.settles_at) else None,
-                                    restarted=team.restarted_at,
-                                )
                             left = round(steps * dt - t, 6)  # the run left after its onset
                             if left < team.recovery.dt_d_max:  # eq. 46's window passes the end
                                 limit = round(team.recovery.dt_d_max, 6)
@@ -513,6 +506,17 @@ class Simulation:
                         monitor.period(t, x, eta, team.u, team.u_bar, team.phi_hat, *before[:5])
                     if team.events:
                         self._take_team_events(t)
+                    for f in onsets:  # after the team's step: an exclusion now restarts the rule
+                        if t < team.settles_at:  # outside eq. 46's domain (T_s, or the
+                            # restarted rule's since the last exclusion, this period's included)
+                            events.add(
+                                t,
+                                "detection_not_guaranteed",
+                                robot=f.robot + 1,
+                                # None: the thresholds do not settle within the run
+                                until=team.settles_at if np.isfinite(team.settles_at) else None,
+                                restarted=team.restarted_at,
+                            )
                     if ctrl is None:
                         ctrl = physics.commands(xi)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too

@@ -175,7 +175,8 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     """An exclusion restarts the thresholds from the residuals' bound, a new transient (l1:
     up to 16 times steady on 16 hexbots in a ring, seed 31's run 302): a stop 1.8 s after
     the first exclusion is reported outside eq. 46's domain until the restarted rule's own
-    T_s, and the campaign's facts leave it out; a stop after that T_s is inside."""
+    T_s, and the campaign's facts leave it out (a stop in the exclusion's own period too); a
+    stop after that T_s is inside."""
     from dftc_mujoco.campaign.task import fault_facts
     from dftc_mujoco.events import describe
 
@@ -202,6 +203,14 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     assert later.summary["dt_d_max"]["settle_after_exclusions"] == [restart]  # the same run so far
     assert later.events.of_kind("detection_not_guaranteed") == []
     assert [f["after_settle"] for f in fault_facts(later.summary)] == [True, True]
+    # a stop that begins in the very period of the exclusion is outside the restarted domain
+    # too, and the run says so (the event used to be decided before the team's step)
+    same = two_stops(gone["t"])
+    assert same.summary["exclusions"][0]["t"] == gone["t"]
+    assert [e["t"] for e in same.events.of_kind("fault")] == [15.0, gone["t"]]
+    (note,) = same.events.of_kind("detection_not_guaranteed")
+    assert (note["robot"], note["t"], note["until"]) == (2, gone["t"], t_s)
+    assert not fault_facts(same.summary)[1]["after_settle"]
 
 
 def test_a_fault_too_close_to_the_end_for_eq46s_window_is_said_so():
