@@ -405,3 +405,19 @@ def test_vary_dotted_key_errors(tmp_path):
     assert '(vary."gains.ko" = -1): gains.ko: expected a number > 0, got -1' in msg
     msg = _error(_spec, tmp_path, '"duration.x" = [1]\n')
     assert "duration.x: expected duration to be a table" in msg
+
+
+def test_vary_draws_the_top_level_obstacles_and_duration(tmp_path):
+    """A campaign draws obstacle sets and durations among choices, as it draws dotted keys
+    (before, ``vary.obstacles`` was an unknown key: no campaign could put a cylinder in its
+    runs' way); a set that is not valid is refused at load, naming its key."""
+    cylinder = "{ position = [1.2, 0.6], radius = 0.2, safe_distance = 0.45 }"
+    s = _spec(tmp_path, f"obstacles = [[], [{cylinder}]]\nduration = [20.0, 30.0]\n")
+    drawn = [campaign_spec.scenario_for(s, campaign_spec.draw(s, i)) for i in range(s.runs)]
+    assert {len(sc.obstacles) for sc in drawn} == {0, 1}
+    assert {sc.duration for sc in drawn} == {20.0, 30.0}
+    (one,) = next(sc.obstacles for sc in drawn if sc.obstacles)
+    assert tuple(one.position) == (1.2, 0.6) and one.radius == 0.2
+    msg = _error(_spec, tmp_path, "obstacles = [[{ position = [1, 0], radius = 0.3 }]]\n")
+    assert msg.endswith("c.toml (run 0): obstacles[1].safe_distance: missing key")
+    assert "vary.obstacle: unknown key" in _error(_spec, tmp_path, "obstacle = [[]]\n")

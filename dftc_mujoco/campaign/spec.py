@@ -21,7 +21,8 @@ graph_family = ["ring_chords", "random", "knn", "line"]  # or "ring"
 eta_bar = [0.0005, 0.002]        # uniform ranges
 xi_bar = [0.002, 0.01]
 "gains.ko" = [3.0, 6.0]          # any scenario key by dotted path (quoted): a list
-"onboard.thresholds" = ["paper", "mylab.fdi:Mine"]   # of choices, one drawn per run
+"onboard.thresholds" = ["paper", "mylab.fdi:Mine"]   # of choices, one drawn per run;
+obstacles = [[], [{ position = [3, 0], radius = 0.3, safe_distance = 0.55 }]]  # and duration
 design = "random"                # or "grid": every combination of the lists above
                                  # (robots, graph_family, fault_kind, dotted keys) in
                                  # turn, run i taking combination i mod their count
@@ -56,6 +57,9 @@ from ..tomlcheck import Table, describe, read_toml
 ZOO_KINDS = ("loss_of_effectiveness", "intermittent", "sensor_bias", "sensor_drift")
 FAULT_KINDS = ("stop", "bias", "none", "two_stops", "silent", *ZOO_KINDS)
 FAMILIES = ("ring", "ring_chords", "random", "knn", "line")
+#: the scenario's top-level keys a [vary] table may draw among choices of, like a dotted key
+#: (the others are drawn by the table's own keys: seed, robots, the faults)
+TOP_KEYS = ("duration", "obstacles")
 
 
 @dataclass(frozen=True)
@@ -204,7 +208,7 @@ def _vary(t: Table) -> dict[str, Any]:
     v["design"] = t.string("design", "random", choices=("random", "grid"))
     dotted: dict[str, list[Any]] = {}
     for key in t.data:
-        if "." in key:
+        if "." in key or key in TOP_KEYS:
             choices = t.raw(key)
             if not isinstance(choices, list) or not choices:
                 t.fail(
