@@ -60,6 +60,33 @@ def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, t
     assert _rows(tmp_path) == _rows(local_run)
 
 
+@pytest.mark.parametrize("path", sorted((ROOT / "campaigns").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_campaign_spec_loads(path):
+    """The README's commands name these specs: each one is valid as shipped."""
+    s = spec.load(path)
+    assert s.runs > 0 and spec.draw(s, 0) == spec.draw(s, 0)
+
+
+def test_the_obstacle_battery_draws_the_untuned_battery_and_a_cylinder_set():
+    """no_false_exclusion_obstacles.toml adds one drawn key, last: its runs meet the very
+    draws of no_false_exclusion.toml, each with one of its cylinder sets, and every set is a
+    valid scenario on a start in formation."""
+    plain = spec.load(ROOT / "campaigns" / "no_false_exclusion.toml")
+    walled = spec.load(ROOT / "campaigns" / "no_false_exclusion_obstacles.toml")
+    sets = walled.vary["scenario_keys"]["obstacles"]
+    assert len(sets) == 12 and sets[0] == [] and max(len(c) for c in sets) == 8
+    seen = set()
+    for i in range(60):
+        drawn = spec.draw(walled, i)
+        assert {k: v for k, v in drawn.items() if k != "obstacles"} == spec.draw(plain, i)
+        seen.add(sets.index(drawn["obstacles"]))
+    assert len(seen) >= 10
+    for cylinders in sets:
+        drawn = {**spec.draw(walled, 1), "obstacles": cylinders}
+        drawn["team.initial_positions"] = {"layout": "formation", "jitter": 0.05}
+        assert len(spec.scenario_for(walled, drawn).obstacles) == len(cylinders)
+
+
 def test_draws_depend_only_on_campaign_seed_and_index():
     s = spec.load(ROOT / "campaigns" / "scale_sweep.toml")
     assert [spec.draw(s, i) for i in range(5)] == [spec.draw(s, i) for i in range(5)]
