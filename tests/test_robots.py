@@ -119,6 +119,30 @@ def test_diffdrive_moves_only_through_wheel_contact():
     assert abs(drive([0.0, 0.0, 0.0])) < 0.01  # no friction, no motion: wheels spin in place
 
 
+@pytest.mark.parametrize("offset", [0.22, 0.25, 0.28])
+def test_a_diffdrive_that_glances_off_a_cylinder_stays_on_its_wheels(offset):
+    """A tyre's corner reaches 9.7 cm from the centre, beyond the 9 cm hull: a diffdrive
+    driven at 0.6 m/s past a cylinder that its left side meets used to run its tyre up the
+    cylinder and tip (22° at 0.25 m, 56° at 0.28 m); half of the N >= 16 diffdrive runs of
+    the untuned battery stopped so ("left the plane"). Its bumper covers the tyres: it stays
+    level (the 2° of its casters at rest)."""
+    from dftc_mujoco.scenario import Obstacle
+
+    dd = robots.get("diffdrive")
+    cylinder = Obstacle(np.array([0.45, offset]), 0.2, 0.5, 0.6)
+    sc = scene.compose(dd, np.zeros((1, 2)), obstacles=(cylinder,))
+    data = Plant.initial_data(sc)
+    adapter = dd.adapter(sc, data)
+    tilt = []
+    for _ in range(200):  # 2 s at 0.6 m/s: past the cylinder, or pressed against it
+        data.ctrl[sc.actuator[0]] = adapter.command(np.array([[0.6, 0.0]]))[0]
+        mujoco.mj_step(sc.model, data, nstep=5)
+        tilt.append(np.degrees(np.arccos(data.xmat[sc.body[0]][8])))
+    assert max(tilt) < 3.0
+    gap = np.hypot(*(data.xpos[sc.body[0], :2] - cylinder.position)) - 0.2
+    assert gap > 0.09  # the bumper, not a tyre, met it
+
+
 @pytest.mark.parametrize("kind", ["stop", "bias"])
 def test_diffdrive_faults_act_on_the_wheels(kind):
     s = make(scenario_dict())
