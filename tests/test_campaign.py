@@ -502,10 +502,34 @@ def test_rows_describe_a_fault_of_the_base_scenario(tmp_path):
     assert row["detected"] and row["detected_by"] == 3 and row["excluded_faulty"]
     assert row["false_flags"] == 0 and row["healthy_exclusions"] == 0
     assert not row["wrong_isolation"]
+    # the compensated bias was never flagged; the stop was excluded, so nothing to explain
+    assert faults[0]["kept_why"] == "never_flagged" and stop["kept_why"] is None
     table = pq.read_table(tmp_path / "base_fault" / "results.parquet")
     assert {"faults", "false_flags", "false_flags_premises_held", "healthy_exclusions"} <= set(
         table.column_names
     )
+
+
+def test_a_faulty_robot_still_in_the_team_at_the_end_says_why(tmp_path):
+    """paper_case cut to 47 s: robot 1 stops at 41.8 s and is flagged at 45.07 s, but its t_r
+    (50.07 s) comes after the end; robot 2's compensated bias is never flagged. Each fault's
+    ``kept_why`` says so, and the report counts them by why (before, a flagged robot left in
+    the team looked like a failed recovery, with nothing to say why)."""
+    rows = _campaign(
+        tmp_path,
+        "cut",
+        'name = "cut"\nscenario = "paper_case"\nruns = 1\nseed = 1\n[set]\nduration = 47.0\n',
+    )
+    (row,) = rows.values()
+    faults = json.loads(row["faults"])
+    assert [(f["kind"], f["detected"], f["kept_why"]) for f in faults] == [
+        ("bias", False, "never_flagged"),
+        ("stop", True, "due_after_end"),
+    ]
+    text = (tmp_path / "cut" / "report.md").read_text()
+    assert "still in the team at the end of their run, by why (of 2 faults)" in text
+    assert "| its t_r (first flag + Δt_d,max) came after the end | 0 | 1 |" in text
+    assert "| no teammate flagged it | 1 | 0 |" in text
 
 
 def test_rows_describe_two_faults_in_one_run(tmp_path):

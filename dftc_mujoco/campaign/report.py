@@ -227,6 +227,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         ]
     lines += _rule_table(ok)
     lines += _kind_table(ok)
+    lines += _kept_table(ok)
     lines += _scale_table(ok, figs)
     lines += _network_table(ok, figs)
     lines += _method_table(ok, figs)
@@ -292,6 +293,43 @@ def _kind_table(ok: list[dict[str, Any]]) -> list[str]:
             f"{m['false_flags']} / {m['false_flags_premises_held']} | "
             f"{m['healthy_exclusions']} |"
         )
+    return [*lines, ""]
+
+
+#: what each ``kept_why`` of :func:`~.task.kept_why` means, in the report's words
+KEPT_WORDS = {
+    "never_flagged": "no teammate flagged it",
+    "due_after_end": "its t_r (first flag + Δt_d,max) came after the end",
+    "run_stopped": "the run stopped before its t_r",
+    "cancelled_not_flagged": "nobody flagged it any more at its t_r",
+    "cancelled_flagged_only_by_itself": "only it flagged itself at its t_r",
+    "cancelled_systemic_anomaly": "a systemic anomaly held at its t_r (more robots flagged "
+    "than fdir.max_faults)",
+    "postponed_contact": "postponed by a contact",
+    "postponed_decaying": "postponed: its flags were a contact's decaying trace",
+    "postponed_estimate": "postponed: its own fault estimate never left its bound",
+}
+
+
+def _kept_table(ok: list[dict[str, Any]]) -> list[str]:
+    """The faulty robots still in the team when their run ended, by why (each fault's
+    ``kept_why``) and fault kind: what the recovery said of each."""
+    faults = [f for r in ok for f in json.loads(r.get("faults") or "[]")]
+    kept = [f for f in faults if f.get("kept_why")]
+    if not kept:
+        return []
+    kinds = sorted({f["kind"] for f in faults})
+    lines = [
+        "Faulty robots still in the team at the end of their run, by why (of "
+        f"{len(faults)} faults):",
+        "",
+        "| why | " + " | ".join(kinds) + " |",
+        "|---|" + "---|" * len(kinds),
+    ]
+    for why in sorted({f["kept_why"] for f in kept}):
+        counts = [sum(f["kind"] == k and f["kept_why"] == why for f in kept) for k in kinds]
+        words = KEPT_WORDS.get(why, why.replace("_", " "))
+        lines.append(f"| {words} | " + " | ".join(str(c) for c in counts) + " |")
     return [*lines, ""]
 
 

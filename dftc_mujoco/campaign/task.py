@@ -65,6 +65,7 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     settle = horizon.get("settle_time")  # T_s (None: not within the run)
     n = int(summary.get("robots") or 0)
     end = float(summary.get("simulated_time") or summary.get("duration") or 0.0)
+    planned = float(summary.get("duration") or end)
     out = []
     for f in (e for e in events if e["kind"] == "fault"):
         robot, t_f = f["robot"], f["t"]
@@ -103,6 +104,8 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
                 "excluded": gone is not None,
                 "exclusion_delay": None if gone is None else gone - t_f,
                 "teammates": max(n - gone_before - 1, 0) if n else None,
+                # why it was still in the team at the end (None: excluded)
+                "kept_why": kept_why(events, robot, t_f, end, planned) if gone is None else None,
                 "after_settle": settled,  # eq. 46's domain
                 "dt_d_max": dt,
                 "command": told,
@@ -121,6 +124,36 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+#: the recovery's events about a flagged robot's exclusion (the last one says why it stayed)
+RECOVERY_KINDS = ("exclusion_scheduled", "exclusion_postponed", "exclusion_cancelled")
+
+
+def kept_why(
+    events: list[dict[str, Any]], robot: int, t_f: float, end: float, planned: float
+) -> str:
+    """Why faulty ``robot`` (1-based; its fault began at ``t_f``) was still in the team when
+    the run ended at ``end`` (``planned``: its duration), from the last word the recovery
+    said of it after the onset: ``never_flagged`` (no teammate flagged it),
+    ``cancelled_<reason>`` (at its t_r, e.g. ``cancelled_not_flagged``,
+    ``cancelled_systemic_anomaly``), ``postponed_<reason>`` (``contact``, ``decaying``,
+    ``estimate``), ``due_after_end`` (t_r = first flag + Δt_d,max after the run's
+    duration) or ``run_stopped`` (the run stopped before a t_r within its duration)."""
+    last = None
+    for e in events:
+        if e["kind"] in RECOVERY_KINDS and e.get("robot") == robot and e["t"] >= t_f:
+            last = e
+    if last is None:
+        return "never_flagged"
+    if last["kind"] == "exclusion_cancelled":
+        return "cancelled_" + str(last.get("reason")).replace(" ", "_")
+    t_r = last.get("t_r")
+    if t_r is not None and end + 1e-9 < t_r <= planned + 1e-9:
+        return "run_stopped"
+    if last["kind"] == "exclusion_postponed":
+        return "postponed_" + str(last.get("reason"))
+    return "due_after_end" if t_r is not None and t_r > planned + 1e-9 else "run_stopped"
 
 
 def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
