@@ -67,14 +67,25 @@ def test_every_shipped_campaign_spec_loads(path):
     assert s.runs > 0 and spec.draw(s, 0) == spec.draw(s, 0)
 
 
-def test_the_obstacle_battery_draws_the_untuned_battery_and_a_cylinder_set():
-    """no_false_exclusion_obstacles.toml adds one drawn key, last: its runs meet the very
-    draws of no_false_exclusion.toml, each with one of its cylinder sets, and every set is a
-    valid scenario on a start in formation."""
-    plain = spec.load(ROOT / "campaigns" / "no_false_exclusion.toml")
-    walled = spec.load(ROOT / "campaigns" / "no_false_exclusion_obstacles.toml")
+@pytest.mark.parametrize(
+    "plain_name, walled_name",
+    [
+        ("no_false_exclusion", "no_false_exclusion_obstacles"),
+        ("network_no_false_exclusion", "network_no_false_exclusion_obstacles"),
+    ],
+)
+def test_the_obstacle_batteries_draw_their_plain_battery_and_a_cylinder_set(
+    plain_name: str, walled_name: str
+) -> None:
+    """An obstacle battery adds one drawn key, last: its runs meet the very draws of its plain
+    battery, each with one of the twelve cylinder sets (the same in both obstacle batteries),
+    and every set is a valid scenario on a start in formation."""
+    plain = spec.load(ROOT / "campaigns" / f"{plain_name}.toml")
+    walled = spec.load(ROOT / "campaigns" / f"{walled_name}.toml")
     sets = walled.vary["scenario_keys"]["obstacles"]
     assert len(sets) == 12 and sets[0] == [] and max(len(c) for c in sets) == 8
+    first = spec.load(ROOT / "campaigns" / "no_false_exclusion_obstacles.toml")
+    assert sets == first.vary["scenario_keys"]["obstacles"]
     seen = set()
     for i in range(60):
         drawn = spec.draw(walled, i)
