@@ -456,3 +456,28 @@ def test_a_start_up_the_drive_cannot_follow_excludes_nobody():
     assert [e["robot"] for e in r.events.of_kind("exclusion_cancelled")] == [12]  # 7.06 s
     bare = simulate(load_scenario(str(path), {"fdir.confirm_by_estimate": False}))
     assert [e["robot"] for e in bare.events.of_kind("exclusion")] == [12]
+
+
+def test_a_team_started_40_m_from_its_slots_excludes_its_stops_and_nobody_healthy():
+    """Run 134 of campaigns/no_false_exclusion_far.toml: 16 hexbots start on a circle 40 m
+    from the path and cross it at their command limit, through each other; robots 4 and 8
+    stop at 28.5 and 35.3 s. Healthy robots are flagged while saturation, contact and
+    mismatch are broken, and none is excluded; both stops are (robot 4 after a contact
+    postponed it)."""
+    from dftc_mujoco.campaign import spec as campaign_spec
+
+    root = Path(__file__).resolve().parent.parent
+    sp = campaign_spec.load(root / "campaigns" / "no_false_exclusion_far.toml")
+    drawn = campaign_spec.draw(sp, 134)
+    assert drawn["team.initial_positions"] == {"layout": "circle", "radius": 40.0}
+    assert (drawn["robots"], drawn["fault_kind"], drawn["faulty_robot"]) == (16, "two_stops", 4)
+    r = simulate(campaign_spec.scenario_for(sp, drawn), progress=False)
+    assert [e["robot"] for e in r.events.of_kind("exclusion")] == [8, 4]
+    s = r.summary
+    assert s["healthy_exclusions"] == 0 and s["healthy_flags"] > 0
+    assert s["healthy_flags_premises_held"] == 0
+    assert {"saturation", "contact"} <= set(s["healthy_flags_by_premise"])
+    assert any(
+        e["robot"] == 4 and e["reason"] == "contact"
+        for e in r.events.of_kind("exclusion_postponed")
+    )
