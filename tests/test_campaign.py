@@ -72,13 +72,14 @@ def test_every_shipped_campaign_spec_loads(path):
     [
         ("no_false_exclusion", "no_false_exclusion_obstacles"),
         ("network_no_false_exclusion", "network_no_false_exclusion_obstacles"),
+        ("no_false_exclusion_tidybot", "no_false_exclusion_tidybot_obstacles"),
     ],
 )
 def test_the_obstacle_batteries_draw_their_plain_battery_and_a_cylinder_set(
     plain_name: str, walled_name: str
 ) -> None:
     """An obstacle battery adds one drawn key, last: its runs meet the very draws of its plain
-    battery, each with one of the twelve cylinder sets (the same in both obstacle batteries),
+    battery, each with one of the twelve cylinder sets (the same in every obstacle battery),
     and every set is a valid scenario on a start in formation."""
     plain = spec.load(ROOT / "campaigns" / f"{plain_name}.toml")
     walled = spec.load(ROOT / "campaigns" / f"{walled_name}.toml")
@@ -95,6 +96,7 @@ def test_the_obstacle_batteries_draw_their_plain_battery_and_a_cylinder_set(
     for cylinders in sets:
         drawn = {**spec.draw(walled, 1), "obstacles": cylinders}
         drawn["team.initial_positions"] = {"layout": "formation", "jitter": 0.05}
+        drawn["team.robot_model"] = "disk"  # the TidyBot's files are the user's own
         assert len(spec.scenario_for(walled, drawn).obstacles) == len(cylinders)
 
 
