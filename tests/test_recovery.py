@@ -481,3 +481,23 @@ def test_a_team_started_40_m_from_its_slots_excludes_its_stops_and_nobody_health
         e["robot"] == 4 and e["reason"] == "contact"
         for e in r.events.of_kind("exclusion_postponed")
     )
+
+
+def test_a_healthy_robot_whose_own_alarm_came_down_before_t_r_is_kept():
+    """Run 195 of the edge-speed battery (tests/data/edge_speed_exclusion.toml, cut to 34 s):
+    sixteen diffdrives at 85 % of their range, no fault. Robot 1 turns on the spot to pass
+    robot 3 with no speed left; its estimate swings past Φ̄ and its alarm is up 30.99-31.39 s;
+    fifteen teammates flag it at 31.13-31.24 s, two still do at t_r = 31.54 s. The code
+    before excluded it there (its alarm had been up since the first flag); now the exclusion
+    needs the alarm up at t_r: it waits, and is cancelled once nobody flags it."""
+    path = Path(__file__).parent / "data" / "edge_speed_exclusion.toml"
+    r = simulate(load_scenario(str(path)), progress=False)
+    flags = [e for e in r.events.items if e["kind"] == "detection" and e["robot"] == 1]
+    assert len({e["by"] for e in flags}) == 15 and all(e["premises"] for e in flags)
+    assert not r.events.of_kind("exclusion") and r.summary["healthy_exclusions"] == 0
+    waited = r.events.of_kind("exclusion_postponed")
+    assert [(e["robot"], e["reason"], e["t"]) for e in waited if e["robot"] == 1] == [
+        (1, "estimate", 31.54)
+    ]
+    cancelled = r.events.of_kind("exclusion_cancelled")
+    assert [(e["robot"], e["reason"]) for e in cancelled] == [(1, "not flagged")]

@@ -573,10 +573,7 @@ class Team:
         """Detection events for first flags; schedule exclusions (eq. 43)."""
         mem = self.members
         pairs = ((int(mem[i]), int(mem[k])) for i, k in zip(*np.nonzero(raised), strict=True))
-        for event in self.recovery.flagged(t, pairs):
-            if event["kind"] == "exclusion_scheduled":  # its own alarm counts from now
-                self.alarm.restart(event["robot"] - 1)
-            self.events.append(event)
+        self.events += self.recovery.flagged(t, pairs)
 
     def _hypothesis(self, t: float) -> None:
         """A ``systemic_anomaly`` begins or ends: more robots flagged by teammates now (and
