@@ -28,7 +28,7 @@ def test_the_alarm_needs_a_whole_window_out_and_as_long_back_in():
     assert _run(alarm, [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]) == [False] * 5 + [True]
     # down after three periods back within Φ̄, not before
     assert _run(alarm, [0.1, 0.1, 0.1]) == [True, True, False]
-    assert not alarm.alarm[1]  # robot 1 never left its bound
+    assert not alarm.alarm[1] and not alarm.seen[1]  # robot 1 never left its bound
 
 
 def test_a_command_out_of_range_counts_as_out_even_with_a_small_estimate():
@@ -37,15 +37,20 @@ def test_a_command_out_of_range_counts_as_out_even_with_a_small_estimate():
     assert _run(alarm, [0.05, 0.05], u_bar=0.69) == [True, False]
 
 
-def test_confirms_says_whether_the_alarm_is_up_now():
-    """At t_r the alarm must be up then: an alarm that was up since the first flag and came
-    down again (a healthy robot's own break of the premises, over) does not confirm."""
+def test_confirms_needs_the_alarm_up_now_then_up_since_the_last_judgement():
+    """At a robot's first judgement (its t_r) the alarm must be up then: an alarm that was up
+    after the first flag and came down (a healthy robot's own break of the premises, over)
+    does not confirm. At a later judgement (``again``) an alarm up some time since the last
+    one does: an intermittent fault off at its t_r is excluded at the next."""
     alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=2)
-    _run(alarm, [0.3, 0.3])  # up at the 2nd period
-    assert alarm.alarm[0] and alarm.confirms(0)
-    _run(alarm, [0.0, 0.0])  # down at the 2nd period back in
-    assert not alarm.alarm[0]
-    assert not alarm.confirms(0)  # it was up in between, but is not now
+    _run(alarm, [0.3, 0.3, 0.0, 0.0])  # up at the 2nd period, down at the 4th
+    assert not alarm.alarm[0] and alarm.seen[0]
+    assert not alarm.confirms(0)  # first judgement: it was up, but is not now
+    _run(alarm, [0.3, 0.3, 0.0, 0.0])  # up and down again before the next judgement
+    assert alarm.confirms(0, again=True)  # it was up since the last judgement
+    assert not alarm.confirms(0, again=True)  # and not since that one
+    _run(alarm, [0.3, 0.3])
+    assert alarm.confirms(0)  # up now
     assert alarm.confirms(0, heard=False)  # unheard (a silent radio) is not healthy
     off = EstimateAlarm(2, phi_bar=np.inf, limit=0.7, need=2)
     assert not off.on and off.confirms(0)  # no bound known: the check is off

@@ -16,16 +16,19 @@ or a detectable bias holds ‖φ̂‖ > Φ̄.
 
 :class:`EstimateAlarm` raises robot k's alarm once its estimate has been out (‖φ̂_k‖ > Φ̄
 or ū_k beyond the range) for a decision window in a row (Remark 5.2's window, the flags'
-own) and lowers it after as long back in. Robot k knows both signals itself and says its
-alarm in its messages, as it says its bumper. The recovery (``fdir.confirm_by_estimate``)
-excludes a robot still flagged at t_r only if its alarm is up then; otherwise the exclusion
-waits another Δt_d,max, and is cancelled once nobody flags it. Up *then*, not some time since
-the first flag: a healthy robot that breaks the premises itself (a diffdrive that turns on the
-spot to pass a teammate with no speed left, its command saturated and its estimate swinging
-past Φ̄ for 0.4 s: run 195 of the edge-speed battery) raises the very flags and the very
-alarm a fault does, but its alarm comes down a window after its signal is healthy again,
-while the observers' memory of the break keeps some flags up to t_r; a fault the residuals
-can see keeps its estimate out.
+own) and lowers it after as long back in; ``seen`` keeps whether it was up since the
+recovery last asked. Robot k knows both signals itself and says its alarm in its messages,
+as it says its bumper. The recovery (``fdir.confirm_by_estimate``) excludes a robot still
+flagged at its t_r only if its alarm is up then; otherwise the exclusion waits another
+Δt_d,max, and is cancelled once nobody flags it; at each later judgement an alarm that was
+up some time since the last one confirms. *Up at t_r*, not some time since the first flag:
+a healthy robot that breaks the premises itself (a diffdrive that turns on the spot to pass
+a teammate with no speed left, its command saturated and its estimate swinging past Φ̄ for
+0.4 s: run 195 of the edge-speed battery) raises the very flags and the very alarm a fault
+does, but its alarm comes down a window after its signal is healthy again, while the
+observers' memory of the break keeps some flags up to t_r. *Since the last judgement*
+after that: an intermittent fault whose t_r falls in an off phase is excluded at the next
+judgement, however its period and Δt_d,max line up.
 """
 
 from __future__ import annotations
@@ -40,10 +43,11 @@ from .decision import count_for, tick
 
 
 @njit(cache=True)
-def watch_estimates(phi_hat, u_bar, phi_bar, limit, need, timer, alarm):  # pragma: no cover
+def watch_estimates(phi_hat, u_bar, phi_bar, limit, need, timer, alarm, seen):  # pragma: no cover
     """One period of every robot's own alarm, in place. ``phi_hat``, ``u_bar`` (N, 2): the
     fault estimates and the commands; ``phi_bar``: Φ̄; ``limit``: the per-axis command
-    range; ``need``: the window in periods; ``timer`` (N,) int32, ``alarm`` (N,) bool."""
+    range; ``need``: the window in periods; ``timer`` (N,) int32, ``alarm`` and ``seen``
+    (N,) bool."""
     bound = phi_bar * phi_bar
     top = max(need, 1)
     for i in range(phi_hat.shape[0]):
@@ -55,6 +59,8 @@ def watch_estimates(phi_hat, u_bar, phi_bar, limit, need, timer, alarm):  # prag
             alarm[i] = True
         elif -c >= top:
             alarm[i] = False
+        if alarm[i]:
+            seen[i] = True
 
 
 class AlarmRecord(NamedTuple):
@@ -62,6 +68,7 @@ class AlarmRecord(NamedTuple):
 
     timer: np.ndarray  # (N,) int32, periods out (> 0) or in (< 0), as the decision's timers
     alarm: np.ndarray  # (N,) bool, each robot's own alarm
+    seen: np.ndarray  # (N,) bool, up since the recovery last asked
     phi_bar: float  # Φ̄ [m/s]
     limit: float  # the per-axis command range [m/s]
     need: int  # the window in control periods
@@ -79,6 +86,7 @@ class EstimateAlarm:
         self.on = bool(on and np.isfinite(self.phi_bar))  # a Python bool, as numba unboxes it
         self.timer = np.zeros(n, np.int32)
         self.alarm = np.zeros(n, bool)
+        self.seen = np.zeros(n, bool)
 
     @classmethod
     def of(cls, config: TeamConfig, n: int, rule_bound: float | None = None) -> EstimateAlarm:
@@ -93,17 +101,28 @@ class EstimateAlarm:
 
     def record(self) -> AlarmRecord:
         """The state the compiled period updates (:func:`watch_estimates` after ū)."""
-        return AlarmRecord(self.timer, self.alarm, self.phi_bar, self.limit, self.need, self.on)
+        return AlarmRecord(
+            self.timer, self.alarm, self.seen, self.phi_bar, self.limit, self.need, self.on
+        )
 
     def step(self, phi_hat: np.ndarray, u_bar: np.ndarray) -> None:
         """One control period, after the estimators and the commands (the general path;
         the compiled period runs it in :func:`.period.deliver`)."""
-        watch_estimates(phi_hat, u_bar, self.phi_bar, self.limit, self.need, self.timer, self.alarm)
+        watch_estimates(
+            phi_hat, u_bar, self.phi_bar, self.limit, self.need, self.timer, self.alarm, self.seen
+        )
 
-    def confirms(self, robot: int, heard: bool = True) -> bool:
-        """Whether robot ``robot``'s alarm is up now (at its t_r); True when the check is off,
-        or when its teammates do not hear its messages (``heard`` False: a silent radio;
-        unheard is not healthy)."""
+    def restart(self, robot: int) -> None:
+        """From now on ``seen`` tells whether robot ``robot``'s alarm was up since now."""
+        self.seen[robot] = self.alarm[robot]
+
+    def confirms(self, robot: int, heard: bool = True, again: bool = False) -> bool:
+        """Whether robot ``robot``'s alarm is up now (its first judgement at t_r) or, when it
+        is judged ``again``, was up since the last :meth:`restart`, which it does again; True
+        when the check is off, or when its teammates do not hear its messages (``heard``
+        False: a silent radio; unheard is not healthy)."""
         if not (self.on and heard):
             return True
-        return bool(self.alarm[robot])
+        up = bool(self.seen[robot] if again else self.alarm[robot])
+        self.restart(robot)
+        return up

@@ -274,7 +274,7 @@ def deliver(
             u_bar[r, d] = command[r, d] - (applied[r, d] if est.compensate else 0.0)  # eq. 28
     if alarm.on:
         a = alarm
-        watch_estimates(est.phi_hat, u_bar, a.phi_bar, a.limit, a.need, a.timer, a.alarm)
+        watch_estimates(est.phi_hat, u_bar, a.phi_bar, a.limit, a.need, a.timer, a.alarm, a.seen)
 
 
 @njit(cache=True)
@@ -346,7 +346,7 @@ def team_period_flat(
 ):  # fmt: skip  # pragma: no cover - compiled
     """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
     building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 42,
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 43,
     about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
     thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
     or int32, :func:`~.decision.timer_type`); then the records' numbers, in their order.
@@ -373,17 +373,18 @@ def team_period_flat(
     )  # fmt: skip
     i4 = np.int32
     alarm = AlarmRecord(
-        view1(table, 22, i4), view1(table, 23, b1), phi_bar, alarm_limit, alarm_need, alarm_on
-    )
-    th = ThresholdRecord(mu, view1(table, 24, f8), view1(table, 25, f8), view1(table, 26, b1), eta)
+        view1(table, 22, i4), view1(table, 23, b1), view1(table, 24, b1), phi_bar, alarm_limit,
+        alarm_need, alarm_on,
+    )  # fmt: skip
+    th = ThresholdRecord(mu, view1(table, 25, f8), view1(table, 26, f8), view1(table, 27, b1), eta)
     dec = DecisionRecord(
-        timer, view2(table, 27, b1), need, exclusive, view1(table, 28, i8), view2(table, 29, b1),
-        view1(table, 30, b1),
+        timer, view2(table, 28, b1), need, exclusive, view1(table, 29, i8), view2(table, 30, b1),
+        view1(table, 31, b1),
     )  # fmt: skip
     out = PeriodBuffers(
-        view2(table, 31, f8), view2(table, 32, f8), view2(table, 33, f8), view3(table, 34, f8),
-        view2(table, 35, f8), view2(table, 36, f8), view2(table, 37, f8), view2(table, 38, f8),
-        view2(table, 39, f8), view2(table, 40, f8), view2(table, 41, f8),
+        view2(table, 32, f8), view2(table, 33, f8), view2(table, 34, f8), view3(table, 35, f8),
+        view2(table, 36, f8), view2(table, 37, f8), view2(table, 38, f8), view2(table, 39, f8),
+        view2(table, 40, f8), view2(table, 41, f8), view2(table, 42, f8),
     )  # fmt: skip
     ctl = ControllerRecord(kc)
     return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
@@ -405,7 +406,7 @@ RECORDS = (
 )
 #: the fields team_period_flat takes as arguments, not by address (see there)
 PASSED = {(ThresholdRecord, "dense"), (DecisionRecord, "timer")}
-TABLED = 42  # the records' arrays team_period_flat reads from its table
+TABLED = 43  # the records' arrays team_period_flat reads from its table
 
 
 def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:

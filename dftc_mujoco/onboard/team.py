@@ -611,7 +611,8 @@ class Team:
                 self.events.append(later)
                 continue
             heard = self.radios is None or not self.radios.silent_robot[robot]
-            if not self.alarm.confirms(robot, heard):  # a healthy signal: judge it again later
+            again = robot in self.recovery.waiting  # judged before, unconfirmed
+            if not self.alarm.confirms(robot, heard, again):  # a healthy signal: judge it later
                 said = self.recovery.unconfirmed(t, robot, self.alarm.phi_bar)
                 if said is not None:
                     self.events.append(said)
