@@ -171,6 +171,7 @@ def team_config(
         self_exclusion=f.self_exclusion,
         postpone_on_contact=f.postpone_on_contact,
         confirm_by_estimate=f.confirm_by_estimate,
+        response_time=robot.response_time if robot is not None else 0.0,
         phi_bar=phi_bar,
         excluded_relay=f.excluded_relay,
         networked=not s.network.ideal,

@@ -37,20 +37,39 @@ def test_a_command_out_of_range_counts_as_out_even_with_a_small_estimate():
     assert _run(alarm, [0.05, 0.05], u_bar=0.69) == [True, False]
 
 
-def test_confirms_needs_the_alarm_up_now_then_up_since_the_last_judgement():
-    """At a robot's first judgement (its t_r) the alarm must be up then: an alarm that was up
-    after the first flag and came down (a healthy robot's own break of the premises, over)
-    does not confirm. At a later judgement (``again``) an alarm up some time since the last
+def test_a_first_judgement_needs_the_estimate_out_for_the_hold_a_later_one_a_new_alarm():
+    """At a robot's first judgement (its t_r) its estimate must have been out for the hold
+    (the window and twice its response time) in a row: an alarm that went up after the first
+    flag and came down, or went up too lately (a healthy robot's own break of the premises),
+    does not confirm. At a later judgement (``again``) an alarm that went up since the last
     one does: an intermittent fault off at its t_r is excluded at the next."""
-    alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=2)
-    _run(alarm, [0.3, 0.3, 0.0, 0.0])  # up at the 2nd period, down at the 4th
-    assert not alarm.alarm[0] and alarm.seen[0]
-    assert not alarm.confirms(0)  # first judgement: it was up, but is not now
+    alarm = EstimateAlarm(2, phi_bar=0.2, limit=0.7, need=2, hold=4)
+    _run(alarm, [0.3, 0.3, 0.3])  # up at the 2nd period, out for 3
+    assert alarm.alarm[0] and alarm.timer[0] == 3
+    assert not alarm.confirms(0)  # up, but not out for the hold yet
+    _run(alarm, [0.3])
+    assert alarm.confirms(0)  # out for 4 periods in a row
+    _run(alarm, [0.0, 0.0])  # down at the 2nd period back in
+    assert not alarm.alarm[0] and not alarm.confirms(0)
+    assert not alarm.confirms(0, again=True)  # no alarm went up since the last question
     _run(alarm, [0.3, 0.3, 0.0, 0.0])  # up and down again before the next judgement
-    assert alarm.confirms(0, again=True)  # it was up since the last judgement
+    assert alarm.confirms(0, again=True)  # it went up since the last judgement
     assert not alarm.confirms(0, again=True)  # and not since that one
-    _run(alarm, [0.3, 0.3])
-    assert alarm.confirms(0)  # up now
     assert alarm.confirms(0, heard=False)  # unheard (a silent radio) is not healthy
     off = EstimateAlarm(2, phi_bar=np.inf, limit=0.7, need=2)
     assert not off.on and off.confirms(0)  # no bound known: the check is off
+
+
+def test_the_hold_is_the_window_and_twice_the_robots_response_time():
+    """The robots' calibrated response time reaches the alarm: the disk's 0.06 s, the
+    diffdrive's 0.52 s (their robot files), twice, past the 0.2 s window."""
+    from dftc_mujoco import load_scenario
+    from dftc_mujoco.assembly import team_config
+    from dftc_mujoco.sim import robots
+
+    s = load_scenario("paper_case")
+    for model, response in (("disk", 0.06), ("diffdrive", 0.52)):
+        robot = robots.get(model)
+        assert robot.response_time == response
+        alarm = EstimateAlarm.of(team_config(s, robot), 4)
+        assert (alarm.need, alarm.hold) == (20, 20 + round(2 * response / 0.01))

@@ -207,7 +207,8 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
     assert np.array_equal(fast.estimator.int_e, slow.estimator.int_e)
     # each robot's own alarm (estimate_alarm.py): the same timers, and up on the faulty one
     assert fast.alarm.on and np.array_equal(fast.alarm.timer, slow.alarm.timer)
-    assert np.array_equal(fast.alarm.seen, slow.alarm.seen) and fast.alarm.seen.any()
+    assert np.array_equal(fast.alarm.seen, slow.alarm.seen)
+    assert np.array_equal(fast.alarm.alarm, slow.alarm.alarm) and (fast.alarm.timer > 0).any()
     copy.deepcopy(fast)  # a team can be copied (the locality check relies on it)
 
 

@@ -488,8 +488,9 @@ def test_a_healthy_robot_whose_own_alarm_came_down_before_t_r_is_kept():
     sixteen diffdrives at 85 % of their range, no fault. Robot 1 turns on the spot to pass
     robot 3 with no speed left; its estimate swings past Φ̄ and its alarm is up 30.99-31.39 s;
     fifteen teammates flag it at 31.13-31.24 s, two still do at t_r = 31.54 s. The code
-    before excluded it there (its alarm had been up since the first flag); now the exclusion
-    needs the alarm up at t_r: it waits, and is cancelled once nobody flags it."""
+    before excluded it there (its alarm had been up since the first flag); now a first
+    judgement needs its estimate out at t_r (for the hold): it waits, and is cancelled once
+    nobody flags it."""
     path = Path(__file__).parent / "data" / "edge_speed_exclusion.toml"
     r = simulate(load_scenario(str(path)), progress=False)
     flags = [e for e in r.events.items if e["kind"] == "detection" and e["robot"] == 1]
@@ -501,3 +502,26 @@ def test_a_healthy_robot_whose_own_alarm_came_down_before_t_r_is_kept():
     ]
     cancelled = r.events.of_kind("exclusion_cancelled")
     assert [(e["robot"], e["reason"]) for e in cancelled] == [(1, "not flagged")]
+
+
+def test_a_healthy_diffdrive_still_out_at_t_r_is_held_for_twice_its_response():
+    """Run 168 of campaigns/no_false_exclusion_edge.toml, cut to 31 s: sixteen diffdrives at
+    0.5 m/s, no fault. Robot 2 swerves with no speed left; its velocity misses its command
+    by up to 1.7 m/s for 0.64 s and its estimate is out from 25.33 s; every robot flags it at
+    25.57-25.69 s, and at t_r = 25.99 s (Δt_d,max = 0.42 s) its estimate is still out, 0.66 s
+    in a row: the rule "up at t_r" alone excluded it. The hold (the window and twice its
+    0.52 s response time) keeps it; the alarm never goes up again, and it is kept."""
+    from dftc_mujoco import scenario
+    from dftc_mujoco.campaign import spec as campaign_spec
+
+    root = Path(__file__).resolve().parent.parent
+    sp = campaign_spec.load(root / "campaigns" / "no_false_exclusion_edge.toml")
+    d = campaign_spec.scenario_dict(sp, campaign_spec.draw(sp, 168))
+    assert (d["team"]["robots"], d["team"]["robot_model"], d["faults"]) == (16, "diffdrive", [])
+    r = simulate(scenario.from_dict({**d, "duration": 31.0}), progress=False)
+    assert not r.events.of_kind("exclusion") and r.summary["healthy_exclusions"] == 0
+    waited = [(e["robot"], e["reason"], e["t"]) for e in r.events.of_kind("exclusion_postponed")]
+    assert (2, "estimate", 25.99) in waited
+    assert (2, "not flagged") in [
+        (e["robot"], e["reason"]) for e in r.events.of_kind("exclusion_cancelled")
+    ]

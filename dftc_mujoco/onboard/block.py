@@ -56,9 +56,10 @@ class TeamConfig:
     max_faults: int = 1  # robots that may be faulty at once (fdir.max_faults, recovery.py)
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     postpone_on_contact: bool = True  # a bumper contact postpones t_r (onboard/recovery.py)
-    # an exclusion needs the robot's own estimate out of Φ̄ since its first flag
-    # (onboard/estimate_alarm.py)
+    # an exclusion needs the robot's own estimate out of Φ̄ at t_r, for longer than a healthy
+    # robot's own response (onboard/estimate_alarm.py)
     confirm_by_estimate: bool = True
+    response_time: float = 0.0  # [s] the drive's time to follow a command jump (calibration)
     phi_bar: float = np.inf  # Φ̄ [m/s]: a healthy robot's ‖φ̂‖ bound (inf: none known)
     excluded_relay: bool = False  # an excluded robot keeps relaying messages (graph.without)
     lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)

@@ -63,7 +63,7 @@ CALIBRATION_KEYS = (
     "mismatch",  # largest ‖ẋ − u‖ on smooth commands [m/s]
     "startup_mismatch",  # largest ‖ẋ − u‖ while the robot settles at the start [m/s]
     "startup_time",  # how long it settles [s]
-    "response_time",  # time to follow a command jump [s]
+    "response_time",  # time to follow a command jump; an exclusion's hold (estimate_alarm) [s]
     "drift_replan",  # ē measured within 5 s of an exclusion (the re-plan's transient) [m]
     "lag",  # first-order lag τ of the drive, modelled onboard when set (onboard/applied.py) [s]
     "drift_bound",  # ē: bounded offset of the drift after the start-up (docs/thresholds.md) [m]
@@ -119,6 +119,12 @@ class RobotModel:
         """τ of the drive's first-order lag from calibration (0: the robot is taken to move at
         its command, the paper's ẋ = u)."""
         return float(self.calibration.get("lag", 0.0))
+
+    @property
+    def response_time(self) -> float:
+        """The time the robot took to follow a command jump in calibration [s] (0: not
+        measured): how long a healthy robot's velocity may miss its command."""
+        return float(self.calibration.get("response_time", 0.0))
 
     @property
     def accel(self) -> float:
