@@ -42,6 +42,7 @@ def test_the_envelope_is_the_team_s_worst_bounds():
     assert env.footprint_radius == max(m.footprint_radius for m in models)
     assert env.drift_bound == max(m.drift_bound for m in models)
     assert env.accel == min(m.accel for m in models)
+    assert env.response_time == max(m.response_time for m in models) == 0.52  # the diffdrive
     assert env.calibration["compensation_G"] == max(
         m.calibration.get("compensation_G", 0) for m in models
     )

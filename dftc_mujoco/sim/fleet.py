@@ -98,7 +98,8 @@ def envelope(models: tuple[RobotModel, ...], where: str = "team.robot_model") ->
             f"([calibration] lag: {listed}): the onboard drive model is one for the team"
         )
     cal: dict[str, float] = {}
-    for key in ("xi_bar", "mismatch", "drift_bound", "drift_startup", "compensation_G"):
+    team_wide = ("xi_bar", "mismatch", "drift_bound", "drift_startup", "compensation_G")
+    for key in (*team_wide, "response_time"):  # the largest: the slowest robot's
         found = [m.calibration[key] for m in unique if key in m.calibration]
         if found and (key != "xi_bar" or len(found) == len(unique)):  # calibrated: all are
             cal[key] = max(found)
