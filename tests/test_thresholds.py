@@ -342,6 +342,48 @@ def test_delays_agree_with_the_first_crossing_of_the_signature():
     ).all()
 
 
+def test_delays_of_a_lagged_drive_follow_the_signature_of_its_decaying_velocity():
+    """A stop on a drive with a first-order lag τ: the robot's velocity decays through the
+    lag, so y_m,k drifts by h φ (1 − e^(−mh/τ)) in period m, not h φ from the first period
+    on. Δt_d is the first period where the convolution of that drift with [A_k^j]_{ik}
+    (dense powers) reaches 2 ⁱμ_k; it is later than a drift at once, and a lag far shorter
+    than a period only costs the first period (whose drift the bound takes as 0)."""
+    rng = np.random.default_rng(2)
+    graph = random_strongly_connected(7, 2, rng)
+    n, ko, fault, lag, steps = graph.n, 6.0, 0.1, 2.5, 20000
+    mu = rng.uniform(0.1, 0.9, (n, n)) * fault / ko / 2
+    mu[0, 1] = fault / ko  # never crossed
+    cols = _columns(graph, ko, H, steps)  # (k, T, i)
+    drift = -np.expm1(-np.arange(steps) * H / lag)  # 1 − e^(−mh/τ), period m
+    sig = np.empty_like(cols)
+    for k in range(n):
+        for i in range(n):  # Σ_{m<j} drift_m [A_k^(j−1−m)]_ik, after j = 1 .. T periods
+            sig[k, :, i] = H * fault * np.convolve(drift, cols[k, :, i])[:steps]
+    crossed = sig >= 2 * mu.T[:, None, :]
+    expect = np.where(crossed.any(axis=1), crossed.argmax(axis=1) + 1.0, np.inf).T
+    assert np.isinf(expect[0, 1]) and np.isfinite(np.delete(expect.ravel(), 1)).all()
+    got = predicted_delays(graph, ko, H, mu, fault, lag=lag) / H
+    np.testing.assert_allclose(got, expect, rtol=1e-12)
+    at_once = predicted_delays(graph, ko, H, mu, fault) / H
+    finite = np.isfinite(at_once)
+    assert (got[finite] > at_once[finite]).all()
+    instant = predicted_delays(graph, ko, H, mu, fault, lag=1e-9) / H
+    np.testing.assert_allclose(instant[finite], at_once[finite] + 1.0, rtol=1e-12)
+    # at scale the sweep stops at each column's certificate: upper bounds from R's and E's
+    # decay, here from the first certificate on (the worst case: a 32-period sweep)
+    from dftc_mujoco.onboard.thresholds import delays
+
+    delays.EXACT_CROSSING_WORK = 0.0
+    try:
+        bound = predicted_delays(graph, ko, H, mu, fault, lag=lag) / H + 1e-9
+    finally:
+        delays.EXACT_CROSSING_WORK = 5e8
+    assert np.array_equal(np.isfinite(bound), np.isfinite(expect))
+    finite = np.isfinite(expect)
+    assert (bound[finite] >= expect[finite]).all()
+    assert (bound[finite] <= expect[finite] + 2 * lag / H).all()  # 459 periods at most here
+
+
 def test_delays_are_not_promised_when_the_signature_oscillates():
     """With h k_o (d_max + 1) > 1 some A_k has negative entries: the signature overshoots
     2 ⁱμ_k and falls back below it, so a first crossing guarantees no debounced flag and

@@ -26,6 +26,7 @@ def predicted_delays(
     mu_steady: np.ndarray,
     fault: float,
     max_work: float = MAX_WORK,
+    lag: float = 0.0,
 ) -> np.ndarray:
     """ⁱΔt_d (M, M) [s] for a constant, uncompensated fault of size ``fault`` [m/s] on robot k.
 
@@ -41,6 +42,16 @@ def predicted_delays(
     and everywhere when some A_k has a negative entry (h k_o (d_max + 1) > 1): S_ik then
     oscillates and can fall back below 2 ⁱμ_k after crossing it, inside the detection
     window, so no crossing guarantees a flag.
+
+    ``lag`` = τ > 0: robot k's drive answers with a first-order lag (``TeamConfig.lag``,
+    modelled onboard, ``onboard/applied.py``). A stop then does not take its velocity at
+    once: the velocity decays through the lag (v₀ e^(−t/τ); the slow test base: τ = 2.49 s
+    measured against its calibrated 2.50) while the robot's own drive model goes on
+    predicting the commanded one, so y_m,k drifts by at least h·fault·(1 − r^m) in period m
+    after onset (r = e^(−h/τ)), and the signature is h·fault·W_ik(j), W(j) = Σ_{m<j}
+    (1 − r^m) A_k^(j−1−m) e_k = S(j) − E(j), E(j) = Σ_{m<j} r^(j−1−m) A_k^m e_k (monotone in
+    the drift: A_k ≥ 0). Its crossings are swept as S's are, and bounded past a
+    column's certificate from the decay of R and E (:func:`_lagged_tail`).
     """
     n = graph.n
     beta = h * ko
@@ -56,13 +67,15 @@ def predicted_delays(
         rot = need[(np.arange(n)[:, None] + np.arange(n)[None, :]) % n, np.arange(n)[None, :]]
         need0 = rot.max(axis=1, keepdims=True)
         ok0 = np.isfinite(need0) & (need0 < mass * (1.0 - 1e-12))
-        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work)
+        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work, h, lag)
         idx = (np.arange(n)[:, None] - np.arange(n)[None, :]) % n
         return periods[:, 0][idx] * h
     out = np.full((n, n), np.inf)
     ks = np.flatnonzero(crossable.any(axis=0))
     if len(ks):
-        out[:, ks] = _crossing_periods(adj, beta, ks, need[:, ks], crossable[:, ks], max_work)
+        out[:, ks] = _crossing_periods(
+            adj, beta, ks, need[:, ks], crossable[:, ks], max_work, h, lag
+        )
     return out * h
 
 
@@ -73,8 +86,11 @@ def _crossing_periods(
     need: np.ndarray,
     crossable: np.ndarray,
     max_work: float,
+    h: float = 0.0,
+    lag: float = 0.0,
 ) -> np.ndarray:
-    """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never)."""
+    """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never); with
+    a drive's ``lag`` > 0, with W_ik(j) ≥ need (:func:`predicted_delays`)."""
     n, kk = adj.n, len(ks)
     mass = 1.0 / beta
     result = np.where(crossable & (need <= 0.0), 0.0, np.inf)
@@ -85,10 +101,13 @@ def _crossing_periods(
     when = np.where(result == 0.0, 0, -1).astype(np.int64)
     cert = np.full(kk, -1, dtype=np.int64)
     cols = np.arange(kk)
+    lagged = lag > 0.0
+    r = float(np.exp(-h / lag)) if lagged else 0.0
+    est = np.zeros((n, kk) if lagged else (0, kk))  # E of the lagged drift
     t, work = 0, 0.0
     while len(cols):
         advance_crossing(
-            v, prev, tot, goal, when, adj.src, adj.first, adj.deg,
+            v, prev, tot, est, r, goal, when, adj.src, adj.first, adj.deg,
             column_of_row(ks[cols], n), beta, CHECK, t, cert,
         )  # fmt: skip
         t += CHECK
@@ -109,16 +128,47 @@ def _crossing_periods(
         rem = mass - tot[:, idx] + _slack(t, mass)
         s = np.clip(((rem - v[:, idx]) / rem).max(axis=0), 0.0, 1.0)
         g = goal[:, idx]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            m = np.ceil(np.log((mass - g) / rem) / np.log(s))
         late = ~got & np.isfinite(g) & (s < 1.0)
+        if lagged:
+            m = _lagged_tail(rem, est[:, idx], s, r, mass - g, late)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                m = np.ceil(np.log((mass - g) / rem) / np.log(s))
         result[:, c] = np.where(late, t + np.maximum(m, 0.0), result[:, c])
         keep = ~done
-        v, prev, tot, goal, when = (
-            np.ascontiguousarray(a[:, keep]) for a in (v, prev, tot, goal, when)
+        v, prev, tot, goal, when, est = (
+            np.ascontiguousarray(a[:, keep]) for a in (v, prev, tot, goal, when, est)
         )
         cert, cols = cert[keep], cols[keep]
     return result
+
+
+def _lagged_tail(
+    rem: np.ndarray, est: np.ndarray, s: np.ndarray, r: float, room: np.ndarray, late: np.ndarray
+) -> np.ndarray:
+    """Periods m after a certificate by which a lagged drift's W has surely crossed (N, K):
+    mass − W(t + m) = R(t + m) + E(t + m) with R(t + m) ≤ s^m R(t), and E(t + m) =
+    r^m E(t) + Σ_{q<m} r^(m−1−q) c(t + q), whose columns before q = p weigh at most
+    r^(m−p) and sum to at most R(t), and from p on sum to at most R(t + p) ≤ s^p R(t); so
+    mass − W(t + m) ≤ s^m R + r^m E + R (r^(m−p) + s^p) for any p ≤ m. The first m on a
+    grid growing 2 % a step (p a few fractions of m) at which that is at most ``room`` =
+    mass − need, where ``late`` (+inf where it never is within :data:`~.envelope.MAX_PERIODS`)."""
+    out = np.full(rem.shape, np.inf)
+    open_ = late.copy()
+    m = 1
+    while m <= MAX_PERIODS and open_.any():
+        splits = {max(1, round(f * m)) for f in _SPLITS}
+        split = np.minimum.reduce([r ** (m - p) + s**p for p in splits])
+        bound = s**m * rem + r**m * est + split * rem
+        hit = open_ & (bound <= room)
+        out[hit] = m
+        open_ &= ~hit
+        m = max(m + 1, int(m * 1.02))
+    return out
+
+
+#: where :func:`_lagged_tail` splits the newer columns (fractions of m)
+_SPLITS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 
 
 def detection_horizon(
@@ -131,7 +181,8 @@ def detection_horizon(
         return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
     # the signature of a constant fault comes from the columns A_k^j e_k alone (no tables)
     steady = np.array(thresholds.mu(1e9), dtype=float)
-    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault)
+    # a stop of a robot whose drive lags its command reaches its velocity through the lag
+    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault, lag=cfg.lag)
     # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
     # reported, not waited for (its own residual sits on its noise and drift offset)
     self_ok = bool(np.isfinite(np.diag(delays)).all())
@@ -143,6 +194,8 @@ def detection_horizon(
         "predicted_delays_max": worst if np.isfinite(worst) else None,
         "self_detection_guaranteed": self_ok,
     }
+    if cfg.lag > 0:  # the prediction's premise: a stop's velocity decays through the lag
+        info["drive_lag"] = cfg.lag
     if np.isfinite(worst):
         info["value"] = worst
         return worst, info

@@ -201,15 +201,19 @@ def advance_columns(
 
 @njit(cache=True)
 def advance_crossing(
-    v, prev, tot, need, when, src, first, deg, col_of_row, beta, steps, t0, cert
+    v, prev, tot, lagged, r, need, when, src, first, deg, col_of_row, beta, steps, t0, cert
 ):  # pragma: no cover - compiled
     """``steps`` periods of c ← B_k c accumulating S = Σ_{m<t} c_m (``tot``); ``when[i, b]``
     (−1 until then) records the first t with S_ib(t) ≥ ``need[i, b]``. Buffers and
-    ``cert`` as in :func:`advance_columns`."""
+    ``cert`` as in :func:`advance_columns`. With ``lagged`` (a drive's lag, factor ``r`` =
+    e^(−h/τ) a period) the sum compared is W = S − E, E(t) = Σ_{m<t} r^(t−1−m) c_m (kept in
+    ``lagged``): the signature of a drift that grows as 1 − r^m
+    (:func:`.delays.predicted_delays`)."""
     n, kk = v.shape
     worst = np.full(kk, -np.inf)
     low = np.full(kk, np.inf)
     cur, nxt = v, prev
+    lag = lagged.shape[0] > 0
     for s in range(steps):
         t1 = t0 + s + 1
         for i in range(n):
@@ -217,10 +221,18 @@ def advance_crossing(
             _row(i, cur, o, src, first, deg, col_of_row, beta)
             _flush(o)
             si, ni, wi = tot[i], need[i], when[i]
-            for b in range(kk):
-                si[b] += vi[b]
-                hit = (wi[b] < 0) & (si[b] >= ni[b])
-                wi[b] = t1 if hit else wi[b]
+            if lag:
+                ei = lagged[i]
+                for b in range(kk):
+                    si[b] += vi[b]
+                    ei[b] = r * ei[b] + vi[b]
+                    hit = (wi[b] < 0) & (si[b] - ei[b] >= ni[b])
+                    wi[b] = t1 if hit else wi[b]
+            else:
+                for b in range(kk):
+                    si[b] += vi[b]
+                    hit = (wi[b] < 0) & (si[b] >= ni[b])
+                    wi[b] = t1 if hit else wi[b]
             if s == steps - 1:
                 _watch(o, vi, worst, low)
         cur, nxt = nxt, cur
