@@ -1,5 +1,6 @@
 """Monte-Carlo campaigns: local pool, Ray, resuming, failures, the report."""
 
+import dataclasses
 import json
 import os
 import signal
@@ -398,6 +399,29 @@ def test_a_campaign_folder_belongs_to_one_spec(tmp_path, capsys):
     )
     assert campaign_main([str(longer), "--runs", "2", "--overwrite", *common]) == 0
     assert all(r["duration"] == 12.0 for r in _rows(out).values())  # run again, not kept
+    # another seed is another draw of the battery, so another campaign for the folder
+    capsys.readouterr()
+    assert campaign_main([str(longer), "--runs", "2", "--seed", "4", *common]) == 5
+    assert "differs in: seed" in capsys.readouterr().err
+
+
+def test_seed_draws_the_same_battery_again(tmp_path, capsys, monkeypatch):
+    """--seed overrides the spec's campaign seed (a new draw of an untuned battery, as the
+    README's seed-89 edge draws), into its own default folder; a bad one is exit 2."""
+    sp = spec.load(TINY)
+    again = dataclasses.replace(sp, seed=4)
+    assert [spec.draw(sp, i)["seed"] for i in range(4)] != [
+        spec.draw(again, i)["seed"] for i in range(4)
+    ]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "renders" / "campaigns").mkdir(parents=True)
+    (tmp_path / "renders" / "campaigns" / "tiny_seed4").write_text("x")  # no run starts
+    assert campaign_main([str(TINY), "--seed", "4", "--no-progress"]) == 5
+    err = capsys.readouterr().err
+    assert "tiny_seed4" in err and "names a file" in err
+    for bad in ("-1", str(2**63)):
+        assert campaign_main([str(TINY), "--seed", bad, "--no-progress"]) == 2
+        assert "--seed: expected an integer from 0 to 2**63 - 1" in capsys.readouterr().err
 
 
 def test_campaign_output_problems_are_one_line_exit_5(tmp_path, capsys):

@@ -56,6 +56,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--out", type=Path, help="results folder (default: ./renders/campaigns/NAME)")
     p.add_argument("--runs", type=int, help="override the spec's number of runs")
+    p.add_argument(
+        "--seed",
+        type=int,
+        help="override the spec's campaign seed: a new draw of the same battery (default "
+        "folder: ./renders/campaigns/NAME_seedSEED)",
+    )
     p.add_argument("--limit", type=int, help="stop after this many new runs (resume later)")
     p.add_argument(
         "--overwrite",
@@ -84,6 +90,12 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 if args.runs < 1:
                     raise ScenarioError(f"--runs: expected at least 1, got {args.runs}")
                 spec = dataclasses.replace(spec, runs=args.runs)
+            if args.seed is not None:
+                if not 0 <= args.seed <= 2**63 - 1:
+                    raise ScenarioError(
+                        f"--seed: expected an integer from 0 to 2**63 - 1, got {args.seed}"
+                    )
+                spec = dataclasses.replace(spec, seed=args.seed)
             if args.limit is not None and args.limit < 1:
                 raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
             if args.workers < 1:
@@ -103,7 +115,8 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                     raise ScenarioError(
                         f"--ray-timeout: expected seconds in (0, 3600], got {args.ray_timeout:g}"
                     )
-        out = Path(args.out or Path.cwd() / "renders" / "campaigns" / spec.name).absolute()
+        name = spec.name if args.seed is None else f"{spec.name}_seed{spec.seed}"
+        out = Path(args.out or Path.cwd() / "renders" / "campaigns" / name).absolute()
         if args.ray is not None:  # join the cluster first: a failure leaves no folder behind
             from . import cluster
 
