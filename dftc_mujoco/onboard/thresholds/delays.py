@@ -143,6 +143,10 @@ def _crossing_periods(
     return result
 
 
+#: where :func:`_lagged_tail` splits the newer columns (fractions of m)
+_SPLITS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+
+
 def _lagged_tail(
     rem: np.ndarray, est: np.ndarray, s: np.ndarray, r: float, room: np.ndarray, late: np.ndarray
 ) -> np.ndarray:
@@ -165,10 +169,6 @@ def _lagged_tail(
         open_ &= ~hit
         m = max(m + 1, int(m * 1.02))
     return out
-
-
-#: where :func:`_lagged_tail` splits the newer columns (fractions of m)
-_SPLITS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 
 
 def detection_horizon(
