@@ -130,7 +130,10 @@ def _crossing_periods(
         g = goal[:, idx]
         late = ~got & np.isfinite(g) & (s < 1.0)
         if lagged:
-            m = _lagged_tail(rem, est[:, idx], s, r, mass - g, late)
+            with np.errstate(divide="ignore", invalid="ignore"):  # c(t) / c(t − 1), the newest
+                ratio = np.where(prev[:, idx] > 0.0, v[:, idx] / prev[:, idx], np.inf)
+            sc = np.minimum(ratio.max(axis=0), 1.0)  # A c(t) ≤ sc c(t) once certified
+            m = _lagged_tail(rem, est[:, idx], s, r, mass - g, late, v[:, idx], sc)
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
                 m = np.ceil(np.log((mass - g) / rem) / np.log(s))
@@ -143,27 +146,42 @@ def _crossing_periods(
     return result
 
 
-#: where :func:`_lagged_tail` splits the newer columns (fractions of m)
+#: where :func:`_lagged_tail` splits the newer columns: fractions of m, and lags before m
 _SPLITS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
+_SPLIT_LAGS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
 
 
 def _lagged_tail(
-    rem: np.ndarray, est: np.ndarray, s: np.ndarray, r: float, room: np.ndarray, late: np.ndarray
+    rem: np.ndarray,
+    est: np.ndarray,
+    s: np.ndarray,
+    r: float,
+    room: np.ndarray,
+    late: np.ndarray,
+    col: np.ndarray,
+    sc: np.ndarray,
 ) -> np.ndarray:
     """Periods m after a certificate by which a lagged drift's W has surely crossed (N, K):
-    mass − W(t + m) = R(t + m) + E(t + m) with R(t + m) ≤ s^m R(t), and E(t + m) =
-    r^m E(t) + Σ_{q<m} r^(m−1−q) c(t + q), whose columns before q = p weigh at most
-    r^(m−p) and sum to at most R(t), and from p on sum to at most R(t + p) ≤ s^p R(t); so
-    mass − W(t + m) ≤ s^m R + r^m E + R (r^(m−p) + s^p) for any p ≤ m. The first m on a
-    grid growing 2 % a step (p a few fractions of m) at which that is at most ``room`` =
-    mass − need, where ``late`` (+inf where it never is within :data:`~.envelope.MAX_PERIODS`)."""
+    mass − W(t + m) = R(t + m) + E(t + m), R(t + m) ≤ s^m R(t) and E(t + m) = r^m E(t) +
+    Σ_{q<m} r^(m−1−q) c(t + q). The newer columns c(t + q) are bounded two ways: by
+    sc^q c(t) (``col``; A_k c(t) ≤ sc c(t) when c(t) ≤ sc c(t − 1), A_k ≥ 0), which gives
+    c(t) (sc^m − r^m) / (sc − r); and, split at p ≤ m, those before p weigh at most r^(m−p)
+    and sum to at most R(t), those from p on sum to at most R(t + p) ≤ s^p R(t). The first
+    m on a grid growing 2 % a step (p a few fractions of m, and m less a few lags) at which
+    the lesser bound is at most ``room`` = mass − need, where ``late`` (+inf where it never
+    is within :data:`~.envelope.MAX_PERIODS`)."""
     out = np.full(rem.shape, np.inf)
     open_ = late.copy()
+    lag = -1.0 / np.log(r) if r > 0.0 else 0.0  # τ in periods
     m = 1
     while m <= MAX_PERIODS and open_.any():
         splits = {max(1, round(f * m)) for f in _SPLITS}
-        split = np.minimum.reduce([r ** (m - p) + s**p for p in splits])
-        bound = s**m * rem + r**m * est + split * rem
+        splits |= {m - round(k * lag) for k in _SPLIT_LAGS if round(k * lag) < m}
+        split = np.minimum.reduce([r ** (m - p) + s**p for p in splits]) * rem
+        with np.errstate(divide="ignore", invalid="ignore"):
+            near = np.abs(sc - r) < 1e-12
+            geo = np.where(near, m * r ** (m - 1), (sc**m - r**m) / (sc - r)) * col
+        bound = s**m * rem + r**m * est + np.minimum(split, geo)
         hit = open_ & (bound <= room)
         out[hit] = m
         open_ &= ~hit
