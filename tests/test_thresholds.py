@@ -387,6 +387,9 @@ def test_delays_of_a_lagged_drive_follow_the_signature_of_its_decaying_velocity(
     finite = np.isfinite(expect)
     assert (bound[finite] >= expect[finite]).all()
     assert (bound[finite] <= expect[finite] + 2 * lag / H).all()  # 285 at most here (median 22.5)
+    # a budget spent after 32 periods, before any column is certified: still never early
+    spent = predicted_delays(graph, ko, H, mu, fault, max_work=1.0, lag=lag) / H + 1e-9
+    assert (spent[finite] >= expect[finite]).all() and np.isinf(spent[0, 1])
 
 
 def test_delays_are_not_promised_when_the_signature_oscillates():

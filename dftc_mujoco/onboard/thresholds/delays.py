@@ -130,10 +130,14 @@ def _crossing_periods(
         g = goal[:, idx]
         late = ~got & np.isfinite(g) & (s < 1.0)
         if lagged:
-            with np.errstate(divide="ignore", invalid="ignore"):  # c(t) / c(t − 1), the newest
-                ratio = np.where(prev[:, idx] > 0.0, v[:, idx] / prev[:, idx], np.inf)
-            sc = np.minimum(ratio.max(axis=0), 1.0)  # A c(t) ≤ sc c(t) once certified
-            m = _lagged_tail(rem, est[:, idx], s, r, mass - g, late, v[:, idx], sc)
+            # c(t) ≤ sc c(t − 1) entry by entry gives A_k c(t) ≤ sc c(t) (A_k ≥ 0); +inf
+            # where an entry of c(t − 1) is 0 and its c(t) is not
+            newest, before = v[:, idx], prev[:, idx]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(before > 0.0, newest / before, np.where(newest > 0.0, np.inf, 0.0))
+            sc = ratio.max(axis=0)
+            e_now = est[:, idx] + _slack(t, mass)  # E's rounding, as R's
+            m = _lagged_tail(rem, e_now, s, r, mass - g, late, newest, sc)
         else:
             with np.errstate(divide="ignore", invalid="ignore"):
                 m = np.ceil(np.log((mass - g) / rem) / np.log(s))
@@ -165,7 +169,8 @@ def _lagged_tail(
     mass − W(t + m) = R(t + m) + E(t + m), R(t + m) ≤ s^m R(t) and E(t + m) = r^m E(t) +
     Σ_{q<m} r^(m−1−q) c(t + q). The newer columns c(t + q) are bounded two ways: by
     sc^q c(t) (``col``; A_k c(t) ≤ sc c(t) when c(t) ≤ sc c(t − 1), A_k ≥ 0), which gives
-    c(t) (sc^m − r^m) / (sc − r); and, split at p ≤ m, those before p weigh at most r^(m−p)
+    c(t) (sc^m − r^m) / (sc − r) where sc ≤ 1 (``sc`` (K,), +inf if no such sc); and, split
+    at p ≤ m, those before p weigh at most r^(m−p)
     and sum to at most R(t), those from p on sum to at most R(t + p) ≤ s^p R(t). The first
     m on a grid growing 2 % a step (p a few fractions of m, and m less a few lags) at which
     the lesser bound is at most ``room`` = mass − need, where ``late`` (+inf where it never
@@ -178,9 +183,10 @@ def _lagged_tail(
         splits = {max(1, round(f * m)) for f in _SPLITS}
         splits |= {m - round(k * lag) for k in _SPLIT_LAGS if round(k * lag) < m}
         split = np.minimum.reduce([r ** (m - p) + s**p for p in splits]) * rem
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             near = np.abs(sc - r) < 1e-12
             geo = np.where(near, m * r ** (m - 1), (sc**m - r**m) / (sc - r)) * col
+        geo = np.where(sc <= 1.0, geo, np.inf)  # a growing column bounds nothing here
         bound = s**m * rem + r**m * est + np.minimum(split, geo)
         hit = open_ & (bound <= room)
         out[hit] = m
