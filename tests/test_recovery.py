@@ -221,7 +221,7 @@ def test_eq46s_promise_holds_for_a_stop_that_decays_through_the_drives_lag():
     teammates' last flag came 1.96 s after the stop, every premise holding, inside eq. 46's
     domain. With the lag in the sweep (``onboard/thresholds/delays.py``) the promise holds:
     here (a complete graph, the same speed) every teammate flags robot 1 2.16 s after its
-    stop, within Δt_d,max (6.03 s; 1.78 s without the lag)."""
+    stop, within Δt_d,max (6.03 s; 1.77 s without the lag)."""
     from dftc_mujoco.campaign.task import fault_facts
     from dftc_mujoco.onboard.thresholds.delays import predicted_delays
 
