@@ -170,11 +170,11 @@ def _lagged_tail(
     Σ_{q<m} r^(m−1−q) c(t + q). The newer columns c(t + q) are bounded two ways: by
     sc^q c(t) (``col``; A_k c(t) ≤ sc c(t) when c(t) ≤ sc c(t − 1), A_k ≥ 0), which gives
     c(t) (sc^m − r^m) / (sc − r) where sc ≤ 1 (``sc`` (K,), +inf if no such sc); and, split
-    at p ≤ m, those before p weigh at most r^(m−p)
-    and sum to at most R(t), those from p on sum to at most R(t + p) ≤ s^p R(t). The first
-    m on a grid growing 2 % a step (p a few fractions of m, and m less a few lags) at which
-    the lesser bound is at most ``room`` = mass − need, where ``late`` (+inf where it never
-    is within :data:`~.envelope.MAX_PERIODS`)."""
+    at p ≤ m, those before p weigh at most r^(m−p) and sum to at most R(t), those from p on
+    sum to at most R(t + p) ≤ s^p R(t). The first m on a grid growing 2 % a step (p a few
+    fractions of m, and m less a few lags) at which the lesser bound is at most ``room`` =
+    mass − need, where ``late`` (+inf where it never is within
+    :data:`~.envelope.MAX_PERIODS`)."""
     out = np.full(rem.shape, np.inf)
     open_ = late.copy()
     lag = -1.0 / np.log(r) if r > 0.0 else 0.0  # τ in periods
