@@ -1,0 +1,44 @@
+"""The peers' benchmark runs as the README says, in a process of its own."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_peers_benchmark_times_each_peer_on_the_formation_task():
+    """MuJoCo with a numpy controller and the DFTC loop do the task (every healthy robot
+    within 2 cm of its slot after 5 s) faster than real time; a peer that is not installed
+    is named, not a traceback."""
+    peers = ["mujoco", "dftc", "pybullet"]
+    args = ["--n", "4", "--duration", "5", "--repeat", "1", "--peers", *peers]
+    done = subprocess.run(
+        [sys.executable, "benchmarks/bench_peers.py", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    rows = {
+        m["peer"]: (float(m["us"]), float(m["rtf"]), float(m["err"]))
+        for m in re.finditer(
+            r"^\s+4\s+(?P<peer>\w+)\s+(?P<us>[\d.]+)\s+(?P<rtf>[\d.e+]+)x\s+(?P<err>[\d.]+)m$",
+            done.stdout,
+            flags=re.M,
+        )
+    }
+    for peer in ("mujoco", "dftc"):
+        us, rtf, err = rows[peer]
+        assert err < 0.02, (peer, err)
+        assert rtf > 1.0 and abs(rtf - 1e4 / us) < 0.01 * rtf, (peer, us, rtf)
+    if importlib.util.find_spec("pybullet") is None:
+        assert "pybullet: not installed" in done.stdout
+        assert "pybullet" not in rows
+    else:
+        assert rows["pybullet"][2] < 0.02
