@@ -28,6 +28,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "systemic_anomaly_over": ("robots",),
     "detection_not_guaranteed": ("robot", "until", "restarted"),
     "detection_past_end": ("robot", "left", "dt_d_max"),
+    "detection_window_restarted": ("robot", "onset", "until"),
     "detection_horizon": ("value", "before"),
     "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
     "warning": ("message",),
@@ -130,6 +131,14 @@ def describe(e: Mapping[str, Any]) -> str:
         return (
             f"robot {r}'s fault comes before the thresholds settle{after}: its detection within "
             f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
+        )
+    if k == "detection_window_restarted":
+        until = e["until"]
+        when = f"at {until:.2f} s" if until is not None else "only after the end of the run"
+        return (
+            f"an exclusion restarted the thresholds within robot {r}'s Δt_d,max window (its fault "
+            f"at {e['onset']:.2f} s): eq. 46 no longer promises its detection within Δt_d,max "
+            f"(the thresholds settle again {when})"
         )
     if k == "detection_past_end":
         return (

@@ -32,6 +32,7 @@ from .assembly import (
     team_config,
 )
 from .block_failure import block_error, setup_error
+from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team
@@ -172,6 +173,7 @@ class Simulation:
             obstacles=obstacles.reshape(-1, 4),
         )
         self.events = Events()
+        self.domain = DetectionDomain(self.events, self.steps * dt)  # eq. 46's
         if s.noise.xi_bar is None and "xi_bar" not in model.calibration:
             self.events.add(
                 0.0,
@@ -420,6 +422,7 @@ class Simulation:
         plant, team, faults, noise = self.plant, self.team, self.faults, self.noise
         assert plant is not None  # reset() made it; close() ends stepping
         events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
+        domain = self.domain
         log = self.log
         channel, sensors = self.channel, self.sensors
         watch = MONITOR_ALLOWED
@@ -456,13 +459,7 @@ class Simulation:
                                 t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
                             )
                             monitor.watched[f.robot] = False  # the fault is to be detected
-                            left = round(steps * dt - t, 6)  # the run left after its onset
-                            if left < team.recovery.dt_d_max:  # eq. 46's window passes the end
-                                limit = round(team.recovery.dt_d_max, 6)
-                                events.add(
-                                    t, "detection_past_end", robot=f.robot + 1, left=left,
-                                    dt_d_max=limit,
-                                )  # fmt: skip
+                            domain.onset(t, f.robot + 1, team.recovery.dt_d_max)
                         for f in faults.just_ended:
                             events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
                     plant.positions(out=x)
@@ -507,16 +504,10 @@ class Simulation:
                     if team.events:
                         self._take_team_events(t)
                     for f in onsets:  # after the team's step: an exclusion now restarts the rule
-                        if t < team.settles_at:  # outside eq. 46's domain (T_s, or the
-                            # restarted rule's since the last exclusion, this period's included)
-                            events.add(
-                                t,
-                                "detection_not_guaranteed",
-                                robot=f.robot + 1,
-                                # None: the thresholds do not settle within the run
-                                until=team.settles_at if np.isfinite(team.settles_at) else None,
-                                restarted=team.restarted_at,
-                            )
+                        domain.after_period(
+                            t, f.robot + 1, team.settles_at, team.restarted_at,
+                            team.recovery.dt_d_max,
+                        )  # fmt: skip
                     if ctrl is None:
                         ctrl = physics.commands(xi)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
@@ -592,7 +583,9 @@ class Simulation:
                 monitor.watched[e["robot"] - 1] = False
             elif kind == "graph_not_strongly_connected":
                 monitor.graph_changed(t, False)
-            self.events.add(e.pop("t"), kind, **e)
+            self.events.add(e["t"], kind, **{k: v for k, v in e.items() if k != "t"})
+            if kind == "exclusion":  # the thresholds restarted: windows of eq. 46 it cuts
+                self.domain.excluded(e["t"], e["robot"], self.team.settles_at)
         self.team.events.clear()
 
     def _left_arena(self, t: float, x: np.ndarray) -> None:

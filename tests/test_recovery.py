@@ -213,6 +213,47 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     assert not fault_facts(same.summary)[1]["after_settle"]
 
 
+def test_an_exclusion_within_a_faults_window_takes_that_fault_out_of_eq46s_domain():
+    """Eq. 46 promises a detection within Δt_d,max while the thresholds stay settled over the
+    fault's window; another robot's exclusion inside it restarts them from the residuals'
+    bound. Found on the TidyBot battery with cylinders drawn at seed 62 (run 227: 16 bases,
+    robot 11 stopped at 30.61 s, robot 5 excluded 0.37 s later): the campaign counted the
+    promise as broken because robot 5, excluded, never flagged robot 11. Now the run says
+    that the exclusion cut the window (``detection_window_restarted``), and the campaign's
+    facts leave the fault out of the domain, the time of the cut in ``restarted_in_window``.
+    Here robot 2 stops 0.3 s before robot 1's exclusion (l1, Δt_d,max ≈ 0.8 s)."""
+    from dftc_mujoco.campaign.task import fault_facts
+    from dftc_mujoco.events import describe
+
+    def two_stops(second: float):
+        faults = [
+            {"robot": 1, "kind": "stop", "t": 15.0},
+            {"robot": 2, "kind": "stop", "t": second},
+        ]
+        over = {"onboard.thresholds": "l1", "fdir.dt_d_max": "auto", "faults": faults}
+        return simulate(
+            load_scenario("paper_case", {**over, "fdir.max_faults": 2, "duration": 30.0})
+        )
+
+    alone = two_stops(25.0)  # robot 2's stop long after robot 1's exclusion
+    (gone,) = alone.summary["exclusions"][:1]
+    assert gone["robot"] == 1 and alone.events.of_kind("detection_window_restarted") == []
+    assert all(f["restarted_in_window"] is None for f in fault_facts(alone.summary))
+    onset = round(gone["t"] - 0.3, 2)
+    cut = two_stops(onset)
+    assert cut.summary["exclusions"][0] == gone  # robot 1's exclusion as before
+    (note,) = cut.events.of_kind("detection_window_restarted")
+    (restart,) = cut.summary["dt_d_max"]["settle_after_exclusions"][:1]
+    assert (note["t"], note["robot"], note["onset"]) == (gone["t"], 2, onset)
+    assert note["until"] == restart["settle_time"] > gone["t"]
+    assert f"robot 2's Δt_d,max window (its fault at {onset:.2f} s)" in describe(note)
+    first, second = fault_facts(cut.summary)
+    window = second["dt_d_max"]
+    assert onset < gone["t"] <= onset + window  # the exclusion falls within robot 2's window
+    assert second["after_settle"] and second["restarted_in_window"] == gone["t"]
+    assert not second["in_domain"] and first["restarted_in_window"] is None
+
+
 def test_eq46s_promise_holds_for_a_stop_that_decays_through_the_drives_lag():
     """The slow test base's drive lags its command by 2.5 s (modelled onboard): a stop does
     not take its velocity at once, it decays through the lag, so its drift on y_m grows as

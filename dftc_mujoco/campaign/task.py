@@ -92,6 +92,17 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
         gone = next(
             (e["t"] for e in summary["exclusions"] if e["robot"] == robot and e["t"] >= t_f), None
         )
+        # another robot's exclusion restarted the thresholds within its window (detection_domain)
+        cut = next(
+            (
+                e["t"]
+                for e in events
+                if e["kind"] == "detection_window_restarted"
+                and e["robot"] == robot
+                and e["onset"] == t_f
+            ),
+            None,
+        )
         out.append(
             {
                 "robot": robot,
@@ -107,13 +118,16 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
                 # why it was still in the team at the end (None: excluded)
                 "kept_why": kept_why(events, robot, t_f, end, planned) if gone is None else None,
                 "after_settle": settled,  # eq. 46's domain
+                "restarted_in_window": cut,  # an exclusion's restart cut its window (or None)
                 "dt_d_max": dt,
                 "command": told,
                 # eq. 46's promise applies: a finite prediction, a stop at least the reference
-                # fault at onset, after T_s, and Δt_d,max ends within the run (observable)
+                # fault at onset, after T_s and no restart of the thresholds within its window,
+                # and Δt_d,max ends within the run (observable)
                 "in_domain": bool(
                     promised
                     and settled
+                    and cut is None
                     and f.get("fault") == "stop"
                     and told is not None
                     and reference is not None
