@@ -171,6 +171,18 @@ def test_a_fault_before_the_thresholds_settle_is_reported_outside_eq46s_domain()
     assert late.summary["dt_d_max"]["settle_time"] < 41.8
 
 
+def _two_stops(second: float, **fdir):
+    """paper_case for 30 s with l1 and Δt_d,max "auto": robot 1 stops at 15 s (excluded at
+    16.17 s), robot 2 at ``second``; ``fdir``: more of the ``[fdir]`` table."""
+    faults = [
+        {"robot": 1, "kind": "stop", "t": 15.0},
+        {"robot": 2, "kind": "stop", "t": second},
+    ]
+    over = {"onboard.thresholds": "l1", "fdir.dt_d_max": "auto", "faults": faults}
+    more = {f"fdir.{k}": v for k, v in fdir.items()}
+    return simulate(load_scenario("paper_case", {**over, **more, "duration": 30.0}))
+
+
 def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_time():
     """An exclusion restarts the thresholds from the residuals' bound, a new transient (l1:
     up to 16 times steady on 16 hexbots in a ring, seed 31's run 302): a stop 1.8 s after
@@ -180,15 +192,7 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     from dftc_mujoco.campaign.task import fault_facts
     from dftc_mujoco.events import describe
 
-    def two_stops(second: float):
-        faults = [
-            {"robot": 1, "kind": "stop", "t": 15.0},
-            {"robot": 2, "kind": "stop", "t": second},
-        ]
-        over = {"onboard.thresholds": "l1", "fdir.dt_d_max": "auto", "faults": faults}
-        return simulate(load_scenario("paper_case", {**over, "duration": 30.0}))
-
-    soon, later = two_stops(18.0), two_stops(21.0)
+    soon, later = _two_stops(18.0), _two_stops(21.0)
     (gone,) = soon.summary["exclusions"]
     (restart,) = soon.summary["dt_d_max"]["settle_after_exclusions"]
     assert gone["robot"] == 1 and restart["t"] == gone["t"] < 18.0
@@ -205,7 +209,7 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     assert [f["after_settle"] for f in fault_facts(later.summary)] == [True, True]
     # a stop that begins in the very period of the exclusion is outside the restarted domain
     # too, and the run says so (the event used to be decided before the team's step)
-    same = two_stops(gone["t"])
+    same = _two_stops(gone["t"])
     assert same.summary["exclusions"][0]["t"] == gone["t"]
     assert [e["t"] for e in same.events.of_kind("fault")] == [15.0, gone["t"]]
     (note,) = same.events.of_kind("detection_not_guaranteed")
@@ -225,22 +229,12 @@ def test_an_exclusion_within_a_faults_window_takes_that_fault_out_of_eq46s_domai
     from dftc_mujoco.campaign.task import fault_facts
     from dftc_mujoco.events import describe
 
-    def two_stops(second: float):
-        faults = [
-            {"robot": 1, "kind": "stop", "t": 15.0},
-            {"robot": 2, "kind": "stop", "t": second},
-        ]
-        over = {"onboard.thresholds": "l1", "fdir.dt_d_max": "auto", "faults": faults}
-        return simulate(
-            load_scenario("paper_case", {**over, "fdir.max_faults": 2, "duration": 30.0})
-        )
-
-    alone = two_stops(25.0)  # robot 2's stop long after robot 1's exclusion
+    alone = _two_stops(25.0, max_faults=2)  # robot 2's stop long after robot 1's exclusion
     (gone,) = alone.summary["exclusions"][:1]
     assert gone["robot"] == 1 and alone.events.of_kind("detection_window_restarted") == []
     assert all(f["restarted_in_window"] is None for f in fault_facts(alone.summary))
     onset = round(gone["t"] - 0.3, 2)
-    cut = two_stops(onset)
+    cut = _two_stops(onset, max_faults=2)
     assert cut.summary["exclusions"][0] == gone  # robot 1's exclusion as before
     (note,) = cut.events.of_kind("detection_window_restarted")
     (restart,) = cut.summary["dt_d_max"]["settle_after_exclusions"][:1]
