@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from .errors import InputError, SimulationError, raised_line
+from .onboard.addresses import address_table, view1, view2
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 #: the premises, in the order the tables print them, with a one-line meaning each
@@ -176,35 +177,16 @@ MEMORY_FRACTION = 0.01
 GAP = 0.1
 
 _NOISE, _MISMATCH, _SATURATION, _CONTACT, _PLANAR = range(5)
+#: the monitor's arrays :func:`_check` reads by address, in its order (never reassigned)
+OWN = ("watched", "x0", "int_u", "slow", "body", "z0", "geom_robot", "value")
+#: the monitor's numbers :func:`_check` reads from one array, in its order
+CONSTS = ("h", "eta_bar", "step", "offset", "phi_bar", "limit")
 _PER_PERIOD = ("noise", "mismatch", "saturation", "contact", "planar")
 
 
 @njit(cache=True)
 def _check(
-    x,
-    eta,
-    u,
-    u_bar,
-    phi_hat,
-    watched,
-    x0,
-    int_u,
-    slow,
-    h,
-    eta_bar,
-    step,
-    offset,
-    phi_bar,
-    limit,
-    xpos,
-    xmat,
-    body,
-    z0,
-    geom_robot,
-    contact_geom,
-    contact_dist,
-    ncon,
-    value,
+    x, eta, u, u_bar, phi_hat, own, consts, xpos, xmat, contact_geom, contact_dist, ncon
 ):  # pragma: no cover - compiled
     """One period of the premise checks, every robot at once; ``value`` (5, N) gets each
     premise's excess over its bound (> 0: violated). Returns how many entries are > 0.
@@ -214,7 +196,18 @@ def _check(
     offset E_k = D_k − S_k within ē (``offset``); with ``phi_bar`` > 0 (the drive rule) the
     premise is ‖φ̂_k‖ ≤ Φ̄ instead. Robots not ``watched`` (excluded, or with an active
     fault) are not judged on noise, drift and saturation.
+
+    The monitor's own arrays come by address in ``own`` (:data:`OWN`' order,
+    :mod:`.onboard.addresses`) and its numbers in ``consts`` (:data:`CONSTS`' order): 12
+    arguments instead of 24, about 0.5 µs a period less of numba's unboxing.
     """
+    watched, x0 = view1(own, 0, np.bool_), view2(own, 1, np.float64)
+    int_u, slow = view2(own, 2, np.float64), view2(own, 3, np.float64)
+    body, z0 = view1(own, 4, np.int64), view1(own, 5, np.float64)
+    geom_robot, value = view1(own, 6, np.int64), view2(own, 7, np.float64)
+    h, eta_bar, step, offset, phi_bar, limit = (
+        consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
+    )  # fmt: skip
     n = x.shape[0]
     hits = 0
     for i in range(n):
@@ -320,6 +313,10 @@ class Monitor:
         self.slow = np.zeros((n, 2))
         self.value = np.zeros((5, n))
         self.watched = np.ones(n, bool)
+        # what _check reads of the monitor: its arrays by address (kept alive by the monitor),
+        # its numbers in one array
+        self._own = address_table([getattr(self, name) for name in OWN])
+        self._consts = np.array([getattr(self, name) for name in CONSTS], dtype=float)
         self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
         self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
@@ -333,6 +330,16 @@ class Monitor:
         self.worst["initial_error"] = (start.implied, start.robot + 1)
         if start.implied > start.value:
             self._violate("initial_error", start.robot, start.implied, 0.0)
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A copy or a pickle leaves out the address table: it points into these arrays."""
+        state = self.__dict__.copy()
+        del state["_own"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._own = address_table([getattr(self, name) for name in OWN])
 
     def period(
         self,
@@ -357,25 +364,13 @@ class Monitor:
             u,
             u_bar,
             phi_hat,
-            self.watched,
-            self.x0,
-            self.int_u,
-            self.slow,
-            self.h,
-            self.eta_bar,
-            self.step,
-            self.offset,
-            self.phi_bar,
-            self.limit,
+            self._own,
+            self._consts,
             xpos,
             xmat,
-            self.body,
-            self.z0,
-            self.geom_robot,
             contact_geom if ncon else self._empty_geom,
             contact_dist if ncon else self._empty_dist,
             ncon,
-            self.value,
         )
         if hits:
             for p, i in zip(*np.nonzero(self.value), strict=True):

@@ -50,11 +50,15 @@ class Bumpers:
         self.owner = geom_owners(scene)
         self.data = data
         self.value = np.zeros(len(scene.body), bool)
-        self._none = np.zeros((0, 2), dtype=np.int32)
+        self._clear = True  # ``value`` is all False (the last read had no contact)
 
     def read(self) -> np.ndarray:
         """Which robots touch something now (a view, rewritten by the next read)."""
         ncon = self.data.ncon
-        geom = self.data.contact.geom if ncon else self._none
-        touching(self.owner, geom, ncon, self.value)
+        if ncon:
+            touching(self.owner, self.data.contact.geom, ncon, self.value)
+            self._clear = False
+        elif not self._clear:  # no contact at all: nobody touches (no compiled call)
+            self.value[:] = False
+            self._clear = True
         return self.value
