@@ -462,9 +462,8 @@ class Simulation:
                             domain.onset(t, f.robot + 1, team.recovery.dt_d_max)
                         for f in faults.just_ended:
                             events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
-                    plant.positions(out=x)
                     eta, xi = noise.next()
-                    np.add(x, eta, out=x_m)
+                    plant.sense(eta, x, x_m)  # x and x_m = x + η (eq. 4)
                     if t >= sensors.due:  # faults of the position sensors, on x_m (eq. 4)
                         self._sensor_faults(t, x_m)
                     j = k if k < last else last

@@ -62,6 +62,7 @@ class PhysicsStep:
         self.xmat = np.empty_like(data.xmat)
         self._live = (data.xpos, data.xmat)  # views into MjData's memory, taken once
         self.pose = np.empty((n, 3))
+        self._still = Before(*self._live, None, None, 0, self.pose)  # live() without contacts
         self.k = 0
         self.xi = np.zeros((0, 2))
         self.ctrl: np.ndarray | None = None
@@ -107,13 +108,10 @@ class PhysicsStep:
         """MuJoCo's state now, without copies (the physics advances after the loop read it)."""
         data = self.plant.data
         ncon = data.ncon
-        return Before(
-            *self._live,
-            data.contact.geom if ncon else None,
-            data.contact.dist if ncon else None,
-            ncon,
-            self.pose,
-        )
+        if not ncon:
+            return self._still
+        contact = data.contact
+        return Before(*self._live, contact.geom, contact.dist, ncon, self.pose)
 
     def set(self, k: int, xi: np.ndarray) -> PhysicsStep:
         """Period ``k`` with the drives' errors ``xi``: ready to be run beside the pass."""

@@ -70,8 +70,9 @@ def test_an_array_that_is_not_contiguous_is_refused():
 
 
 def test_the_team_period_takes_its_records_by_address():
-    """The compiled period's arrays are its inputs, the table, μ and the timers; every cached
-    table points into the arrays kept beside it (they live as long as the table)."""
+    """The compiled period's arrays are its inputs, the table, μ, the timers and the records'
+    numbers; every cached table points into the arrays kept beside it (they live as long as
+    the table)."""
     with Simulation(make(scenario_dict())) as sim:
         sim.step(5)
         team = sim.team
@@ -79,7 +80,7 @@ def test_the_team_period_takes_its_records_by_address():
     assert team_period_flat.signatures  # one per argument types met so far in this process
     for signature in team_period_flat.signatures:
         arrays = [a for a in signature if isinstance(a, types.Array)]
-        assert len(arrays) == 9 and len(signature) == 38
+        assert len(arrays) == 10 and len(signature) == 15
     assert team._flat
     for kept, table, *_ in team._flat.values():
         assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]

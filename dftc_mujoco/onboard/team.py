@@ -60,7 +60,7 @@ from .supervisor import Supervisor, Surroundings, obstacle_label
 from .team_axis import expand, place
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
-from .thresholds.paper import dense_thresholds
+from .thresholds.paper import dense_thresholds, refresh_bound
 from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -401,6 +401,7 @@ class Team:
             inp, buf, th = PeriodInputs(*inputs), self._buffers, self._th
             ob, dec = self.observer.record(), self.decision.record()
             ctl, sup, seen, drive, est, alarm = self._records()
+            refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
             begin(inp, ob, ctl, buf)  # each robot's own block of the state, before it moves
             code = 0
 
@@ -448,9 +449,9 @@ class Team:
                 self.decision.record(),
                 self._buffers,
             )
-            arrays, (_, timer, *numbers) = flat_arguments(records)  # ⁱμ_k: at each call
-            flat = self._flat[key] = (arrays, address_table(arrays), timer, *numbers)
-        return (flat[1], self._th.dense, *flat[2:])
+            arrays, (_, timer, numbers) = flat_arguments(records)  # ⁱμ_k: at each call
+            flat = self._flat[key] = (arrays, address_table(arrays), timer, numbers)
+        return flat[1], self._th.dense, flat[2], flat[3]
 
     def _records(self) -> tuple[Any, ...]:
         """The records that change only at an exclusion (and with the range sensor's
