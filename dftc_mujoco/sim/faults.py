@@ -43,7 +43,6 @@ class ActuatorFaults:
         self.stopped = np.zeros(n, bool)
         self.started = [False] * len(faults)
         self._stop_terms: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._written: np.ndarray | None = None  # bias terms last written
         bias = [f for f in faults if f.kind in ("bias", "drift")]  # drift: a growing bias
         self._bias_robots = np.array(sorted({f.robot for f in bias}), dtype=int)
         self._b_robot = np.array([f.robot for f in bias], dtype=int)
@@ -55,6 +54,13 @@ class ActuatorFaults:
         # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
         self._b_settled = np.where(self._b_ramp, np.inf, self._b_t + 40.0 * self._b_tau)
         self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
+        # the bias faults as Python numbers (bias_phi every period: no NumPy scalars)
+        self._b_list = list(
+            zip(
+                self._b_robot.tolist(), self._b_t.tolist(), self._b_end.tolist(),
+                self._b_tau.tolist(), self._b_ramp.tolist(), list(self._b_value), strict=True,
+            )
+        )  # fmt: skip
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
         # the faults _switch reads, and when what it finds may next change (-inf: now)
         self._switched = tuple(f for f in faults if f.kind not in ("bias", "drift"))
@@ -62,6 +68,9 @@ class ActuatorFaults:
         self._moving_until = -np.inf  # a bias profile moves (apply() every period) until then
         self.ended = [False] * len(faults)
         self.just_ended: list[Fault] = []  # the faults that ended at the last apply()
+        self._mark = self.due  # the next start or end of a fault (apply() looks then)
+        self._b0 = model.actuator_biasprm[:, 0]  # a view into the model: the bias terms b0
+        self._bias_rows = self._rows_of(self.stopped)
         self._gain = np.ones(n)  # each robot's remaining effectiveness (loss_of_effectiveness)
         self.stuck = np.zeros(n, bool)  # robots whose actuators keep the command of onset
         self.any_stuck = False  # stuck.any(), read every period
@@ -71,6 +80,11 @@ class ActuatorFaults:
                 "faults: loss_of_effectiveness is modelled for velocity servos and motors; this "
                 "robot drives position servos (whose gain scales the position, not the speed)"
             )
+
+    def _rows_of(self, stopped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The biased robots that are not ``stopped``, and their actuators (R, A)."""
+        rows = self._bias_robots[~stopped[self._bias_robots]]
+        return rows, self.actuator[rows]
 
     def _acting(self, f: Fault, t: float) -> bool:
         """Fault ``f`` acts at ``t``: started, not ended, and (intermittent) in an on window."""
@@ -108,8 +122,8 @@ class ActuatorFaults:
                 m.actuator_gainprm[ids, 0] = gain0[ids] * gain[robot]
                 m.actuator_biasprm[ids, 0] = bias0[ids, 0]
                 m.actuator_biasprm[ids, 2] = bias0[ids, 2]
-                self._written = None  # the bias terms are written again
         self.stopped, self._gain = stopped, gain
+        self._bias_rows = self._rows_of(stopped)
         # until the next start or end of a fault it reads it would change nothing, so
         # apply() (every period while a bias moves) skips it
         self._switch_due = _next_switch(self._switched, t)
@@ -120,14 +134,23 @@ class ActuatorFaults:
         Called every control period while a bias profile moves or while the drive maps a
         bias through the robot's pose or integrates it (position servos).
         """
-        new, self.just_ended = [], []
-        for k, f in enumerate(self.faults):
-            if not self.started[k] and t >= f.t:
-                self.started[k] = True
-                new.append(f)
-            if self.started[k] and not self.ended[k] and t >= f.end:
-                self.ended[k] = True
-                self.just_ended.append(f)
+        new: list[Fault] = []
+        if self.just_ended:
+            self.just_ended = []
+        if t >= self._mark:  # a fault starts or ends now
+            mark = np.inf
+            for k, f in enumerate(self.faults):
+                if not self.started[k] and t >= f.t:
+                    self.started[k] = True
+                    new.append(f)
+                if self.started[k] and not self.ended[k] and t >= f.end:
+                    self.ended[k] = True
+                    self.just_ended.append(f)
+                if not self.started[k]:
+                    mark = min(mark, f.t)
+                elif not self.ended[k]:
+                    mark = min(mark, f.end)
+            self._mark = mark
         if t >= self._switch_due:
             self._switch(t)
         m = self.model
@@ -135,12 +158,8 @@ class ActuatorFaults:
             phi = self.bias_phi(t)
             # drives map the whole team (a wheel offset depends on each robot's heading)
             b0 = self.actuation.bias_terms(self.drive.joint_velocity(phi), advance=True)
-            rows = self._bias_robots[~self.stopped[self._bias_robots]]
-            offsets = b0[rows]
-            written = self._written
-            if written is None or written.shape != offsets.shape or not (offsets == written).all():
-                m.actuator_biasprm[self.actuator[rows], 0] = offsets
-                self._written = offsets
+            rows, ids = self._bias_rows  # the biased robots that are not stopped
+            self._b0[ids] = b0[rows]  # (an unchanged value: as cheap to write as to compare)
         for robot, (gain, b0, b2) in self._stop_terms.items():
             ids = self.actuator[robot]
             m.actuator_gainprm[ids, 0] = gain[0]
@@ -177,14 +196,13 @@ class ActuatorFaults:
         """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
         phi = self._phi
         phi[:] = 0.0
-        for j, robot in enumerate(self._b_robot):
-            age = t - self._b_t[j]
-            if age >= 0.0 and t < self._b_end[j]:
-                tau = self._b_tau[j]
-                if self._b_ramp[j]:  # a drift: value [m/s²] × age
-                    phi[robot] += age * self._b_value[j]
+        for robot, start, end, tau, ramp, value in self._b_list:
+            age = t - start
+            if age >= 0.0 and t < end:
+                if ramp:  # a drift: value [m/s²] × age
+                    phi[robot] += age * value
                 else:
-                    phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * self._b_value[j]
+                    phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * value
         return phi
 
     def _bias_profile(self, t: np.ndarray) -> np.ndarray:
@@ -228,6 +246,7 @@ class ActuatorFaults:
         self.model.actuator_biasprm[:, :3] = bias
         self.model.actuator_biastype[:] = biastype
         self.stopped[:] = False
+        self._bias_rows = self._rows_of(self.stopped)
         self.stuck[:] = False
         self.any_stuck = False
         self._stuck_ctrl.clear()
@@ -235,9 +254,8 @@ class ActuatorFaults:
         self.started = [False] * len(self.faults)
         self.ended = [False] * len(self.faults)
         self._stop_terms.clear()
-        self._written = None
         self.actuation.bias_integral[:] = 0.0
-        self.due = min((f.t for f in self.faults), default=np.inf)
+        self.due = self._mark = min((f.t for f in self.faults), default=np.inf)
         self._switch_due = self._moving_until = -np.inf
 
 
