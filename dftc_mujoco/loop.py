@@ -600,11 +600,7 @@ class Simulation:
         the robots' poses read before the physics advanced (None: read them now)."""
         log = self.log
         row, d = log.size, log.data
-        d["t"][row] = t
-        d["x"][row] = x
-        d["c_d"][row] = c
-        lim, v_cmd = self.command_limit, d["v_cmd"][row]  # what the drives were asked for,
-        np.minimum(np.maximum(cmd, -lim, out=v_cmd), lim, out=v_cmd)  # within their range
+        log.sample(t, x, c, cmd, self.command_limit)  # v_cmd: within the drives' range
         assert self.plant is not None
         if pose is None:
             self.plant.poses(out=d["pose"][row])

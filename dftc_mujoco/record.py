@@ -12,9 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from .atomic import atomic_write, write_text
 from .events import make
+from .onboard.addresses import address_table, view1, view2, view3
 
 __all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
@@ -72,6 +74,32 @@ def _shape(code: str, n: int) -> tuple[int, ...]:
     return tuple(n if c == "N" else int(c) for c in code)
 
 
+#: the fields :meth:`Log.sample` writes, in the order of its compiled call's table
+SAMPLED = ("t", "x", "c_d", "v_cmd")
+
+
+@njit(cache=True)
+def _sample(table, row, t, x, c, cmd, limit):  # pragma: no cover - compiled
+    """Row ``row`` of t, x, c_d and v_cmd (:data:`SAMPLED`, by address in ``table``):
+    v_cmd is ``cmd`` within ±``limit`` (what the drives can be asked for; NaN stays NaN)."""
+    f8 = np.float64
+    log_t, log_x, log_c, log_v = (
+        view1(table, 0, f8), view3(table, 1, f8), view2(table, 2, f8), view3(table, 3, f8)
+    )  # fmt: skip
+    log_t[row] = t
+    for d in range(c.shape[0]):
+        log_c[row, d] = c[d]
+    for i in range(x.shape[0]):
+        for d in range(x.shape[1]):
+            log_x[row, i, d] = x[i, d]
+            v = cmd[i, d]
+            if v < -limit:
+                v = -limit
+            if v > limit:
+                v = limit
+            log_v[row, i, d] = v
+
+
 class Log:
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part.
 
@@ -101,6 +129,24 @@ class Log:
             for name, (code, dtype, fill) in LOG_FIELDS.items()
             if name not in DERIVED_FIELDS
         }
+        # :meth:`sample`'s arrays by address (these arrays live as long as the log)
+        self._sampled = address_table([self.data[name] for name in SAMPLED])
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A copy or a pickle leaves out the address table: it points into these arrays."""
+        state = self.__dict__.copy()
+        del state["_sampled"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._sampled = address_table([self.data[name] for name in SAMPLED])
+
+    def sample(self, t: float, x: np.ndarray, c: np.ndarray, cmd: np.ndarray, limit: float) -> None:
+        """The simulator's part of the current row (:attr:`size`): the time ``t``, the true
+        positions ``x`` (N, 2), the desired centroid ``c`` and the commands ``cmd`` (N, 2)
+        within the drives' range ±``limit`` (v_cmd), in one compiled call."""
+        _sample(self._sampled, self.size, t, x, c, cmd, limit)
 
     def add_field(self, name: str, shape: tuple[int, ...], dtype: type, fill: Any) -> None:
         """A field of this run only (the network's per-link fields), sampled every row."""

@@ -38,6 +38,7 @@ from .detector import Detector
 from .estimate_alarm import EstimateAlarm
 from .fault_estimator import FaultEstimator, held
 from .general import general_period
+from .log_row import write_row
 from .observer import Observer
 from .period import (
     RAISED,
@@ -57,7 +58,7 @@ from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .streaming import streams
 from .supervisor import Supervisor, Surroundings, obstacle_label
-from .team_axis import expand, place
+from .team_axis import expand
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds, refresh_bound
@@ -237,7 +238,6 @@ class Team:
         # ‖ⁱr_k‖ (none before the first round of a network), then each thread's scratch row
         self._norms = np.zeros((m + threads, m))
         self._raised = np.zeros((m, m), bool)
-        self._logged = np.zeros((2, m), bool)  # a log row's reactive and flagged members
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         cfg, gone = self.config, len(self.gone)
         self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
@@ -247,6 +247,7 @@ class Team:
         )
         self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
         self._flat = Tables()  # see _flat_records
+        self.log_tables = Tables()  # the log's arrays by address (.log_row.write_row)
         self._buffers = PeriodBuffers(
             self.x_own,
             self.x_d,
@@ -516,23 +517,9 @@ class Team:
     ) -> None:
         """Write the period's outputs into row ``row`` of preallocated log arrays (original
         robot axis; the fields of :meth:`outputs` but ``u_bar`` and ``flag``); the N × N
-        ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1."""
-        mem = self.members  # after an exclusion: onto the original axis (place)
-        log["u"][row] = self.u
-        log["active"][row] = self.active
-        place(log["x_d"][row], self.x_d, mem)
-        reactive, flagged = self._logged
-        np.greater_equal(self.supervisor.active, 0, out=reactive)
-        flagged_by_teammates(np.asarray(self.flag, bool), flagged)
-        place(log["reactive"][row], reactive, mem, fill=False)
-        place(log["flagged"][row], flagged, mem, fill=False)
-        if fdir:
-            log["phi_hat"][row] = self.phi_hat
-        if row_nn >= 0:
-            place(log["x_hat"][row_nn], self.x_hat, mem, square=True)
-            place(log["residual"][row_nn], self.r_norm, mem, square=True)
-            if fdir:
-                place(log["threshold"][row_nn], self.mu, mem, square=True)
+        ones (estimates, residuals, thresholds) into row ``row_nn`` unless it is -1
+        (:func:`.log_row.write_row`)."""
+        write_row(self, log, row, fdir, row_nn)
 
     def avoiding(self) -> np.ndarray:
         """What each robot avoids, on the original axis: cylinder o as o, robot j (excluded,
