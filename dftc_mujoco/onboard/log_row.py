@@ -80,12 +80,21 @@ def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_n
             team.flag, team.phi_hat, team.x_hat, team.r_norm, mu,
         )  # fmt: skip
         return
+    if kept[3].shape[1] != len(mem):  # the members' reactive and flagged robots (scratch)
+        kept = tables[id(log)] = (*kept[:3], np.zeros((2, len(mem)), bool))
+    placed_row(team, log, row, fdir, row_nn, kept[3])
+
+
+def placed_row(
+    team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int, scratch: np.ndarray
+) -> None:
+    """:func:`write_row` in Python: the members' rows placed on the original robot axis
+    (:func:`~.team_axis.place`), the others filled; ``scratch`` (2, M) bool."""
+    mem = team.members
     log["u"][row] = team.u
     log["active"][row] = team.active
     place(log["x_d"][row], team.x_d, mem)
-    if kept[3].shape[1] != len(mem):  # the members' reactive and flagged robots (scratch)
-        kept = tables[id(log)] = (*kept[:3], np.zeros((2, len(mem)), bool))
-    reactive, flagged = kept[3]
+    reactive, flagged = scratch
     np.greater_equal(team.supervisor.active, 0, out=reactive)
     flagged_by_teammates(np.asarray(team.flag, bool), flagged)
     place(log["reactive"][row], reactive, mem, fill=False)
