@@ -2,10 +2,11 @@
 
 A log row takes the team's inputs, membership, desired positions, reactive and flagged
 robots and fault estimates, and at the rows that keep them the N × N estimates, residuals
-and thresholds (float32 in the log). While every robot is a member (the common case) one
-compiled call writes them all (:func:`_whole_team_row`, 3.7 µs a row in Python at N = 4,
-about 1 µs compiled); after an exclusion the rows of the robots that left are filled
-(:func:`~.team_axis.place`, NaN or False) in Python.
+and thresholds (float32 in the log). For the paper's (compiled) blocks one compiled call
+writes them all, after an exclusion too, the rows of the robots that left filled with NaN
+or False (:func:`_team_row`: 1.4 µs a row at N = 4, where placing the arrays in Python took
+3.7, and 14 after an exclusion); a team of plug-in blocks writes its row in Python
+(:func:`placed_row`, :func:`~.team_axis.place`).
 
 The log's arrays reach the compiled call by address (:mod:`.addresses`): the table is
 built once per log and kept with the arrays it points into (:class:`~.addresses.Tables`).
@@ -27,45 +28,64 @@ FIELDS = ("u", "active", "x_d", "reactive", "flagged", "phi_hat", "x_hat", "resi
 
 
 @njit(cache=True)
-def _whole_team_row(
-    table, row, row_nn, fdir, u, active, x_d, supervised, flag, phi_hat, x_hat, r_norm, mu
-):  # pragma: no cover - compiled
+def _team_row(
+    table, row, row_nn, fdir, members, u, active, x_d, supervised, flag, phi_hat, x_hat, r_norm,
+    mu,
+):  # fmt: skip  # pragma: no cover - compiled
     """Row ``row`` of the log's fields (:data:`FIELDS`, by address in ``table``, each with
-    its time axis first; ``x_hat``'s as (T, N, 2N)) from the team's arrays, every robot a
-    member; the N × N fields into row ``row_nn`` unless it is -1; ``phi_hat`` and the
+    its time axis first; ``x_hat``'s as (T, N, 2N)) from the team's arrays: ``u``,
+    ``active`` and ``phi_hat`` on the original robot axis (N), the others on the members'
+    (M, robots ``members``), placed on the original axis with NaN or False for the robots
+    that left; the N × N fields into row ``row_nn`` unless it is -1; ``phi_hat`` and the
     thresholds only with FDIR (``fdir``)."""
     f8, f4, b1 = np.float64, np.float32, np.bool_
-    n = u.shape[0]
+    n, m = u.shape[0], members.shape[0]
     log_u, log_active = view3(table, 0, f8), view2(table, 1, b1)
     log_xd, log_reactive = view3(table, 2, f8), view2(table, 3, b1)
     log_flagged, log_phi = view2(table, 4, b1), view3(table, 5, f8)
+    whole = m == n
     for i in range(n):
         for d in range(2):
             log_u[row, i, d] = u[i, d]
-            log_xd[row, i, d] = x_d[i, d]
-        log_active[row, i] = active[i]
-        log_reactive[row, i] = supervised[i] >= 0
-    flagged_by_teammates(flag, log_flagged[row])
-    if fdir:
-        for i in range(n):
-            for d in range(2):
+            if not whole:
+                log_xd[row, i, d] = np.nan
+            if fdir:
                 log_phi[row, i, d] = phi_hat[i, d]
+        log_active[row, i] = active[i]
+        log_reactive[row, i] = False
+        log_flagged[row, i] = False
+    for a in range(m):  # row by row, in memory order (flagged_by_teammates)
+        i = members[a]
+        for d in range(2):
+            log_xd[row, i, d] = x_d[a, d]
+        log_reactive[row, i] = supervised[a] >= 0
+        for b in range(m):
+            if flag[a, b] and a != b:
+                log_flagged[row, members[b]] = True
     if row_nn < 0:
         return
     log_xh, log_res, log_th = view3(table, 6, f4), view3(table, 7, f4), view3(table, 8, f4)
-    for i in range(n):
-        for k in range(n):
+    if not whole:
+        log_xh[row_nn] = np.nan
+        log_res[row_nn] = np.nan
+        if fdir:
+            log_th[row_nn] = np.nan
+    for a in range(m):
+        i = members[a]
+        for b in range(m):
+            k = members[b]
             for d in range(2):
-                log_xh[row_nn, i, 2 * k + d] = x_hat[i, k, d]
-            log_res[row_nn, i, k] = r_norm[i, k]
+                log_xh[row_nn, i, 2 * k + d] = x_hat[a, b, d]
+            log_res[row_nn, i, k] = r_norm[a, b]
             if fdir:
-                log_th[row_nn, i, k] = mu[i, k]
+                log_th[row_nn, i, k] = mu[a, b]
 
 
 def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
     """Write the team's outputs into row ``row`` of the log's preallocated arrays (the N × N
-    ones into row ``row_nn`` unless it is -1), on the original robot axis."""
-    mem = team.members  # after an exclusion: onto the original axis (place)
+    ones into row ``row_nn`` unless it is -1), on the original robot axis: one compiled call
+    for a compiled team (:func:`_team_row`), :func:`placed_row` for a team of plug-in blocks
+    (whose arrays may be of any type)."""
     tables: Tables = team.log_tables
     kept = tables.get(id(log))
     if kept is None or kept[0] is not log:  # a new log: its table (kept with its arrays)
@@ -73,15 +93,16 @@ def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_n
         arrays[6] = arrays[6].reshape(len(arrays[6]), team.n, -1)  # (T, N, 2N): a view
         tables.clear()
         kept = tables[id(log)] = (log, arrays, address_table(arrays), np.zeros((2, 0), bool))
-    if len(mem) == team.n:
-        mu = team.mu if fdir and row_nn >= 0 else team.x_d  # (not read without thresholds)
-        _whole_team_row(
-            kept[2], row, row_nn, fdir, team.u, team.active, team.x_d, team.supervisor.active,
-            team.flag, team.phi_hat, team.x_hat, team.r_norm, mu,
+    if team.compiled:
+        mu = team.mu if fdir and row_nn >= 0 else team.r_norm  # (not read without thresholds)
+        _team_row(
+            kept[2], row, row_nn, fdir, team.members, team.u, team.active, team.x_d,
+            team.supervisor.active, team.flag, team.phi_hat, team.x_hat, team.r_norm, mu,
         )  # fmt: skip
         return
-    if kept[3].shape[1] != len(mem):  # the members' reactive and flagged robots (scratch)
-        kept = tables[id(log)] = (*kept[:3], np.zeros((2, len(mem)), bool))
+    m = len(team.members)
+    if kept[3].shape[1] != m:  # the members' reactive and flagged robots (scratch)
+        kept = tables[id(log)] = (*kept[:3], np.zeros((2, m), bool))
     placed_row(team, log, row, fdir, row_nn, kept[3])
 
 

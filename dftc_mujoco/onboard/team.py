@@ -310,7 +310,7 @@ class Team:
                 if len(self._mates) == self.n:  # every robot a member: a copy, not a gather
                     self._mates[...] = sensed_bodies
                 else:
-                    np.take(sensed_bodies, self.members, axis=0, out=self._mates)
+                    sensed_bodies.take(self.members, axis=0, out=self._mates)
         offsets, rates = self.plan.at(t)
         for b in self._timed:
             b.t = t
