@@ -241,6 +241,7 @@ class Team:
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         cfg, gone = self.config, len(self.gone)
         self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
+        self._gone_p = self._obs_p[len(cfg.obstacle_position.reshape(-1, 2)) :]  # a view
         self._obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
         self._obs_a = np.concatenate(
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
@@ -305,7 +306,7 @@ class Team:
         self._sensed = sensed_bodies is not None
         if sensed_bodies is not None:
             if len(self.gone):
-                self._obs_p[len(self.config.obstacle_position) :] = sensed_bodies[self.gone]
+                sensed_bodies.take(self.gone, axis=0, out=self._gone_p)  # the robots that left
             if self.config.teammate_safe > 0:
                 if len(self._mates) == self.n:  # every robot a member: a copy, not a gather
                     self._mates[...] = sensed_bodies
