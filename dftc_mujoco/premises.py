@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from .errors import InputError, SimulationError, raised_line
-from .onboard.addresses import address_table, view1, view2
+from .onboard.addresses import OwnTable, view1, view2
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 #: the premises, in the order the tables print them, with a one-line meaning each
@@ -253,7 +253,7 @@ def _check(
     return hits
 
 
-class Monitor:
+class Monitor(OwnTable):
     """The premises of the run's threshold rule, checked against the truth every period.
 
     ``bounds`` names each premise's bound as the rule uses it. Each span during which a
@@ -315,7 +315,7 @@ class Monitor:
         self.watched = np.ones(n, bool)
         # what _check reads of the monitor: its arrays by address (kept alive by the monitor),
         # its numbers in one array
-        self._own = address_table([getattr(self, name) for name in OWN])
+        self.build_own_table()  # _check reads OWN's arrays by address
         self._consts = np.array([getattr(self, name) for name in CONSTS], dtype=float)
         self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
@@ -331,15 +331,9 @@ class Monitor:
         if start.implied > start.value:
             self._violate("initial_error", start.robot, start.implied, 0.0)
 
-    def __getstate__(self) -> dict[str, Any]:
-        """A copy or a pickle leaves out the address table: it points into these arrays."""
-        state = self.__dict__.copy()
-        del state["_own"]
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._own = address_table([getattr(self, name) for name in OWN])
+    def own_arrays(self) -> list[np.ndarray]:
+        """The arrays :func:`_check` reads by address (:data:`OWN`)."""
+        return [getattr(self, name) for name in OWN]
 
     def period(
         self,
@@ -364,7 +358,7 @@ class Monitor:
             u,
             u_bar,
             phi_hat,
-            self._own,
+            self.own_table,
             self._consts,
             xpos,
             xmat,

@@ -16,7 +16,7 @@ from numba import njit
 
 from .atomic import atomic_write, write_text
 from .events import make
-from .onboard.addresses import address_table, view1, view2, view3
+from .onboard.addresses import OwnTable, view1, view2, view3
 
 __all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
@@ -100,7 +100,7 @@ def _sample(table, row, t, x, c, cmd, limit):  # pragma: no cover - compiled
             log_v[row, i, d] = v
 
 
-class Log:
+class Log(OwnTable):
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part.
 
     The N × N fields (:data:`MATRIX_FIELDS`) are kept every ``matrix_every`` rows
@@ -129,24 +129,17 @@ class Log:
             for name, (code, dtype, fill) in LOG_FIELDS.items()
             if name not in DERIVED_FIELDS
         }
-        # :meth:`sample`'s arrays by address (these arrays live as long as the log)
-        self._sampled = address_table([self.data[name] for name in SAMPLED])
+        self.build_own_table()  # :meth:`sample`'s arrays by address (they live as long as the log)
 
-    def __getstate__(self) -> dict[str, Any]:
-        """A copy or a pickle leaves out the address table: it points into these arrays."""
-        state = self.__dict__.copy()
-        del state["_sampled"]
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._sampled = address_table([self.data[name] for name in SAMPLED])
+    def own_arrays(self) -> list[np.ndarray]:
+        """The arrays :meth:`sample` writes by address (:data:`SAMPLED`)."""
+        return [self.data[name] for name in SAMPLED]
 
     def sample(self, t: float, x: np.ndarray, c: np.ndarray, cmd: np.ndarray, limit: float) -> None:
         """The simulator's part of the current row (:attr:`size`): the time ``t``, the true
         positions ``x`` (N, 2), the desired centroid ``c`` and the commands ``cmd`` (N, 2)
         within the drives' range ±``limit`` (v_cmd), in one compiled call."""
-        _sample(self._sampled, self.size, t, x, c, cmd, limit)
+        _sample(self.own_table, self.size, t, x, c, cmd, limit)
 
     def add_field(self, name: str, shape: tuple[int, ...], dtype: type, fill: Any) -> None:
         """A field of this run only (the network's per-link fields), sampled every row."""

@@ -103,3 +103,20 @@ def test_a_copied_team_builds_its_own_tables():
         assert all(np.array_equal(a, b) for a, b in zip(before, after, strict=True))
         for kept, table, *_ in copied._flat.values():
             assert table[:, 0].tolist() == [a.__array_interface__["data"][0] for a in kept]
+
+
+def test_a_copied_log_samples_into_its_own_arrays():
+    """The log writes its rows by address (``Log.sample``): a copy (or an unpickled log)
+    builds its own table, so sampling into the copy leaves the original's rows alone."""
+    import pickle
+
+    with Simulation(make(scenario_dict())) as sim:
+        sim.step(5)
+        log = sim.log
+        before = log.data["x"].copy()
+        for twin in (copy.deepcopy(log), pickle.loads(pickle.dumps(log))):
+            twin.sample(9.0, np.full((4, 2), 7.0), np.zeros(2), np.full((4, 2), 50.0), 1.0)
+            assert np.array_equal(log.data["x"], before, equal_nan=True)
+            row = twin.size
+            assert (twin.data["x"][row] == 7.0).all() and twin.data["t"][row] == 9.0
+            assert (twin.data["v_cmd"][row] == 1.0).all()  # within the drives' range

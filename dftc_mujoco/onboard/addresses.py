@@ -59,6 +59,31 @@ class Tables(dict):
         return (Tables, ())
 
 
+class OwnTable:
+    """An object that hands some of its own arrays to compiled code by address: the table is
+    :attr:`own_table` (built by :meth:`build_own_table` from :meth:`own_arrays`, which a class
+    defines), and a copy or a pickle leaves it out and builds its own (a copied table would
+    still point into the original's arrays)."""
+
+    own_table: np.ndarray
+
+    def own_arrays(self) -> list[np.ndarray]:  # pragma: no cover - every user defines it
+        raise NotImplementedError
+
+    def build_own_table(self) -> None:
+        """(Re)build :attr:`own_table` from :meth:`own_arrays`."""
+        self.own_table = address_table(self.own_arrays())
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state.pop("own_table", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.build_own_table()
+
+
 @intrinsic
 def _pointer(typingctx, address, dtype):  # pragma: no cover - compiled
     """The integer ``address`` as a pointer to ``dtype`` (a NumPy scalar type)."""
