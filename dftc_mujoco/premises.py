@@ -315,7 +315,7 @@ class Monitor(OwnTable):
         self.watched = np.ones(n, bool)
         # what _check reads of the monitor: its arrays by address (kept alive by the monitor),
         # its numbers in one array
-        self.build_own_table()  # _check reads OWN's arrays by address
+        self.build_own_table()
         self._consts = np.array([getattr(self, name) for name in CONSTS], dtype=float)
         self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
