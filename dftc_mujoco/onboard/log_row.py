@@ -108,23 +108,23 @@ def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_n
     for a compiled team (:func:`_team_row`), :func:`placed_row` for a team of plug-in blocks
     (whose arrays may be of any type)."""
     tables: Tables = team.log_tables
+    if not team.compiled:  # the members' reactive and flagged robots: a scratch kept
+        scratch = tables.get("scratch")
+        if scratch is None or scratch.shape[1] != len(team.members):
+            scratch = tables["scratch"] = np.zeros((2, len(team.members)), bool)
+        placed_row(team, log, row, fdir, row_nn, scratch)
+        return
     kept = tables.get(id(log))
     if kept is None or kept[0] is not log:  # a new log: its table (kept with its arrays)
         arrays = [log[name] for name in FIELDS]
         arrays[6] = arrays[6].reshape(len(arrays[6]), team.n, -1)  # (T, N, 2N): a view
-        tables.clear()
-        kept = tables[id(log)] = (log, arrays, address_table(arrays), np.zeros((2, 0), bool))
-    if team.compiled:
-        mu = team.mu if fdir and row_nn >= 0 else team.r_norm  # (not read without thresholds)
-        _team_row(
-            kept[2], row, row_nn, fdir, team.members, team.u, team.active, team.x_d,
-            team.supervisor.active, team.flag, team.phi_hat, team.x_hat, team.r_norm, mu,
-        )  # fmt: skip
-        return
-    m = len(team.members)
-    if kept[3].shape[1] != m:  # the members' reactive and flagged robots (scratch)
-        kept = tables[id(log)] = (*kept[:3], np.zeros((2, m), bool))
-    placed_row(team, log, row, fdir, row_nn, kept[3])
+        tables.clear()  # one log at a time
+        kept = tables[id(log)] = (log, arrays, address_table(arrays))
+    mu = team.mu if fdir and row_nn >= 0 else team.r_norm  # (not read without thresholds)
+    _team_row(
+        kept[2], row, row_nn, fdir, team.members, team.u, team.active, team.x_d,
+        team.supervisor.active, team.flag, team.phi_hat, team.x_hat, team.r_norm, mu,
+    )  # fmt: skip
 
 
 def placed_row(
