@@ -37,7 +37,7 @@ from numba import njit
 from .addresses import view1, view2, view3
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
-from .decision import DecisionRecord, decide_row
+from .decision import DecisionRecord, decide_row, unchanged_row
 from .estimate_alarm import AlarmRecord, watch_estimates
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
@@ -151,7 +151,7 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         else:
             for a in range(mn):
                 yni[a] = advance_one(yi[a], row[a], ko, dt_o)
-        if inp.fdir:
+        if inp.fdir and not unchanged_row(norms, th, i, dec):
             count += decide_row(norms, th, i, dec)  # eq. 39
     if round_now and stream:
         store_fence()  # the streamed ŷ is whole before another thread reads it
