@@ -31,6 +31,12 @@ def test_a_streamed_store_writes_the_same_numbers():
         _advance(y, r, plain, False)
         _advance(y, r, streamed, True)
         assert np.array_equal(plain, streamed) and np.array_equal(plain, y + 0.02 * r)
+        # float32 state (benchmarks/bench_pass.py): rounded as an ordinary store rounds
+        plain32, streamed32 = np.full(shape, np.nan, np.float32), np.full(shape, 0, np.float32)
+        _advance(y, r, plain32, False)
+        _advance(y, r, streamed32, True)
+        assert np.array_equal(plain32, streamed32)
+        assert np.array_equal(plain32, (y + 0.02 * r).astype(np.float32))
 
 
 def test_only_arrays_beyond_the_cache_stream(monkeypatch):

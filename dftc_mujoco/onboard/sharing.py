@@ -58,6 +58,8 @@ class Sharing:
         self.threads = threads
         self.own_rows = -1  # robots the caller takes after the beside work (-1: m / threads)
         self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, helpers, the caller
+        self.passes = 0  # shared passes run, and the sums of their timings (benchmarks)
+        self.sums = (0.0, 0.0, 0.0)
 
     def run(
         self,
@@ -97,6 +99,8 @@ class Sharing:
         count += sum(c for c, _, _ in ends)
         helper_end = max(end for _, _, end in ends) - t0
         self.timings = (t1 - t0, helper_end, t2 - t0)
+        self.passes += 1
+        self.sums = (self.sums[0] + t1 - t0, self.sums[1] + helper_end, self.sums[2] + t2 - t0)
         spent = sum(end - start for _, start, end in ends)
         if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
             per_row = spent / rest  # one thread's time for a robot

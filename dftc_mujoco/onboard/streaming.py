@@ -27,11 +27,15 @@ from numba.extending import intrinsic
 #: [bytes] the last-level cache assumed where the system does not say
 DEFAULT_CACHE = 32 << 20
 
+#: the element types a streamed store writes (float32: ``benchmarks/bench_pass.py``'s state)
+_FLOATS = (types.float64, types.float32)
+
 
 @intrinsic
 def stream_store(typingctx, array, index, value):
-    """``array[index] = value`` (a 1-d float64 array), with a store that bypasses the caches."""
-    if not (isinstance(array, types.Array) and array.ndim == 1 and array.dtype == types.float64):
+    """``array[index] = value`` (a 1-d float64 or float32 array; the value rounded to the
+    array's type as an ordinary store would), with a store that bypasses the caches."""
+    if not (isinstance(array, types.Array) and array.ndim == 1 and array.dtype in _FLOATS):
         return None
     if not isinstance(index, types.Integer):
         return None
@@ -41,7 +45,7 @@ def stream_store(typingctx, array, index, value):
         arr_t, idx_t, val_t = signature.args
         arr = context.make_array(arr_t)(context, builder, args[0])
         idx = context.cast(builder, args[1], idx_t, types.intp)
-        val = context.cast(builder, args[2], val_t, types.float64)
+        val = context.cast(builder, args[2], val_t, arr_t.dtype)
         ptr = cgutils.get_item_pointer(context, builder, arr_t, arr, [idx], wraparound=False)
         store = builder.store(val, ptr)
         store.set_metadata("nontemporal", builder.module.add_metadata([ir.IntType(32)(1)]))
