@@ -1,4 +1,4 @@
-"""The peers' benchmark runs as the README says, in a process of its own."""
+"""The benchmarks run as the README says, each in a process of its own."""
 
 from __future__ import annotations
 
@@ -42,3 +42,31 @@ def test_the_peers_benchmark_times_each_peer_on_the_formation_task():
         assert "pybullet" not in rows
     else:
         assert rows["pybullet"][2] < 0.02
+
+
+def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
+    """``bench_pass.py`` at N = 160 (a team that shares its pass): every stage and both
+    precisions timed, float32's next ŷ within 1e-5 m of float64's, and the shared part of
+    the period ending within the period."""
+    args = ["--n", "160", "--repeat", "2", "--periods", "20"]
+    done = subprocess.run(
+        [sys.executable, "benchmarks/bench_pass.py", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    times = re.findall(r"^  (\S.*?)\s+([\d.]+) /\s+([\d.]+)$", done.stdout, flags=re.M)
+    assert len(times) == 6, done.stdout
+    assert all(0 < float(lo) <= float(med) for _, lo, med in times), times
+    gap = re.search(r"at most ([\d.e+-]+) m from float64's", done.stdout)
+    assert gap is not None and float(gap.group(1)) < 1e-5, done.stdout
+    split = re.search(
+        r"a period ([\d.]+) ms; .* beside the pass ([\d.]+) ms, the helpers end at ([\d.]+) ms, "
+        r"the calling thread at ([\d.]+) ms",
+        done.stdout,
+    )
+    assert split is not None, done.stdout
+    period, beside, helpers, caller = (float(v) for v in split.groups())
+    assert 0 < beside <= caller <= period and 0 < helpers <= period, split.groups()
