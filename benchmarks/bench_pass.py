@@ -72,7 +72,7 @@ def main() -> None:
     p.add_argument("--periods", type=int, default=300, help="periods of the split (shared)")
     args = p.parse_args()
     n = args.n
-    sim = Simulation(scene(n, AFTER + 0.05 * args.periods + 1.0))
+    sim = Simulation(scene(n, 2 * AFTER + 1.0))  # its stop fault comes after AFTER
     sim.step(round(AFTER / sim.dt))
     team = sim.team
     m = len(team.members)
