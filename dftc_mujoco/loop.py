@@ -511,9 +511,8 @@ class Simulation:
                         ctrl = physics.commands(xi)
                     if k % log_every == 0 or team.ended or k == steps:  # the last period too
                         pose = None if beside is None else before.pose  # read before physics
-                        self._sample(t, x, cmd, position[j], pose)
-                        if np.abs(x).max() > checks.ARENA_HALF:
-                            self._left_arena(t, x)
+                        if self._sample(t, x, cmd, position[j], pose) > checks.ARENA_HALF:
+                            self._left_arena(t, x)  # its largest |x| is beyond the floor
                     if k == steps or team.ended or self.left:
                         k += 1
                         break
@@ -595,12 +594,13 @@ class Simulation:
 
     def _sample(
         self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray, pose: np.ndarray | None
-    ) -> None:
+    ) -> float:
         """One log row: raw values only (everything else is derived after the run); ``pose``:
-        the robots' poses read before the physics advanced (None: read them now)."""
+        the robots' poses read before the physics advanced (None: read them now). Returns the
+        largest |x| coordinate (NaN if any is NaN)."""
         log = self.log
         row, d = log.size, log.data
-        log.sample(t, x, c, cmd, self.command_limit)  # v_cmd: within the drives' range
+        far = log.sample(t, x, c, cmd, self.command_limit)  # v_cmd: within the drives' range
         assert self.plant is not None
         if pose is None:
             self.plant.poses(out=d["pose"][row])
@@ -612,6 +612,7 @@ class Simulation:
             d["link_age"][row] = self._ages
             d["link_lost"][row] = self.channel.lost
         log.size += 1
+        return far
 
     # ------------------------------------------------------------------ results
 

@@ -120,3 +120,22 @@ def test_a_copied_log_samples_into_its_own_arrays():
             row = twin.size
             assert (twin.data["x"][row] == 7.0).all() and twin.data["t"][row] == 9.0
             assert (twin.data["v_cmd"][row] == 1.0).all()  # within the drives' range
+
+
+def test_a_log_row_returns_the_largest_coordinate_as_numpy_would():
+    """``Log.sample`` returns ``np.abs(x).max()``: the loop's test of the floor's edge reads
+    it, so a NaN anywhere must come back NaN (never beyond the floor), as numpy's does."""
+    with Simulation(make(scenario_dict())) as sim:
+        log = sim.log
+        cmd, c = np.zeros((4, 2)), np.zeros(2)
+        rng = np.random.default_rng(3)
+        for x in (
+            rng.uniform(-60.0, 60.0, (4, 2)),
+            np.array([[1.0, -2.0], [-70.0, 3.0], [0.0, 0.0], [4.0, 5.0]]),
+            np.array([[np.nan, 1.0], [80.0, 0.0], [0.0, 0.0], [0.0, 0.0]]),
+            np.array([[80.0, 1.0], [0.0, 0.0], [0.0, -np.nan], [0.0, 0.0]]),
+            np.zeros((4, 2)),
+        ):
+            far = log.sample(1.0, x, c, cmd, 1.0)
+            assert far == np.abs(x).max() or (np.isnan(far) and np.isnan(np.abs(x).max()))
+            assert not far > 50.0 or np.abs(x).max() > 50.0

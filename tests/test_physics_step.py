@@ -87,3 +87,22 @@ def test_stepping_a_shared_team_period_by_period_shows_the_same_snapshots(period
         assert a.t == b.t and a.events == b.events
         for name in ("x", "x_m", "x_hat", "u", "u_bar", "phi_hat", "residual", "flag"):
             assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+
+
+def test_a_robot_carried_off_the_floor_ends_the_mission_at_the_next_log_row(monkeypatch):
+    """A robot put 60 m out (beyond the floor's ±50 m) at 2 s ends the mission at the log
+    row that sees it, naming it, with its records kept; both ways alike."""
+
+    def carry_off(t, plant):
+        if t >= 2.0:
+            m, body = plant.model, plant.scene.body[2]
+            plant.data.qpos[m.jnt_qposadr[m.body_jntadr[body]]] = 60.0
+
+    shared, _ = _run(True, monkeypatch, hook=carry_off)
+    alone, _ = _run(False, monkeypatch, hook=carry_off)
+    ended = [e for e in shared.events.items if e["kind"] == "mission_ended"]
+    assert len(ended) == 1 and ended[0]["robots"] == [3], ended
+    assert "robot 3 left the arena" in ended[0]["reason"]
+    assert 2.0 < shared.log["t"][-1] <= 2.1 and shared.log["x"][-1, 2, 0] > 50.0
+    assert np.all(np.abs(shared.log["x"][:-1]) < 50.0)  # the row before: all on the floor
+    _same(shared, alone)
