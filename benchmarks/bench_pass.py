@@ -11,9 +11,12 @@ median of ``--repeat`` timings (µs) of:
 
 * the integrals only: ⁱx̂ and ∫ⁱû_g (eqs. 15, 20, 21), a period between two rounds of a
   network;
-* plus the round: the residual (eq. 35), its norms and the next ŷ (eq. 19);
-* plus the decision (eq. 39): the whole pass, as the team runs it at this N (ŷ streamed past
-  the caches where the team streams it, ``onboard/streaming.py``);
+* plus the round: the residual (eq. 35) and the next ŷ (eq. 19); without FDIR and a log
+  row the pass computes no norms;
+* plus the decision (eq. 39): the squares of the norms, and their square roots only for
+  the rows not at rest (``onboard/decision.py``, ``quiet_row``): the whole pass, as the
+  team runs it at this N between log rows (ŷ streamed past the caches where the team
+  streams it, ``onboard/streaming.py``);
 * the whole pass again with ŷ, ∫ⁱû_g and the next ŷ held in float32 (copies of the team's
   arrays, streamed and not): what float32 state would save. The project keeps float64: the
   records would change, and its thresholds are millimetres over positions of tens of metres.

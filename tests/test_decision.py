@@ -1,5 +1,6 @@
 """The decision of eq. 39 (onboard/decision.py): a row it would leave as it is is skipped,
-and only such a row."""
+and only such a row; a row the pass finds quiet from the squares of its norms is such a
+row."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from dftc_mujoco.onboard.decision import (
     DecisionRecord,
     decide,
     decide_row,
+    quiet_row,
     timer_type,
     unchanged_row,
 )
@@ -21,6 +23,11 @@ from dftc_mujoco.onboard.thresholds.paper import ThresholdRecord, dense_threshol
 @njit
 def _skipped(r, th, i, dec):
     return unchanged_row(r, th, i, dec)
+
+
+@njit
+def _quiet(sq, th, i, dec):
+    return quiet_row(sq, th, i, dec)
 
 
 @njit
@@ -136,3 +143,66 @@ def test_the_decision_with_its_skip_gives_every_row_s_numbers(mode):
                 if isinstance(a, np.ndarray):
                     assert np.array_equal(a, b), (need, round_, name)
         assert raised > 0  # flags rose (and fell), not only rows at rest
+
+
+def _around_squares(rng, mu: np.ndarray) -> np.ndarray:
+    """Squares of norms at and around (μ_k)² as the pass computes it: the float μ·μ itself,
+    its neighbouring floats, a relative 1e-12 either side, well below, and now and then
+    0, NaN or inf."""
+    p = mu * mu
+    pick = rng.integers(0, 8, mu.shape)
+    sq = np.select(
+        [pick == 0, pick == 1, pick == 2, pick == 3, pick == 4, pick == 5],
+        [p, np.nextafter(p, np.inf), np.nextafter(p, 0.0), p * (1 + 1e-12), p * (1 - 1e-12),
+         p * 0.25],
+        default=p * rng.uniform(0.0, 2.0, mu.shape),
+    )  # fmt: skip
+    sq[rng.random(mu.shape) < 0.03] = 0.0
+    sq[rng.random(mu.shape) < 0.03] = np.nan
+    sq[rng.random(mu.shape) < 0.03] = np.inf
+    return sq
+
+
+def test_a_row_quiet_by_its_squares_is_one_its_norms_leave_as_it_is():
+    """Wherever :func:`quiet_row` finds a row quiet from the squares of its norms, the norms
+    themselves (their square roots, as the pass takes them) leave the row as it is
+    (:func:`unchanged_row`), exactly: squares at the float μ·μ and its neighbours, thresholds
+    from 1e-170 (squares below the normal floats) to 1e170 (squares beyond them), +inf,
+    NaN, zero and negative entries of a rule's array; and a row at rest well below its
+    thresholds is found quiet. (A tolerance of 1e-12 the wrong way, or no test of μ ≥ 0,
+    makes this fail.)"""
+    rng = np.random.default_rng(46)
+    quiet = loud_at_rest = 0
+    for case in range(3000):
+        m = int(rng.integers(1, 9))
+        clean = case % 5 == 0  # well below thresholds of everyday sizes
+        scales = [-3, 0, 2] if clean else [-170, -100, -3, 0, 2, 100, 170]
+        scale = 10.0 ** rng.choice(scales)
+        if case % 2:
+            th = _factored(rng, m)
+            th = th._replace(coef=th.coef * scale)
+            mu = np.outer(th.coef, th.bound)
+        else:
+            mu = rng.uniform(0.5, 1.5, (m, m)) * scale
+            odd = rng.random((m, m)) + clean  # no odd entries when clean
+            mu[odd < 0.03] = np.inf
+            mu[(odd >= 0.03) & (odd < 0.06)] = np.nan
+            mu[(odd >= 0.06) & (odd < 0.09)] = 0.0
+            mu[(odd >= 0.09) & (odd < 0.12)] *= -1.0
+            th = dense_thresholds(mu)
+        dec = _record(rng, m, int(rng.integers(0, 30)), case % 3, settled=0.8)
+        if clean:
+            sq = np.where(np.isfinite(mu), mu * mu * 0.25, 1.0)
+        else:
+            with np.errstate(over="ignore"):
+                sq = _around_squares(rng, mu)
+        with np.errstate(invalid="ignore"):
+            norms = np.sqrt(sq)
+        for i in range(m):
+            if _quiet(sq[i], th, i, dec):
+                quiet += 1
+                assert _skipped(norms[i], th, i, dec), (case, i, mu[i], sq[i])
+            elif clean and _skipped(norms[i], th, i, dec):
+                loud_at_rest += 1
+    assert quiet > 1000
+    assert loud_at_rest == 0  # at rest and well below: found quiet from the squares

@@ -64,20 +64,36 @@ def residual_row(
 
 
 @njit(inline="always")
-def row_norms(row, n, norms):  # pragma: no cover - compiled
-    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``norms`` (M,)."""
+def row_squares(row, n, out):  # pragma: no cover - compiled
+    """‖ⁱr_k‖² for every k of robot i's residual ``row`` (M·n,), into ``out`` (M,): what the
+    pass keeps of a row that no log row, snapshot or exclusion reads, where the decision
+    needs no square root (:func:`~.decision.quiet_row`)."""
     if n == 2:  # the plane: the same sums unrolled, which the compiler vectorises
-        for k in range(norms.shape[0]):
+        for k in range(out.shape[0]):
             acc = 0.0
             acc += row[2 * k] ** 2
             acc += row[2 * k + 1] ** 2
-            norms[k] = np.sqrt(acc)
+            out[k] = acc
         return
-    for k in range(norms.shape[0]):
+    for k in range(out.shape[0]):
         acc = 0.0
         for d in range(n):
             acc += row[k * n + d] ** 2
-        norms[k] = np.sqrt(acc)
+        out[k] = acc
+
+
+@njit(inline="always")
+def norms_of_squares(sq):  # pragma: no cover - compiled
+    """‖ⁱr_k‖ from ‖ⁱr_k‖² (:func:`row_squares`), in place."""
+    for k in range(sq.shape[0]):
+        sq[k] = np.sqrt(sq[k])
+
+
+@njit(inline="always")
+def row_norms(row, n, norms):  # pragma: no cover - compiled
+    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``norms`` (M,)."""
+    row_squares(row, n, norms)
+    norms_of_squares(norms)
 
 
 @njit(cache=True)

@@ -37,7 +37,7 @@ from numba import njit
 from .addresses import view1, view2, view3
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
-from .decision import DecisionRecord, decide_row, unchanged_row
+from .decision import DecisionRecord, decide_row, quiet_row, unchanged_row
 from .estimate_alarm import AlarmRecord, watch_estimates
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
@@ -45,8 +45,10 @@ from .observer import (
     advance_one,
     estimate_one,
     integrate_inputs,
+    norms_of_squares,
     residual_row,
     row_norms,
+    row_squares,
 )
 from .streaming import store_fence, stream_store
 from .supervisor import SupervisorRecord, Surroundings, supervise
@@ -103,8 +105,9 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     snapshot reads it) and ∫ ⁱû_g advanced (eqs. 15, 20); at a round of the observers
     (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ (into ``r_norm`` when
     ``norms``, else into a scratch row: only a log row, a snapshot or an exclusion reads
-    them), ⁱŷ of the next period (eq. 19) into ``y_next`` (past the caches when
-    ``stream``, :mod:`.streaming`) and, with FDIR, its flags (eq. 39,
+    them; there, with FDIR, first their squares, whose square roots a row at rest does not
+    need, :func:`~.decision.quiet_row`), ⁱŷ of the next period (eq. 19) into ``y_next``
+    (past the caches when ``stream``, :mod:`.streaming`) and, with FDIR, its flags (eq. 39,
     :func:`~.decision.decide_row`, with the thresholds ``th`` read entry by entry). Every
     N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
     measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
@@ -143,7 +146,10 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
             row,
         )
         norms = out.r_norm[i if inp.norms else m + b]
-        row_norms(row, n, norms)
+        if inp.norms:
+            row_norms(row, n, norms)
+        elif inp.fdir:  # their squares: a row at rest needs no square root (quiet_row)
+            row_squares(row, n, norms)
         yni = yn[i]  # ⁱŷ of the next period (eq. 19)
         if stream:  # past the caches: the next period reads it from memory anyway
             for a in range(mn):
@@ -151,7 +157,13 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         else:
             for a in range(mn):
                 yni[a] = advance_one(yi[a], row[a], ko, dt_o)
-        if inp.fdir and not unchanged_row(norms, th, i, dec):
+        if not inp.fdir:
+            continue
+        if not inp.norms:
+            if quiet_row(norms, th, i, dec):  # at rest, every square below (ⁱμ_k)²
+                continue
+            norms_of_squares(norms)
+        if not unchanged_row(norms, th, i, dec):
             count += decide_row(norms, th, i, dec)  # eq. 39
     if round_now and stream:
         store_fence()  # the streamed ŷ is whole before another thread reads it
