@@ -159,12 +159,14 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
                 yni[a] = advance_one(yi[a], row[a], ko, dt_o)
         if not inp.fdir:
             continue
-        if not inp.norms:
-            if quiet_row(norms, th, i, dec):  # at rest, every square below (ⁱμ_k)²
+        if inp.norms:
+            if unchanged_row(norms, th, i, dec):  # at rest, every norm at most ⁱμ_k
                 continue
+        elif quiet_row(norms, th, i, dec):  # at rest, every square below (ⁱμ_k)²
+            continue
+        else:  # a row that may change: its norms (the skips only save work)
             norms_of_squares(norms)
-        if not unchanged_row(norms, th, i, dec):
-            count += decide_row(norms, th, i, dec)  # eq. 39
+        count += decide_row(norms, th, i, dec)  # eq. 39
     if round_now and stream:
         store_fence()  # the streamed ŷ is whole before another thread reads it
     return count
