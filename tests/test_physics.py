@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from dftc_mujoco import loop, run, scenario
 from dftc_mujoco.record import LOG_FIELDS, STATIC_FIELDS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
-from dftc_mujoco.sim.plant import Plant
+from dftc_mujoco.sim.plant import NoiseStream, Plant
 from tests.conftest import make, ring_team, scenario_dict
 
 
@@ -22,6 +23,38 @@ def _fault_free(**changes):
     d["faults"] = []
     d.update(changes)
     return make(d)
+
+
+@pytest.mark.parametrize("at_bound", [False, True])
+def test_the_noise_stream_is_the_disk_formula_whatever_its_chunk(at_bound):
+    """η and ξ of each period, drawn ahead in chunks and computed in compiled loops, are the
+    whole-array numpy formula of the disk, bit for bit, and the same for any chunk size."""
+    n, periods, eta_bar, xi_bar, alpha = 37, 40, 0.001, 0.02, 0.9
+
+    def plant(seed):  # what NoiseStream reads of a plant
+        noise = scenario.Noise(eta_bar=eta_bar, xi_bar=xi_bar, at_bound=at_bound)
+        state = np.full((n, 2), 0.004)
+        return SimpleNamespace(
+            rng=np.random.default_rng(seed), n=n, noise=noise, at_bound=at_bound,
+            xi_bar=xi_bar, _alpha=alpha, _xi_state=state,
+        )  # fmt: skip
+
+    def disk(r, radius, rim):  # the formula, on whole arrays
+        ang, mag = 2.0 * np.pi * r[0], radius if rim else radius * np.sqrt(r[1])
+        return np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)
+
+    rng, state = np.random.default_rng(5), np.full((n, 2), 0.004)
+    want = []
+    for _ in range(periods):
+        r = rng.random((2, 2, n))
+        state = alpha * state + (1.0 - alpha) * disk(r[1], xi_bar, False)
+        norm = np.maximum(np.sqrt(state[:, 0] ** 2 + state[:, 1] ** 2), 1e-12)[:, None]
+        want.append((disk(r[0], eta_bar, at_bound), xi_bar * state / norm if at_bound else state))
+    for chunk in (1, 7, 512):
+        stream = NoiseStream(plant(5), chunk)  # type: ignore[arg-type]
+        for k, (eta, xi) in enumerate(want):
+            got = stream.next()
+            assert np.array_equal(got[0], eta) and np.array_equal(got[1], xi), (chunk, k)
 
 
 def test_fault_free_run_converges_without_obstacles():

@@ -68,12 +68,22 @@ def _gather_pose(xpos, xmat, idx, out):  # pragma: no cover - compiled
 def _disk_chunk(r: np.ndarray, radius: float, at_bound: bool) -> np.ndarray:
     """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N): row 0 gives the angle,
     row 1 the radius (uniform in the disk, or ``radius`` itself if ``at_bound``)."""
-    ang = (2.0 * np.pi) * r[:, 0]
-    mag = radius if at_bound else radius * np.sqrt(r[:, 1])
-    out = np.empty((len(r), r.shape[2], 2))
-    out[:, :, 0] = mag * np.cos(ang)
-    out[:, :, 1] = mag * np.sin(ang)
+    out = np.empty((r.shape[0], r.shape[2], 2))
+    _disk_fill(r, radius, at_bound, out)
     return out
+
+
+@njit(cache=True)
+def _disk_fill(r, radius, at_bound, out):  # pragma: no cover - compiled
+    """:func:`_disk_chunk` into ``out`` (C, N, 2): the same operations on the same floats as
+    numpy's on whole arrays, element by element (twice as fast: numpy called the C library's
+    sine and cosine one element at a time all the same, through a slower loop)."""
+    for c in range(r.shape[0]):
+        for i in range(r.shape[2]):
+            ang = (2.0 * np.pi) * r[c, 0, i]
+            mag = radius if at_bound else radius * np.sqrt(r[c, 1, i])
+            out[c, i, 0] = mag * np.cos(ang)
+            out[c, i, 1] = mag * np.sin(ang)
 
 
 class NoiseStream:
@@ -91,6 +101,8 @@ class NoiseStream:
         n = plant.n
         self.eta = np.empty((chunk, n, 2))
         self.xi = np.empty((chunk, n, 2))
+        self._r = np.empty((chunk, 2, 2, n))  # the uniform draws of a chunk
+        self._w = np.empty((chunk, n, 2))  # ξ's inputs before the low pass
         self._rows: list[tuple[np.ndarray, np.ndarray]] = []  # (η, ξ) views of each period
 
     def next(self) -> tuple[np.ndarray, np.ndarray]:
@@ -109,10 +121,10 @@ class NoiseStream:
 
     def _refill(self) -> None:
         p = self.plant
-        r = p.rng.random((self.chunk, 2, 2, p.n))  # per period: η's (2, N), then ξ's (2, N)
-        self.eta[:] = _disk_chunk(r[:, 0], p.noise.eta_bar, p.at_bound)
-        w = _disk_chunk(r[:, 1], p.xi_bar, False)
-        _low_pass(w, p._alpha, p._xi_state, p.at_bound, p.xi_bar, self.xi)
+        r = p.rng.random(out=self._r)  # per period: η's (2, N), then ξ's (2, N)
+        _disk_fill(r[:, 0], p.noise.eta_bar, p.at_bound, self.eta)
+        _disk_fill(r[:, 1], p.xi_bar, False, self._w)
+        _low_pass(self._w, p._alpha, p._xi_state, p.at_bound, p.xi_bar, self.xi)
         if not self._rows:  # the views of every period, made once (0.1 µs a period each)
             self._rows = list(zip(self.eta, self.xi, strict=True))
         self.k = 0
