@@ -8,7 +8,7 @@ import pytest
 
 from dftc_mujoco import load_scenario, simulate
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.onboard.supervisor import supervise
+from dftc_mujoco.onboard.supervisor import grid_work, supervise
 from tests.test_premises import shuffled
 
 
@@ -19,15 +19,15 @@ def test_two_robots_heading_at_each_other_are_held_at_the_safe_distance():
     u_g = np.array([[1.0, 0.2], [-1.0, 0.0]])
     active = np.full(2, -1, dtype=np.intp)
     u, du = np.empty((2, 2)), np.empty((2, 2))
-    none = np.zeros((0, 2))
     theta, safe = 3.0, 0.22
-    supervise(x, u_g, none, np.zeros(0), np.zeros(0), theta, 0.01, active, u, du, x, safe, 0.32)
+    none, nothing, work = np.zeros((0, 2)), np.zeros(0), grid_work(2)
+    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.32, work)
     assert list(active) == [1, 0]  # each avoids the other (obstacle index O + j, O = 0)
     away = theta * (safe - 0.25)  # radial speed allowed: −0.09 m/s towards the teammate
     assert u[0] == pytest.approx([-away, 0.2])
     assert u[1] == pytest.approx([away, 0.0])
     np.testing.assert_allclose(du, u - u_g)
-    supervise(x, u_g, none, np.zeros(0), np.zeros(0), theta, 0.01, active, u, du, x, 0.0, 0.0)
+    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, 0.0, 0.0, work)
     assert list(active) == [-1, -1] and np.array_equal(u, u_g)  # off: the paper's behaviour
 
 
@@ -103,6 +103,7 @@ def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
                 x,
                 cfg.teammate_safe,
                 activation,
+                grid_work(2),
             )
             jump = max(jump, abs(u[0, 0] - previous))
             previous = u[0, 0]
@@ -177,6 +178,46 @@ def test_the_grid_of_a_large_team_finds_the_teammates_a_scan_finds(seed):
     expect = _nearest_by_scan(x, u_g, mates, 3.0, 0.01, active, 0.22, 0.6)
     u, du = np.empty((m, 2)), np.empty((m, 2))
     none = np.zeros((0, 2))
-    supervise(x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, active, u, du, mates, 0.22, 0.6)
-    assert np.array_equal(active, expect)
+    # the team's own integers, the same left dirty by another period, and none (it allocates)
+    dirty = np.full(len(grid_work(m)), 7, np.int64)
+    for work in (grid_work(m), dirty, dirty, np.zeros(0, np.int64)):
+        chosen = active.copy()
+        supervise(
+            x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, chosen, u, du, mates, 0.22, 0.6, work
+        )  # fmt: skip
+        assert np.array_equal(chosen, expect)
     assert (expect >= 0).sum() > m // 10  # the case is not empty
+
+
+def test_the_grid_of_a_large_team_allocates_nothing_in_the_teams_own_integers():
+    """The supervisor sorts teammates into a grid every period: in the integers the team
+    keeps (``grid_work``) it allocates nothing more than with the grid off (numba's own
+    count of its allocations); the scratch arrays it allocated before, four a period, were
+    the compiled period's only ones."""
+    from numba.core.runtime import _nrt_python, rtsys
+
+    from dftc_mujoco.onboard.supervisor import GRID_FROM
+
+    m = 2 * GRID_FROM
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-4.0, 4.0, (m, 2))
+    u_g = rng.normal(0, 0.3, (m, 2))
+    active = np.full(m, -1, dtype=np.intp)
+    u, du, none, work = np.empty((m, 2)), np.empty((m, 2)), np.zeros((0, 2)), grid_work(m)
+
+    def allocations(mate_safe: float, work: np.ndarray) -> int:
+        args = (x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, active, u, du, x)
+        supervise(*args, mate_safe, 0.6, work)  # compiled and typed before counting
+        before = rtsys.get_allocation_stats().alloc
+        supervise(*args, mate_safe, 0.6, work)
+        return rtsys.get_allocation_stats().alloc - before
+
+    was = _nrt_python.memsys_stats_enabled()
+    _nrt_python.memsys_enable_stats()
+    try:
+        off, on, own = allocations(0.0, work), allocations(0.22, work), allocations(0.22, work[:0])
+    finally:
+        if not was:
+            _nrt_python.memsys_disable_stats()
+    assert (active >= 0).any()  # teammates were in reach: the grid was read
+    assert on == off and own == off + 1  # without the team's integers: one array of its own

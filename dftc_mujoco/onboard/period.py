@@ -91,6 +91,7 @@ class PeriodBuffers(NamedTuple):
     r_norm: np.ndarray
     u: np.ndarray  # (N, 2) nominal input, original robot axis
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
+    grid: np.ndarray  # the supervisor's grid of teammates (supervisor.grid_work(M), scratch)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -221,6 +222,7 @@ def act(
         seen.mates,
         sup.mate_safe,
         sup.mate_act,
+        out.grid,
     ):
         code |= SWITCHED
     if limit_input(
@@ -363,7 +365,7 @@ def team_period_flat(
 ):  # fmt: skip  # pragma: no cover - compiled
     """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
     building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 47,
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 48,
     about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
     thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
     or int32, :func:`~.decision.timer_type`); then the records' 24 numbers in one float64
@@ -417,7 +419,7 @@ def team_period_flat(
     out = PeriodBuffers(
         view2(table, 36, f8), view2(table, 37, f8), view2(table, 38, f8), view3(table, 39, f8),
         view2(table, 40, f8), view2(table, 41, f8), view2(table, 42, f8), view2(table, 43, f8),
-        view2(table, 44, f8), view2(table, 45, f8), view2(table, 46, f8),
+        view2(table, 44, f8), view2(table, 45, f8), view2(table, 46, f8), view1(table, 47, i8),
     )  # fmt: skip
     ctl = ControllerRecord(kc)
     return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
@@ -439,7 +441,7 @@ RECORDS = (
 )
 #: the fields team_period_flat takes as arguments, not by address (see there)
 PASSED = {(ThresholdRecord, "dense"), (DecisionRecord, "timer")}
-TABLED = 47  # the records' arrays team_period_flat reads from its table
+TABLED = 48  # the records' arrays team_period_flat reads from its table
 
 
 def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:

@@ -31,23 +31,41 @@ def _cell(cx, cy, cells):  # pragma: no cover - compiled
     return ((np.int64(cx) * 73856093) ^ (np.int64(cy) * 19349663)) & (cells - 1)
 
 
-@njit(cache=True)
-def _grid(mates, width):  # pragma: no cover - compiled
-    """The teammates sorted by the bucket of their cell of side ``width``: bucket h holds
-    ``order[start[h]:start[h + 1]]`` (a counting sort; a bucket may hold several cells)."""
-    m = mates.shape[0]
+@njit(inline="always")
+def _cells(m):  # pragma: no cover - compiled
+    """The grid's buckets for ``m`` teammates: the power of two at least 2m."""
     cells = 1
     while cells < 2 * m:
         cells *= 2
-    key = np.empty(m, np.int64)
-    start = np.zeros(cells + 1, np.int64)
+    return cells
+
+
+def grid_work(m: int) -> np.ndarray:
+    """The integers :func:`supervise` sorts ``m`` teammates into (a team keeps one, so that
+    the period allocates nothing; any other array makes it allocate its own)."""
+    return np.zeros(2 * m + 2 * _cells.py_func(m) + 1, np.int64)
+
+
+@njit(cache=True)
+def _grid(mates, width, work):  # pragma: no cover - compiled
+    """The teammates sorted by the bucket of their cell of side ``width``: bucket h holds
+    ``order[start[h]:start[h + 1]]`` (a counting sort; a bucket may hold several cells),
+    in ``work`` (:func:`grid_work`) or, if it is too short, in arrays of its own."""
+    m = mates.shape[0]
+    cells = _cells(m)
+    if work.shape[0] < 2 * m + 2 * cells + 1:
+        work = np.empty(2 * m + 2 * cells + 1, np.int64)
+    key = work[:m]
+    start = work[m : m + cells + 1]
+    fill = work[m + cells + 1 : m + 2 * cells + 1]
+    order = work[m + 2 * cells + 1 : 2 * m + 2 * cells + 1]
+    start[:] = 0
     for j in range(m):
         key[j] = _cell(np.floor(mates[j, 0] / width), np.floor(mates[j, 1] / width), cells)
         start[key[j] + 1] += 1
     for h in range(cells):
         start[h + 1] += start[h]
-    fill = start[:-1].copy()
-    order = np.empty(m, np.int64)
+    fill[:] = start[:-1]
     for j in range(m):
         order[fill[key[j]]] = j
         fill[key[j]] += 1
@@ -80,7 +98,7 @@ def _mate(
 
 @njit(cache=True)
 def supervise(
-    x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act
+    x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act, work
 ):  # pragma: no cover - compiled
     """Nominal inputs uᵢ (eq. 8) and Δuᵢ = uᵢ − u_g,i (eq. 22) into ``u``, ``delta_u`` (M, n).
 
@@ -89,7 +107,8 @@ def supervise(
     distances (O,); ``mates`` (M, n) where robot i's range sensor sees its teammates
     (row i: itself, skipped), avoided within ``mate_act`` at safe distance
     ``mate_safe`` (0: not avoided); ``active[i]`` (updated) is the obstacle robot i
-    avoids (O + j for teammate j) or -1. Returns True when some robot switched behaviour.
+    avoids (O + j for teammate j) or -1; ``work``: the grid's integers (:func:`grid_work`).
+    Returns True when some robot switched behaviour.
 
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
@@ -99,9 +118,9 @@ def supervise(
     changed = False
     grid = mate_safe > 0.0 and mates.shape[0] >= GRID_FROM
     if grid:
-        cells, start, order = _grid(mates, mate_act)
-    else:
-        cells, start, order = 1, np.zeros(1, np.int64), np.zeros(0, np.int64)
+        cells, start, order = _grid(mates, mate_act, work)
+    else:  # no grid: nothing reads them
+        cells, start, order = 1, work[:0], work[:0]
     for i in range(x.shape[0]):
         best = -1
         best_m = 1e300
@@ -241,6 +260,7 @@ class Supervisor(Block):
             mates,
             self.mate_safe if teammates is not None else 0.0,
             self.mate_act,
+            grid_work(len(mates)),
         )
         return u, du
 

@@ -57,7 +57,7 @@ from .recovery import Recovery, split_event
 from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .streaming import streams
-from .supervisor import Supervisor, Surroundings, obstacle_label
+from .supervisor import Supervisor, Surroundings, grid_work, obstacle_label
 from .team_axis import expand
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
@@ -261,6 +261,7 @@ class Team:
             self._norms,
             self.u,
             self.u_bar,
+            grid_work(m),
         )
 
     # ------------------------------------------------------------------ one period
