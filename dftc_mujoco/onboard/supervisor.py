@@ -33,17 +33,19 @@ def _cell(cx, cy, cells):  # pragma: no cover - compiled
 
 @njit(inline="always")
 def _cells(m):  # pragma: no cover - compiled
-    """The grid's buckets for ``m`` teammates: the power of two at least 2m."""
+    """The grid's buckets for ``m`` teammates, the power of two at least 2m, and the length
+    of the integers it is sorted in: a key and an order per teammate, the buckets' starts
+    (one more) and their fill."""
     cells = 1
     while cells < 2 * m:
         cells *= 2
-    return cells
+    return cells, 2 * m + 2 * cells + 1
 
 
 def grid_work(m: int) -> np.ndarray:
     """The integers :func:`supervise` sorts ``m`` teammates into (a team keeps one, so that
     the period allocates nothing; any other array makes it allocate its own)."""
-    return np.zeros(2 * m + 2 * _cells.py_func(m) + 1, np.int64)
+    return np.zeros(_cells.py_func(m)[1], np.int64)
 
 
 @njit(cache=True)
@@ -52,13 +54,13 @@ def _grid(mates, width, work):  # pragma: no cover - compiled
     ``order[start[h]:start[h + 1]]`` (a counting sort; a bucket may hold several cells),
     in ``work`` (:func:`grid_work`) or, if it is too short, in arrays of its own."""
     m = mates.shape[0]
-    cells = _cells(m)
-    if work.shape[0] < 2 * m + 2 * cells + 1:
-        work = np.empty(2 * m + 2 * cells + 1, np.int64)
+    cells, length = _cells(m)
+    if work.shape[0] < length:
+        work = np.empty(length, np.int64)
     key = work[:m]
     start = work[m : m + cells + 1]
     fill = work[m + cells + 1 : m + 2 * cells + 1]
-    order = work[m + 2 * cells + 1 : 2 * m + 2 * cells + 1]
+    order = work[m + 2 * cells + 1 : length]
     start[:] = 0
     for j in range(m):
         key[j] = _cell(np.floor(mates[j, 0] / width), np.floor(mates[j, 1] / width), cells)
