@@ -1,6 +1,5 @@
 """The decision of eq. 39 (onboard/decision.py): a row it would leave as it is is skipped,
-and only such a row; a row the pass finds quiet from the squares of its norms is such a
-row."""
+and only such a row; a row the pass finds quiet from its residual is such a row."""
 
 from __future__ import annotations
 
@@ -17,6 +16,7 @@ from dftc_mujoco.onboard.decision import (
     timer_type,
     unchanged_row,
 )
+from dftc_mujoco.onboard.observer import row_norms
 from dftc_mujoco.onboard.thresholds.paper import ThresholdRecord, dense_thresholds
 
 
@@ -26,8 +26,16 @@ def _skipped(r, th, i, dec):
 
 
 @njit
-def _quiet(sq, th, i, dec):
-    return quiet_row(sq, th, i, dec)
+def _quiet(row, n, th, i, dec):
+    return quiet_row(row, n, th, i, dec)
+
+
+@njit
+def _norms(row, n, m):
+    """‖ⁱr_k‖ of robot i's residual row, as the pass takes them."""
+    out = np.empty(m)
+    row_norms(row, n, out)
+    return out
 
 
 @njit
@@ -145,33 +153,46 @@ def test_the_decision_with_its_skip_gives_every_row_s_numbers(mode):
         assert raised > 0  # flags rose (and fell), not only rows at rest
 
 
-def _around_squares(rng, mu: np.ndarray) -> np.ndarray:
-    """Squares of norms at and around (μ_k)² as the pass computes it: the float μ·μ itself,
-    its neighbouring floats, a relative 1e-12 either side, well below, and now and then
-    0, NaN or inf."""
-    p = mu * mu
+def _around_rows(rng, mu: np.ndarray, n: int) -> np.ndarray:
+    """Residual rows (M, M·n) whose k-th block has a norm at and around μ_k: μ itself in one
+    component (its square the float μ·μ), the neighbouring floats of μ, a relative 1e-12
+    either side, μ split 0.6 : 0.8 over two components, well below; and now and then 0,
+    NaN or inf."""
+    m = mu.shape[0]
     pick = rng.integers(0, 8, mu.shape)
-    sq = np.select(
-        [pick == 0, pick == 1, pick == 2, pick == 3, pick == 4, pick == 5],
-        [p, np.nextafter(p, np.inf), np.nextafter(p, 0.0), p * (1 + 1e-12), p * (1 - 1e-12),
-         p * 0.25],
-        default=p * rng.uniform(0.0, 2.0, mu.shape),
-    )  # fmt: skip
-    sq[rng.random(mu.shape) < 0.03] = 0.0
-    sq[rng.random(mu.shape) < 0.03] = np.nan
-    sq[rng.random(mu.shape) < 0.03] = np.inf
-    return sq
+    with np.errstate(invalid="ignore"):
+        v = np.select(
+            [pick == 0, pick == 1, pick == 2, pick == 3, pick == 4, pick == 5],
+            [mu, np.nextafter(mu, np.inf), np.nextafter(mu, 0.0), mu * (1 + 1e-12),
+             mu * (1 - 1e-12), mu * 0.5],
+            default=mu * rng.uniform(0.0, 1.4, mu.shape),
+        )  # fmt: skip
+    v[rng.random(mu.shape) < 0.03] = 0.0
+    v[rng.random(mu.shape) < 0.03] = np.nan
+    v[rng.random(mu.shape) < 0.03] = np.inf
+    v *= np.where(rng.random(mu.shape) < 0.5, -1.0, 1.0)
+    rows = np.zeros((m, m, n))
+    at = rng.integers(0, n, mu.shape)
+    split = (rng.random(mu.shape) < 0.3) & np.isfinite(v)
+    i, k = np.nonzero(~split)
+    rows[i, k, at[i, k]] = v[i, k]
+    i, k = np.nonzero(split)
+    rows[i, k, at[i, k]] = 0.6 * v[i, k]
+    rows[i, k, (at[i, k] + 1) % n] = 0.8 * v[i, k]
+    return rows.reshape(m, m * n)
 
 
-def test_a_row_quiet_by_its_squares_is_one_its_norms_leave_as_it_is():
-    """Wherever :func:`quiet_row` finds a row quiet from the squares of its norms, the norms
-    themselves (their square roots, as the pass takes them) leave the row as it is
-    (:func:`unchanged_row`), exactly: squares at the float μ·μ and its neighbours, thresholds
-    from 1e-170 (squares below the normal floats) to 1e170 (squares beyond them), +inf,
-    NaN, zero and negative entries of a rule's array; and a row at rest well below its
-    thresholds is found quiet. (A tolerance of 1e-12 the wrong way, or no test of μ ≥ 0,
-    makes this fail.)"""
-    rng = np.random.default_rng(46)
+@pytest.mark.parametrize("n", [2, 3])
+def test_a_row_quiet_by_its_residual_is_one_its_norms_leave_as_it_is(n):
+    """Wherever :func:`quiet_row` finds a row quiet from robot i's residual (the squares
+    compared as they are computed), the norms the pass would take from it
+    (:func:`~dftc_mujoco.onboard.observer.row_norms`) leave the row as it is
+    (:func:`unchanged_row`), exactly: residual norms at μ, at its neighbouring floats and
+    split over two components, thresholds from 1e-170 (squares below the normal floats) to
+    1e170 (squares beyond them), +inf, NaN, zero and negative entries of a rule's array; and
+    a row at rest well below its thresholds is found quiet. (A tolerance of 1e-12 the wrong
+    way, or no test of μ ≥ 0, makes this fail.)"""
+    rng = np.random.default_rng(46 + n)
     quiet = loud_at_rest = 0
     for case in range(3000):
         m = int(rng.integers(1, 9))
@@ -192,17 +213,17 @@ def test_a_row_quiet_by_its_squares_is_one_its_norms_leave_as_it_is():
             th = dense_thresholds(mu)
         dec = _record(rng, m, int(rng.integers(0, 30)), case % 3, settled=0.8)
         if clean:
-            sq = np.where(np.isfinite(mu), mu * mu * 0.25, 1.0)
+            rows = np.zeros((m, m * n))
+            rows[:, ::n] = np.where(np.isfinite(mu), mu * 0.5, 1.0)
         else:
             with np.errstate(over="ignore"):
-                sq = _around_squares(rng, mu)
-        with np.errstate(invalid="ignore"):
-            norms = np.sqrt(sq)
+                rows = _around_rows(rng, mu, n)
         for i in range(m):
-            if _quiet(sq[i], th, i, dec):
+            norms = _norms(rows[i], n, m)
+            if _quiet(rows[i], n, th, i, dec):
                 quiet += 1
-                assert _skipped(norms[i], th, i, dec), (case, i, mu[i], sq[i])
-            elif clean and _skipped(norms[i], th, i, dec):
+                assert _skipped(norms, th, i, dec), (case, i, mu[i], rows[i])
+            elif clean and _skipped(norms, th, i, dec):
                 loud_at_rest += 1
     assert quiet > 1000
     assert loud_at_rest == 0  # at rest and well below: found quiet from the squares

@@ -4,6 +4,7 @@ import copy
 
 import numpy as np
 import pytest
+from numba import njit
 
 from dftc_mujoco import check_locality
 from dftc_mujoco.blocks import paper
@@ -67,6 +68,51 @@ def test_messages_sum_matches_laplacian():
     y = np.random.default_rng(0).normal(size=(g.n, g.n, 2))
     expected = -np.einsum("ij,jkd->ikd", g.laplacian(), y)
     assert np.allclose(msg.neighbour_sum(y), expected)
+
+
+@njit
+def _residual_rows(y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked):
+    out = np.empty((y_hat.shape[0], y_hat.shape[0] * y_hat.shape[2]))
+    for i in range(y_hat.shape[0]):
+        observer.residual_row(
+            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, out[i]
+        )
+    return out
+
+
+@pytest.mark.parametrize("networked", [False, True])
+def test_the_residual_sums_its_messages_left_to_right_whatever_the_in_degree(networked):
+    """Eq. 35 as the pass computes it, up to three messages in one loop: bit for bit the
+    sum taken a message at a time, −|Nᵢ| ⁱŷ + ʲ¹ŷ + ʲ²ŷ + … left to right, then the own
+    measurement's term, for in-degrees 0 to 6 (the current ŷ of each sender, or on a
+    network the message each link delivered); and eq. 35 itself to rounding."""
+    rng = np.random.default_rng(35)
+    m, n = 9, 2
+    src, first, degree = [], [0], []
+    for i in range(m):  # robot i hears from i mod 7 teammates (0 to 6), in a shuffled order
+        senders = rng.permutation([j for j in range(m) if j != i])[: i % 7]
+        src += list(senders)
+        first.append(len(src))
+        degree.append(len(senders))
+    src, first = np.array(src, np.int64), np.array(first, np.int64)
+    in_degree = np.array(degree, float)
+    y_hat = rng.normal(size=(m, m, n)) * 10.0 ** rng.integers(-3, 4, (m, m, 1))
+    int_u_own, x_m = rng.normal(size=(m, n)), rng.normal(size=(m, n))
+    links = rng.normal(size=(len(src), m * n)) if networked else np.zeros((0, m * n))
+    got = _residual_rows(y_hat, int_u_own, x_m, src, first, in_degree, links, networked)
+    flat, expected = y_hat.reshape(m, m * n), np.empty((m, m * n))
+    for i in range(m):
+        row = -in_degree[i] * flat[i]
+        for e in range(first[i], first[i + 1]):
+            row = row + (links[e] if networked else flat[src[e]])
+        row[i * n : i * n + n] += x_m[i] - int_u_own[i] - y_hat[i, i]
+        expected[i] = row
+    assert np.array_equal(got, expected)
+    sent = links if networked else flat[src]
+    for i in range(m):  # Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ)
+        eq35 = (sent[first[i] : first[i + 1]] - flat[i]).sum(axis=0)
+        eq35[i * n : i * n + n] += x_m[i] - int_u_own[i] - y_hat[i, i]
+        assert np.allclose(got[i], eq35, rtol=1e-12, atol=1e-9)
 
 
 @pytest.mark.parametrize("n", [4, 12])

@@ -45,10 +45,8 @@ from .observer import (
     advance_one,
     estimate_one,
     integrate_inputs,
-    norms_of_squares,
     residual_row,
     row_norms,
-    row_squares,
 )
 from .streaming import store_fence, stream_store
 from .supervisor import SupervisorRecord, Surroundings, supervise
@@ -104,12 +102,14 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
 
     For robot i: ⁱx̂ (eq. 21, into ``x_hat`` when ``estimates``: only where a log row or a
     snapshot reads it) and ∫ ⁱû_g advanced (eqs. 15, 20); at a round of the observers
-    (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ (into ``r_norm`` when
-    ``norms``, else into a scratch row: only a log row, a snapshot or an exclusion reads
-    them; there, with FDIR, first their squares, whose square roots a row at rest does not
-    need, :func:`~.decision.quiet_row`), ⁱŷ of the next period (eq. 19) into ``y_next``
-    (past the caches when ``stream``, :mod:`.streaming`) and, with FDIR, its flags (eq. 39,
-    :func:`~.decision.decide_row`, with the thresholds ``th`` read entry by entry). Every
+    (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm`` when
+    ``norms`` (only a log row, a snapshot or an exclusion reads them), ⁱŷ of the next period
+    (eq. 19) into ``y_next`` (past the caches when ``stream``, :mod:`.streaming`) and, with
+    FDIR, its flags (eq. 39, :func:`~.decision.decide_row`, with the thresholds ``th`` read
+    entry by entry). Where the norms are not kept, a row at rest is first tested from the
+    residual itself (:func:`~.decision.quiet_row`: the squares compared as they are
+    computed, none stored, no square root); only a row that may change takes its norms,
+    into a scratch row. Every
     N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
     measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
     the pass may run beside them and the physics; :func:`integrate` follows it."""
@@ -149,8 +149,6 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         norms = out.r_norm[i if inp.norms else m + b]
         if inp.norms:
             row_norms(row, n, norms)
-        elif inp.fdir:  # their squares: a row at rest needs no square root (quiet_row)
-            row_squares(row, n, norms)
         yni = yn[i]  # ⁱŷ of the next period (eq. 19)
         if stream:  # past the caches: the next period reads it from memory anyway
             for a in range(mn):
@@ -163,10 +161,10 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         if inp.norms:
             if unchanged_row(norms, th, i, dec):  # at rest, every norm at most ⁱμ_k
                 continue
-        elif quiet_row(norms, th, i, dec):  # at rest, every square below (ⁱμ_k)²
+        elif quiet_row(row, n, th, i, dec):  # at rest, every square below (ⁱμ_k)²
             continue
         else:  # a row that may change: its norms (the skips only save work)
-            norms_of_squares(norms)
+            row_norms(row, n, norms)
         count += decide_row(norms, th, i, dec)  # eq. 39
     if round_now and stream:
         store_fence()  # the streamed ŷ is whole before another thread reads it
