@@ -59,11 +59,14 @@ def timed(call, repeat: int) -> tuple[float, float]:
 
 
 def in_float32(ob, buf):
-    """Copies of the observer's record and the period's buffers with ŷ, ∫ⁱû_g, the next ŷ
-    and ⁱx̂ in float32."""
+    """Copies of the observer's record and the period's buffers with ŷ, ∫ⁱû_g, the next ŷ,
+    the links' messages and ⁱx̂ in float32."""
     f4 = np.float32
     ob32 = ob._replace(
-        y_hat=ob.y_hat.astype(f4), int_u_hat=ob.int_u_hat.astype(f4), y_next=ob.y_next.astype(f4)
+        y_hat=ob.y_hat.astype(f4),
+        int_u_hat=ob.int_u_hat.astype(f4),
+        y_next=ob.y_next.astype(f4),
+        links=ob.links.astype(f4),  # the messages a network delivered: ŷ as it was sent
     )
     return ob32, buf._replace(x_hat=buf.x_hat.astype(f4))
 

@@ -89,22 +89,18 @@ def residual_row(
 
 
 @njit(inline="always")
-def square_norm(row, k, n):  # pragma: no cover - compiled
-    """‖ⁱr_k‖² from robot i's residual ``row`` (M·n,): the one formula of the squares that
-    :func:`row_squares` keeps and :func:`~.decision.quiet_row` compares."""
-    if n == 2:  # the plane, unrolled: a loop over k calling this the compiler vectorises
-        return row[2 * k] ** 2 + row[2 * k + 1] ** 2
-    acc = 0.0
-    for d in range(n):
-        acc += row[k * n + d] ** 2
-    return acc
-
-
-@njit(inline="always")
 def row_squares(row, n, out):  # pragma: no cover - compiled
-    """‖ⁱr_k‖² for every k of robot i's residual ``row`` (M·n,), into ``out`` (M,)."""
+    """‖ⁱr_k‖² for every k of robot i's residual ``row`` (M·n,), into ``out`` (M,)
+    (:func:`~.decision.quiet_row` compares the same floats as it computes them)."""
+    if n == 2:  # the plane: the same sums unrolled, which the compiler vectorises
+        for k in range(out.shape[0]):
+            out[k] = row[2 * k] ** 2 + row[2 * k + 1] ** 2
+        return
     for k in range(out.shape[0]):
-        out[k] = square_norm(row, k, n)
+        acc = 0.0
+        for d in range(n):
+            acc += row[k * n + d] ** 2
+        out[k] = acc
 
 
 @njit(inline="always")
