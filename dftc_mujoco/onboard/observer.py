@@ -56,7 +56,8 @@ def residual_row(
     The sum is taken as −|Nᵢ| ⁱŷ + ʲ¹ŷ + ʲ²ŷ + …, left to right, with up to three messages
     in one loop over the row and any further ones added a loop each: the same floats as a
     loop per message, with the row stored and read back once instead of once a message
-    (at N = 1000 and three in-neighbours, 5 % of the pass over the team's state)."""
+    (at N = 1000 and three in-neighbours, the pass's round without the decision took
+    2.24-2.35 ms on one core, against 2.42-2.63 ms a loop a message, 2026-11-28)."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     own, w = y[i], -in_degree[i]  # one-dimensional views: loops the compiler vectorises
