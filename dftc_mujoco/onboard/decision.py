@@ -118,7 +118,7 @@ def quiet_row(row, n, th, i, dec):  # pragma: no cover - compiled
     (2026-11-28: 6-10 % of the pass at N = 1000) and their store: each square is compared
     as it is computed, from the residual. The squares are written out in the loops: the
     same sum in a helper stopped the compiler vectorising them (the test on 1000 rows took
-    0.95 ms instead of 0.42 ms, 2026-11-28).
+    0.93-0.95 ms instead of 0.42-0.50 ms, 2026-11-28).
 
     Exact, with no tolerance: x < fl(μ·μ) with μ ≥ 0 gives x < μ² (x is a float below the
     float nearest μ², so below μ² itself), hence √x < μ, and the square root rounded to
