@@ -128,35 +128,26 @@ def quiet_row(row, n, th, i, dec):  # pragma: no cover - compiled
     negative μ, fails the test (the row takes the square roots)."""
     if not at_rest(i, dec):
         return False
-    m, below = dec.flag.shape[1], 0
-    if th.dense.shape[0]:  # a rule's array: row i of it
+    m, below, dense = dec.flag.shape[1], 0, th.dense.shape[0] > 0
+    if n == 2 and dense:  # the plane, a rule's array: row i of it
         mus = th.dense[i]
-        if n == 2:
-            for k in range(m):
-                sq = row[2 * k] ** 2 + row[2 * k + 1] ** 2
-                mu = mus[k]
-                below += (sq < mu * mu) & (mu >= 0.0)
-            return below == m
         for k in range(m):
-            sq = 0.0
-            for d in range(n):
-                sq += row[k * n + d] ** 2
+            sq = row[2 * k] ** 2 + row[2 * k + 1] ** 2
             mu = mus[k]
             below += (sq < mu * mu) & (mu >= 0.0)
-        return below == m
-    ci, bound = th.coef[i], th.bound  # eq. 40's factors: ⁱμ_k = cᵢ b_k, as unchanged_row
-    if n == 2:
+    elif n == 2:  # the plane, eq. 40's factors: ⁱμ_k = cᵢ b_k, the float unchanged_row compares
+        ci, bound = th.coef[i], th.bound
         for k in range(m):
             sq = row[2 * k] ** 2 + row[2 * k + 1] ** 2
             mu = ci * bound[k]
             below += (sq < mu * mu) & (mu >= 0.0)
-        return below == m
-    for k in range(m):
-        sq = 0.0
-        for d in range(n):
-            sq += row[k * n + d] ** 2
-        mu = ci * bound[k]
-        below += (sq < mu * mu) & (mu >= 0.0)
+    else:  # any n: one loop for either kind of thresholds (not the plane's hot path)
+        for k in range(m):
+            sq = 0.0
+            for d in range(n):
+                sq += row[k * n + d] ** 2
+            mu = th.dense[i, k] if dense else th.coef[i] * th.bound[k]
+            below += (sq < mu * mu) & (mu >= 0.0)
     return below == m
 
 
