@@ -13,8 +13,9 @@ median of ``--repeat`` timings (µs) of:
   network;
 * plus the round: the residual (eq. 35) and the next ŷ (eq. 19); without FDIR and a log
   row the pass computes no norms;
-* plus the decision (eq. 39): the squares of the norms, and their square roots only for
-  the rows not at rest (``onboard/decision.py``, ``quiet_row``): the whole pass, as the
+* plus the decision (eq. 39): each row at rest tested from its residual's squares, and
+  the norms taken only for the rows that fail the test (``onboard/decision.py``,
+  ``quiet_row``): the whole pass, as the
   team runs it at this N between log rows (ŷ streamed past the caches where the team
   streams it, ``onboard/streaming.py``);
 * the whole pass again with ŷ, ∫ⁱû_g and the next ŷ held in float32 (copies of the team's
