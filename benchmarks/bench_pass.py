@@ -28,7 +28,10 @@ For a team that shares its pass between threads (N ≥ ``sharing.PARALLEL_FROM``
 of ``--periods`` periods of the loop itself, in one ``Simulation.step`` call (means in ms,
 from ``Sharing.sums``): the period; the work the calling thread does beside the pass (the
 commands and MuJoCo's step); when the helper threads and the calling thread end their rows;
-and what of the period is outside the shared part.
+and what of the period is outside the shared part. Then when the helpers begin, how long
+each works on its rows, and the period's work on all threads (the calling thread's period
+but its wait for the helpers, and the helpers' rows): divided by the threads, the shortest
+period this split of the work allows, were no thread ever idle.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from bench_scale import scene
 
 from dftc_mujoco.loop import Simulation
 from dftc_mujoco.onboard.period import PeriodInputs, team_rows
-from dftc_mujoco.onboard.sharing import PARALLEL_FROM
+from dftc_mujoco.onboard.sharing import PARALLEL_FROM, SUMMED
 
 #: [s] the state the pass is timed on: after the transient's start, before the fault
 AFTER = 3.0
@@ -145,13 +148,22 @@ def main() -> None:
         t0 = time.perf_counter()
         sim.step(k)
         period = (time.perf_counter() - t0) / k * 1e3
-        runs = sharing.passes - passes
+        runs, w = sharing.passes - passes, sharing.threads
         spent = zip(sums, sharing.sums, strict=True)
-        beside, helpers, caller = ((b - a) / runs * 1e3 for a, b in spent)
+        mean = dict(zip(SUMMED, ((b - a) / runs * 1e3 for a, b in spent), strict=True))
+    beside, helpers, caller = mean["beside"], mean["helpers_end"], mean["caller_end"]
     print(
         f"  the loop, {k} periods: a period {period:.3f} ms; in it the calling thread's work "
         f"beside the pass {beside:.3f} ms, the helpers end at {helpers:.3f} ms, the calling "
         f"thread at {caller:.3f} ms, the rest of the period {period - max(helpers, caller):.3f} ms"
+    )
+    # the calling thread works but while it waits for the helpers; each helper only on its rows
+    work = period - (mean["joined"] - caller) + (w - 1) * mean["helper_work"]
+    print(
+        f"  the helpers begin their rows at {mean['helpers_start']:.3f} ms and work "
+        f"{mean['helper_work']:.3f} ms each, the calling thread's rows take "
+        f"{caller - beside:.3f} ms and it joins the helpers at {mean['joined']:.3f} ms: "
+        f"{work:.3f} ms of work on {w} threads, {work / w:.3f} ms a period if none ever idled"
     )
 
 

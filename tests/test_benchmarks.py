@@ -54,8 +54,10 @@ def test_the_peers_benchmark_times_each_peer_on_the_formation_task():
 
 def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
     """``bench_pass.py`` at N = 160 (a team that shares its pass): every stage and both
-    precisions timed, float32's next ŷ within 1e-5 m of float64's, and the shared part of
-    the period ending within the period."""
+    precisions timed, float32's next ŷ within 1e-5 m of float64's, the shared part of the
+    period ending within the period, and the period's work on the threads (the calling
+    thread's period but its wait for the helpers, and the helpers' rows) adding up, its
+    share a thread no longer than the period."""
     out = _bench("bench_pass.py", "--n", "160", "--repeat", "2", "--periods", "20")
     times = re.findall(r"^  (\S.*?)\s+([\d.]+) /\s+([\d.]+)$", out, flags=re.M)
     assert len(times) == 6, out
@@ -70,3 +72,16 @@ def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
     assert split is not None, out
     period, beside, helpers, caller = (float(v) for v in split.groups())
     assert 0 < beside <= caller <= period and 0 < helpers <= period, split.groups()
+    work = re.search(
+        r"the helpers begin their rows at ([\d.]+) ms and work ([\d.]+) ms each, the calling "
+        r"thread's rows take ([\d.]+) ms and it joins the helpers at ([\d.]+) ms: ([\d.]+) ms "
+        r"of work on (\d+) threads, ([\d.]+) ms a period if none ever idled",
+        out,
+    )
+    assert work is not None, out
+    start, each, rows, joined, total, threads, ideal = (float(v) for v in work.groups())
+    assert 0 <= start < helpers and 0 < each <= helpers + 1e-3, work.groups()
+    assert caller <= joined <= period and abs(rows - (caller - beside)) < 2e-3, work.groups()
+    # the work is the calling thread's period but its wait, and each helper's rows
+    assert threads >= 2 and abs(total - (period - (joined - caller) + (threads - 1) * each)) < 5e-3
+    assert abs(ideal - total / threads) < 2e-3 and ideal <= period, work.groups()

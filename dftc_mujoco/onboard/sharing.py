@@ -51,6 +51,12 @@ def workers() -> int:
 #: [s] how much earlier than the caller the helpers aim to end (a thread's wake-up)
 MARGIN = 1e-4
 
+#: what :attr:`Sharing.sums` adds up over the shared passes, in order [s]: the caller's
+#: work beside the pass, when the last helper ended, when the caller's rows ended, when the
+#: last helper began, one helper's time on its rows (their mean), when the helpers were
+#: joined (each but the fifth from the pass's start; ``benchmarks/bench_pass.py``)
+SUMMED = ("beside", "helpers_end", "caller_end", "helpers_start", "helper_work", "joined")
+
 
 class Sharing:
     """Runs ``rows(lo, hi, b)`` over robots 0 .. m - 1 in ``threads`` threads (``b``: the
@@ -60,8 +66,8 @@ class Sharing:
         self.threads = threads
         self.own_rows = -1  # robots the caller takes after the beside work (-1: m / threads)
         self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, helpers, the caller
-        self.passes = 0  # shared passes run, and the sums of their timings (benchmarks)
-        self.sums = (0.0, 0.0, 0.0)
+        self.passes = 0  # shared passes run, and the sums of their timings (SUMMED)
+        self.sums = (0.0,) * len(SUMMED)
 
     def run(
         self,
@@ -97,13 +103,16 @@ class Sharing:
             t2 = time.perf_counter()
         finally:  # nothing is left running on the team's arrays
             _join(helpers)
+        t3 = time.perf_counter()
         ends = [f.result() for f in helpers]
         count += sum(c for c, _, _ in ends)
         helper_end = max(end for _, _, end in ends) - t0
         self.timings = (t1 - t0, helper_end, t2 - t0)
-        self.passes += 1
-        self.sums = (self.sums[0] + t1 - t0, self.sums[1] + helper_end, self.sums[2] + t2 - t0)
         spent = sum(end - start for _, start, end in ends)
+        began = max(start for _, start, _ in ends) - t0
+        now = (t1 - t0, helper_end, t2 - t0, began, spent / (w - 1), t3 - t0)
+        self.passes += 1
+        self.sums = tuple(s + x for s, x in zip(self.sums, now, strict=True))
         if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
             per_row = spent / rest  # one thread's time for a robot
             late = helper_end - (t2 - t0) + MARGIN
