@@ -112,9 +112,9 @@ def unchanged_row(r, th, i, dec):  # pragma: no cover - compiled
 @njit(inline="always")
 def quiet_row(row, n, th, i, dec):  # pragma: no cover - compiled
     """Whether robot i's row is at rest (:func:`at_rest`) and every ‖ⁱr_k‖², computed from
-    robot i's residual ``row`` (M·n,) as :func:`~.observer.row_squares` computes it, lies
-    below (ⁱμ_k)²: then :func:`unchanged_row` on the norms the pass would take
-    (:func:`~.observer.row_norms`) is true, and the pass skips them: their square roots
+    robot i's residual ``row`` (M·n,) as :func:`~.observer.row_norms` computes it before
+    its square roots, lies below (ⁱμ_k)²: then :func:`unchanged_row` on the norms the pass
+    would take is true, and the pass skips them: their square roots
     (2026-11-28: 6-10 % of the pass at N = 1000) and their store: each square is compared
     as it is computed, from the residual. The squares are written out in the loops: the
     same sum in a helper stopped the compiler vectorising them (the test on 1000 rows took

@@ -90,32 +90,21 @@ def residual_row(
 
 
 @njit(inline="always")
-def row_squares(row, n, out):  # pragma: no cover - compiled
-    """‖ⁱr_k‖² for every k of robot i's residual ``row`` (M·n,), into ``out`` (M,)
-    (:func:`~.decision.quiet_row` compares the same floats as it computes them)."""
-    if n == 2:  # the plane: the same sums unrolled, which the compiler vectorises
-        for k in range(out.shape[0]):
-            out[k] = row[2 * k] ** 2 + row[2 * k + 1] ** 2
-        return
-    for k in range(out.shape[0]):
-        acc = 0.0
-        for d in range(n):
-            acc += row[k * n + d] ** 2
-        out[k] = acc
-
-
-@njit(inline="always")
-def norms_of_squares(sq):  # pragma: no cover - compiled
-    """‖ⁱr_k‖ from ‖ⁱr_k‖² (:func:`row_squares`), in place."""
-    for k in range(sq.shape[0]):
-        sq[k] = np.sqrt(sq[k])
-
-
-@njit(inline="always")
 def row_norms(row, n, norms):  # pragma: no cover - compiled
-    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``norms`` (M,)."""
-    row_squares(row, n, norms)
-    norms_of_squares(norms)
+    """‖ⁱr_k‖ for every k of robot i's residual ``row`` (M·n,), into ``norms`` (M,): the
+    squares first (:func:`~.decision.quiet_row` compares the same floats as it computes
+    them), then their square roots in place."""
+    if n == 2:  # the plane: the same sums unrolled, which the compiler vectorises
+        for k in range(norms.shape[0]):
+            norms[k] = row[2 * k] ** 2 + row[2 * k + 1] ** 2
+    else:
+        for k in range(norms.shape[0]):
+            acc = 0.0
+            for d in range(n):
+                acc += row[k * n + d] ** 2
+            norms[k] = acc
+    for k in range(norms.shape[0]):
+        norms[k] = np.sqrt(norms[k])
 
 
 @njit(cache=True)
