@@ -24,11 +24,17 @@ from .block import Block, TeamConfig
 #: cells as wide as the activation distance (the same choice as looking at all of them)
 GRID_FROM = 64
 
+#: the buckets between one row of the grid and the next, modulo the buckets: 2⁶⁴ / φ as a
+#: signed integer (rows scattered evenly, whatever the power of two of the buckets)
+ROW_STRIDE = -7046029254386353131
+
 
 @njit(inline="always")
 def _cell(cx, cy, cells):  # pragma: no cover - compiled
-    """The bucket of the grid cell (cx, cy) among ``cells`` (a power of two)."""
-    return ((np.int64(cx) * 73856093) ^ (np.int64(cy) * 19349663)) & (cells - 1)
+    """The bucket of the grid cell (cx, cy) among ``cells`` (a power of two): the cells of
+    a row in consecutive buckets (the rows scattered), so that three neighbours of a row
+    are one range of the sorted teammates."""
+    return (np.int64(cx) + np.int64(cy) * ROW_STRIDE) & (cells - 1)
 
 
 @njit(inline="always")
@@ -150,14 +156,15 @@ def supervise(
             if grid:  # only the teammates in the 3 × 3 cells around robot i can be in reach
                 cx = np.floor(x[i, 0] / mate_act)
                 cy = np.floor(x[i, 1] / mate_act)
-                for dx in range(-1, 2):
-                    for dy in range(-1, 2):
-                        h = _cell(cx + dx, cy + dy, cells)
-                        for q in range(start[h], start[h + 1]):
-                            best_now = _mate(
-                                i, order[q], x, mates, u_g, theta, release, active, n_obs,
-                                reach, mate_safe, best_now,
-                            )  # fmt: skip
+                sorted_ = start[cells]  # every teammate
+                for dy in range(-1, 2):  # a row's three cells: buckets h, h + 1, h + 2
+                    h = _cell(cx - 1, cy + dy, cells)  # (past the last bucket: the first)
+                    end = start[h + 3] if h + 3 <= cells else sorted_ + start[h + 3 - cells]
+                    for q in range(start[h], end):
+                        best_now = _mate(
+                            i, order[q if q < sorted_ else q - sorted_], x, mates, u_g, theta,
+                            release, active, n_obs, reach, mate_safe, best_now,
+                        )  # fmt: skip
             else:
                 for j in range(mates.shape[0]):
                     best_now = _mate(
