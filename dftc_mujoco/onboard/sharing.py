@@ -64,7 +64,8 @@ class Sharing:
 
     def __init__(self, threads: int) -> None:
         self.threads = threads
-        self.own_rows = -1  # robots the caller takes after the beside work (-1: m / threads)
+        self.own_rows = -1  # robots the caller takes after the beside work (-1: m / threads;
+        # at most m - threads + 1: a helper without rows has no timing to move it back)
         self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, helpers, the caller
         self.passes = 0  # shared passes run, and the sums of their timings (SUMMED)
         self.sums = (0.0,) * len(SUMMED)
@@ -83,7 +84,8 @@ class Sharing:
             if beside is not None:
                 beside()
             return count
-        share = m // w if self.own_rows < 0 else min(self.own_rows, m)
+        most = max(m - (w - 1), 0)  # a row for each helper: its timing moves the share
+        share = m // w if self.own_rows < 0 else min(self.own_rows, most)
         rest = m - share  # robots 0 .. rest - 1 for the helpers, the last ones for the caller
         cuts = [rest * j // (w - 1) for j in range(w)]
         pool = _helpers(w - 1)
@@ -117,7 +119,7 @@ class Sharing:
             per_row = spent / rest  # one thread's time for a robot
             late = helper_end - (t2 - t0) + MARGIN
             target = share + late / per_row * (w - 1) / w
-            self.own_rows = round(0.5 * share + 0.5 * min(max(target, 0.0), m))
+            self.own_rows = round(0.5 * share + 0.5 * min(max(target, 0.0), most))
         if error is not None:
             raise error
         return count
