@@ -569,6 +569,31 @@ def test_a_faulty_robot_still_in_the_team_at_the_end_says_why(tmp_path):
     assert "| no teammate flagged it | 1 | 0 |" in text
 
 
+def test_a_robot_flagged_before_its_fault_keeps_that_flags_t_r_as_its_why():
+    """Found in an N = 400 battery at seed 412: robot 25, flagged while premises were
+    violated before it stopped, then flagged by 98 teammates after the stop, read
+    ``never_flagged``. The recovery schedules t_r at a robot's first flag only, so the word
+    in force at the onset is that earlier ``exclusion_scheduled``: here its t_r (Δt_d,max of
+    an unsettled rule) comes after the end. A schedule cancelled before the onset, or one
+    whose t_r passed before it, says nothing of the fault."""
+    from dftc_mujoco.campaign.task import kept_why
+    from dftc_mujoco.onboard.recovery import Recovery
+
+    rec = Recovery(dt_d_max=5.0e6, max_faults=1)
+    events = rec.flagged(10.0, [(3, 24)])  # before the stop at 13.8 s
+    events += rec.flagged(14.1, [(5, 24), (7, 24)])  # after it: detections, nothing new
+    assert [e["kind"] for e in events] == ["detection", "exclusion_scheduled"] + ["detection"] * 2
+    assert kept_why(events, 25, 13.8, 60.0, 60.0) == "due_after_end"
+
+    rec = Recovery(dt_d_max=2.0, max_faults=1)
+    events = rec.flagged(10.0, [(3, 24)])  # t_r at 12 s, before the onset: cancelled then
+    assert rec.due(12.0) == [24]
+    events.append(rec.cancel(12.0, 24))
+    assert kept_why(events, 25, 13.8, 60.0, 60.0) == "never_flagged"
+    events += rec.flagged(14.1, [(5, 24)])  # flagged anew after the onset: t_r at 16.1 s
+    assert kept_why(events, 25, 13.8, 15.0, 60.0) == "run_stopped"
+
+
 def test_rows_describe_two_faults_in_one_run(tmp_path):
     """Two sequential stops from the base scenario: one entry each in ``faults``."""
     base = tmp_path / "two.toml"

@@ -149,15 +149,24 @@ def kept_why(
 ) -> str:
     """Why faulty ``robot`` (1-based; its fault began at ``t_f``) was still in the team when
     the run ended at ``end`` (``planned``: its duration), from the last word the recovery
-    said of it after the onset: ``never_flagged`` (no teammate flagged it),
-    ``cancelled_<reason>`` (at its t_r, e.g. ``cancelled_not_flagged``,
+    said of it that held at the onset or came after it: ``never_flagged`` (no teammate
+    flagged it), ``cancelled_<reason>`` (at its t_r, e.g. ``cancelled_not_flagged``,
     ``cancelled_systemic_anomaly``), ``postponed_<reason>`` (``contact``, ``decaying``,
     ``estimate``), ``due_after_end`` (t_r = first flag + Δt_d,max after the run's
-    duration) or ``run_stopped`` (the run stopped before a t_r within its duration)."""
+    duration) or ``run_stopped`` (the run stopped before a t_r within its duration).
+    A robot flagged before its fault began keeps the t_r of that first flag: later flags
+    schedule nothing new (before, such a robot, flagged after the onset too, read
+    ``never_flagged``)."""
     last = None
     for e in events:
-        if e["kind"] in RECOVERY_KINDS and e.get("robot") == robot and e["t"] >= t_f:
+        if e["kind"] not in RECOVERY_KINDS or e.get("robot") != robot:
+            continue
+        if e["t"] >= t_f:
             last = e
+        else:  # before the onset: in force at it while its t_r (None: never) is still to come
+            t_r = e.get("t_r")
+            pending = e["kind"] != "exclusion_cancelled" and (t_r is None or t_r >= t_f)
+            last = e if pending else None
     if last is None:
         return "never_flagged"
     if last["kind"] == "exclusion_cancelled":
