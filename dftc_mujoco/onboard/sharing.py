@@ -109,10 +109,10 @@ class Sharing:
         ends = [f.result() for f in helpers]
         count += sum(c for c, _, _ in ends)
         helper_end = max(end for _, _, end in ends) - t0
-        self.timings = (t1 - t0, helper_end, t2 - t0)
         spent = sum(end - start for _, start, end in ends)
         began = max(start for _, start, _ in ends) - t0
-        now = (t1 - t0, helper_end, t2 - t0, began, spent / (w - 1), t3 - t0)
+        now = (t1 - t0, helper_end, t2 - t0, began, spent / (w - 1), t3 - t0)  # SUMMED
+        self.timings = now[:3]
         self.passes += 1
         self.sums = tuple(s + x for s, x in zip(self.sums, now, strict=True))
         if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
