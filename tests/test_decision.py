@@ -72,7 +72,8 @@ def _record(rng, m: int, need: int, mode: int, settled: float) -> DecisionRecord
     raised = flag & (rng.random((m, m)) < 0.5)
     raised_rows = raised.any(axis=1) | (rng.random(m) < 0.05)
     isolated = np.where(rng.random(m) < 0.5, rng.integers(0, m, m), -1)
-    return DecisionRecord(timer, flag, need, mode, isolated, raised, raised_rows)
+    rest_rows = (timer == -top).all(axis=1) & ~flag.any(axis=1) & ~raised_rows  # settled_row
+    return DecisionRecord(timer, flag, need, mode, isolated, raised, raised_rows, rest_rows)
 
 
 def _copy(dec: DecisionRecord) -> DecisionRecord:

@@ -75,8 +75,9 @@ def _residual_rows(y_hat, int_u_own, x_m, src, first_edge, in_degree, links, net
     out = np.empty((y_hat.shape[0], y_hat.shape[0] * y_hat.shape[2]))
     for i in range(y_hat.shape[0]):
         observer.residual_row(
-            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, out[i]
-        )
+            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, out[i],
+            out[i], np.nan,
+        )  # fmt: skip
     return out
 
 

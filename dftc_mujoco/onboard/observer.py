@@ -45,10 +45,10 @@ def _message(y, links, networked, src, e):  # pragma: no cover - compiled
 
 @njit(inline="always")
 def residual_row(
-    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, row
+    y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, row, scale, half
 ):  # pragma: no cover - compiled
-    """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ); returns
-    nothing. Robot i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
+    """Robot i's ⁱr (eq. 35) into ``row`` (M·n,): Σ_{j∈Nᵢ}(ʲŷ − ⁱŷ) + Πᵢ(y_m,i − ⁱŷᵢ). Robot
+    i reads the messages ʲŷ on the edges into it only (``src[first_edge[i]:
     first_edge[i + 1]]``) and its own y_m,i = x_m,i − ∫uᵢ (eq. 21, docs/notes.md, 2). On a
     network (``networked``) the message of edge e is the last one its link delivered,
     ``links[e]`` (M·n,), instead of the sender's current ŷ.
@@ -57,36 +57,57 @@ def residual_row(
     in one loop over the row and any further ones added a loop each: the same floats as a
     loop per message, with the row stored and read back once instead of once a message
     (at N = 1000 and three in-neighbours, the pass's round without the decision took
-    2.24-2.35 ms on one core, against 2.42-2.63 ms a loop a message, 2026-11-28)."""
+    2.24-2.35 ms on one core, against 2.42-2.63 ms a loop a message, 2026-11-28).
+
+    Returns how many entries a of the row are *not* below the decision's bound, counted
+    in the same loop as the entry is computed: ``not r_a² < half · scale[a]`` (the test
+    of a row at rest, :func:`~.decision.quiet_sums`; a NaN anywhere counts). Only the sum
+    of up to three messages is tested: with more messages, or the own block's
+    measurement term added after the loop, the count says nothing of the final entries
+    and the caller tests those itself (the count is then M·n, or the own block is tested
+    apart). A ``half`` of NaN tests nothing: every entry counts, whatever ``scale``
+    (M·n,) holds."""
     m, _, n = y_hat.shape
     y = y_hat.reshape(m, m * n)  # row i: robot i's message, (k, d) flattened
     own, w = y[i], -in_degree[i]  # one-dimensional views: loops the compiler vectorises
     e, end = first_edge[i], first_edge[i + 1]
+    over = 0
     if end - e >= 3:
         m1, m2 = _message(y, links, networked, src, e), _message(y, links, networked, src, e + 1)
         m3 = _message(y, links, networked, src, e + 2)
         for a in range(m * n):
-            row[a] = w * own[a] + m1[a] + m2[a] + m3[a]
+            r = w * own[a] + m1[a] + m2[a] + m3[a]
+            row[a] = r
+            over += not r * r < half * scale[a]
         e += 3
     elif end - e == 2:
         m1, m2 = _message(y, links, networked, src, e), _message(y, links, networked, src, e + 1)
         for a in range(m * n):
-            row[a] = w * own[a] + m1[a] + m2[a]
+            r = w * own[a] + m1[a] + m2[a]
+            row[a] = r
+            over += not r * r < half * scale[a]
         e += 2
     elif end - e == 1:
         m1 = _message(y, links, networked, src, e)
         for a in range(m * n):
-            row[a] = w * own[a] + m1[a]
+            r = w * own[a] + m1[a]
+            row[a] = r
+            over += not r * r < half * scale[a]
         e += 1
     else:
         for a in range(m * n):
-            row[a] = w * own[a]
-    for later in range(e, end):  # a fourth message and beyond
+            r = w * own[a]
+            row[a] = r
+            over += not r * r < half * scale[a]
+    if e < end:  # a fourth message and beyond: the count was of partial sums
+        over = m * n
+    for later in range(e, end):
         msg = _message(y, links, networked, src, later)
         for a in range(m * n):
             row[a] += msg[a]
     for d in range(n):
         row[i * n + d] += x_m[i, d] - int_u_own[i, d] - y_hat[i, i, d]
+    return over
 
 
 @njit(inline="always")
@@ -123,8 +144,12 @@ def residual(
     m, _, n = y_hat.shape
     rr = r.reshape(m, m * n)
     for i in range(m):
-        residual_row(y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, rr[i])
-        row_norms(rr[i], n, r_norm[i])
+        row = rr[i]  # no test of the decision's (a NaN half): the row itself as the scale
+        residual_row(
+            y_hat, int_u_own, x_m, src, first_edge, in_degree, links, networked, i, row, row,
+            np.nan,
+        )  # fmt: skip
+        row_norms(row, n, r_norm[i])
 
 
 @njit(inline="always")

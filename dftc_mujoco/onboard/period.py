@@ -37,7 +37,15 @@ from numba import njit
 from .addresses import view1, view2, view3
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
-from .decision import DecisionRecord, decide_row, quiet_row, unchanged_row
+from .decision import (
+    DecisionRecord,
+    bound_squares,
+    decide_row,
+    entry_share,
+    quiet_row,
+    quiet_sums,
+    unchanged_row,
+)
 from .estimate_alarm import AlarmRecord, watch_estimates
 from .fault_estimator import EstimatorRecord, estimate_faults
 from .observer import (
@@ -90,6 +98,7 @@ class PeriodBuffers(NamedTuple):
     u: np.ndarray  # (N, 2) nominal input, original robot axis
     u_bar: np.ndarray  # (N, 2) the compensated command (eq. 28)
     grid: np.ndarray  # the supervisor's grid of teammates (supervisor.grid_work(M), scratch)
+    scale: np.ndarray  # (M·n,) this period's b_k² for the residual loop's test (bound_squares)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -107,9 +116,10 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     (eq. 19) into ``y_next`` (past the caches when ``stream``, :mod:`.streaming`) and, with
     FDIR, its flags (eq. 39, :func:`~.decision.decide_row`, with the thresholds ``th`` read
     entry by entry). Where the norms are not kept, a row at rest is first tested from the
-    residual itself (:func:`~.decision.quiet_row`: the squares compared as they are
-    computed, none stored, no square root); only a row that may change takes its norms,
-    into a scratch row. Every
+    residual itself: in the residual's own loop, each entry against its share of eq. 40's
+    bound (:func:`~.decision.quiet_sums`), else from the squares
+    (:func:`~.decision.quiet_row`: compared as they are computed, none stored, no square
+    root); only a row that may change takes its norms, into a scratch row. Every
     N × N array is read or written once per period. The residual reads only ŷ, ∫u and the
     measurements, which neither this pass nor :func:`act` and :func:`deliver` change, so
     the pass may run beside them and the physics; :func:`integrate` follows it."""
@@ -134,7 +144,7 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
             si[a] += dt * collective_one(vd[a], kc, xd[a], estimate_one(yi[a], si[a]))
         if not round_now:
             continue
-        residual_row(  # eq. 35
+        over = residual_row(  # eq. 35, each entry tested against its share of eq. 40's bound
             ob.y_hat,
             ob.int_u_own,
             out.x_own,
@@ -145,6 +155,8 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
             ob.networked,
             i,
             row,
+            out.scale,
+            entry_share(th, i, n) if inp.fdir and not inp.norms else np.nan,
         )
         norms = out.r_norm[i if inp.norms else m + b]
         if inp.norms:
@@ -161,6 +173,8 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         if inp.norms:
             if unchanged_row(norms, th, i, dec):  # at rest, every norm at most ⁱμ_k
                 continue
+        elif quiet_sums(over, row, n, th, i, dec):  # at rest, every entry below its share
+            continue
         elif quiet_row(row, n, th, i, dec):  # at rest, every square below (ⁱμ_k)²
             continue
         else:  # a row that may change: its norms (the skips only save work)
@@ -173,10 +187,16 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
 
 @njit(cache=True, inline="always")
 def begin(
-    inp: PeriodInputs, ob: ObserverRecord, ctl: ControllerRecord, out: PeriodBuffers
+    inp: PeriodInputs,
+    ob: ObserverRecord,
+    ctl: ControllerRecord,
+    th: ThresholdRecord,
+    out: PeriodBuffers,
 ) -> None:  # pragma: no cover - compiled
     """Stage 1: the members' own measurements, the mission's x_d = J⁻¹σ_d (eq. 14) and
-    each robot's u_g,i = Γᵢ ⁱû_g (eq. 16) from its own block of ⁱx̂ (eq. 21), before ∫ moves."""
+    each robot's u_g,i = Γᵢ ⁱû_g (eq. 16) from its own block of ⁱx̂ (eq. 21), before ∫ moves;
+    with FDIR at a round, this period's scale of the decision's test in the residual's
+    loop (:func:`~.decision.bound_squares`)."""
     x_m, rows, c, c_dot, offsets, rates = (
         inp.x_m,
         inp.rows,
@@ -193,6 +213,8 @@ def begin(
             out.xd_dot[i, d] = c_dot[d] + rates[i, d]
             e = estimate_one(y[i, i, d], s[i, i, d])
             out.u_g[i, d] = collective_one(out.xd_dot[i, d], kc, out.x_d[i, d], e)
+    if inp.fdir and inp.round_now and not inp.norms:
+        bound_squares(th, y.shape[2], out.scale)
 
 
 @njit(cache=True, inline="always")
@@ -349,7 +371,7 @@ def team_period(
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).
     """
     refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
-    begin(inp, ob, ctl, out)
+    begin(inp, ob, ctl, th, out)
     code = commands(inp, sup, seen, drive, est, alarm, out)
     raised = team_rows(inp, ob, ctl, th, dec, out, 0, inp.rows.shape[0], 0)
     integrate(ob, out)
@@ -412,12 +434,13 @@ def team_period_flat(
     )  # fmt: skip
     dec = DecisionRecord(
         timer, view2(table, 32, b1), need, exclusive, view1(table, 33, i8), view2(table, 34, b1),
-        view1(table, 35, b1),
+        view1(table, 35, b1), view1(table, 36, b1),
     )  # fmt: skip
     out = PeriodBuffers(
-        view2(table, 36, f8), view2(table, 37, f8), view2(table, 38, f8), view3(table, 39, f8),
-        view2(table, 40, f8), view2(table, 41, f8), view2(table, 42, f8), view2(table, 43, f8),
-        view2(table, 44, f8), view2(table, 45, f8), view2(table, 46, f8), view1(table, 47, i8),
+        view2(table, 37, f8), view2(table, 38, f8), view2(table, 39, f8), view3(table, 40, f8),
+        view2(table, 41, f8), view2(table, 42, f8), view2(table, 43, f8), view2(table, 44, f8),
+        view2(table, 45, f8), view2(table, 46, f8), view2(table, 47, f8), view1(table, 48, i8),
+        view1(table, 49, f8),
     )  # fmt: skip
     ctl = ControllerRecord(kc)
     return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
@@ -439,7 +462,7 @@ RECORDS = (
 )
 #: the fields team_period_flat takes as arguments, not by address (see there)
 PASSED = {(ThresholdRecord, "dense"), (DecisionRecord, "timer")}
-TABLED = 48  # the records' arrays team_period_flat reads from its table
+TABLED = 50  # the records' arrays team_period_flat reads from its table
 
 
 def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:

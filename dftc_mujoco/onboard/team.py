@@ -262,6 +262,7 @@ class Team:
             self.u,
             self.u_bar,
             grid_work(m),
+            np.full(m * 2, np.nan),  # the decision's scale, written each round (bound_squares)
         )
 
     # ------------------------------------------------------------------ one period
@@ -405,7 +406,7 @@ class Team:
             ob, dec = self.observer.record(), self.decision.record()
             ctl, sup, seen, drive, est, alarm = self._records()
             refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
-            begin(inp, ob, ctl, buf)  # each robot's own block of the state, before it moves
+            begin(inp, ob, ctl, th, buf)  # each robot's own block of the state, before it moves
             code = 0
 
             def rows(lo: int, hi: int, b: int) -> int:
