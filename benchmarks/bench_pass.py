@@ -13,9 +13,10 @@ median of ``--repeat`` timings (µs) of:
   network;
 * plus the round: the residual (eq. 35) and the next ŷ (eq. 19); without FDIR and a log
   row the pass computes no norms;
-* plus the decision (eq. 39): each row at rest tested from its residual's squares, and
-  the norms taken only for the rows that fail the test (``onboard/decision.py``,
-  ``quiet_row``): the whole pass, as the
+* plus the decision (eq. 39): each row at rest tested in the residual's own loop against
+  its share of eq. 40's bound (``onboard/decision.py``, ``quiet_sums``), else from its
+  residual's squares (``quiet_row``), and the norms taken only for the rows that fail both:
+  the whole pass, as the
   team runs it at this N between log rows (ŷ streamed past the caches where the team
   streams it, ``onboard/streaming.py``);
 * the whole pass again with ŷ, ∫ⁱû_g and the next ŷ held in float32 (copies of the team's
@@ -44,6 +45,7 @@ import numpy as np
 from bench_scale import scene
 
 from dftc_mujoco.loop import Simulation
+from dftc_mujoco.onboard.decision import bound_squares
 from dftc_mujoco.onboard.period import PeriodInputs, team_rows
 from dftc_mujoco.onboard.sharing import PARALLEL_FROM, SUMMED
 
@@ -99,6 +101,7 @@ def main() -> None:
 
     ob, ctl, th = team.observer.record(), team.controller.record(), team._th
     dec, buf = team.decision.record(), team._buffers
+    bound_squares(th, 2, buf.scale)  # the decision's scale, as the period's begin writes it
     ob32, buf32 = in_float32(ob, buf)
 
     def rows(inp, o, b):

@@ -10,9 +10,12 @@ from numba import njit
 from dftc_mujoco.onboard.decision import (
     ISOLATION,
     DecisionRecord,
+    bound_squares,
     decide,
     decide_row,
+    entry_share,
     quiet_row,
+    quiet_sums,
     timer_type,
     unchanged_row,
 )
@@ -28,6 +31,20 @@ def _skipped(r, th, i, dec):
 @njit
 def _quiet(row, n, th, i, dec):
     return quiet_row(row, n, th, i, dec)
+
+
+@njit
+def _quiet_sums(row, n, th, i, dec):
+    """:func:`quiet_sums` with the count residual_row takes in its loop, over every block but
+    robot i's own (whose final entries the pass tests apart): the least the count can be."""
+    scale = np.empty(row.shape[0])
+    bound_squares(th, n, scale)
+    half, over = entry_share(th, i, n), 0
+    for a in range(row.shape[0]):
+        if a // n != i:
+            r = row[a]
+            over += not r * r < half * scale[a]
+    return quiet_sums(over, row, n, th, i, dec)
 
 
 @njit
@@ -151,6 +168,10 @@ def test_the_decision_with_its_skip_gives_every_row_s_numbers(mode):
             for name, a, b in zip(DecisionRecord._fields, dec, ref, strict=True):
                 if isinstance(a, np.ndarray):
                     assert np.array_equal(a, b), (need, round_, name)
+            # what at_rest answers is the row's own state once every row has been decided
+            top = max(need, 1)
+            settled = (dec.timer == -top).all(axis=1) & ~dec.flag.any(axis=1) & ~dec.raised_rows
+            assert np.array_equal(dec.rest_rows, settled), (need, round_)
         assert raised > 0  # flags rose (and fell), not only rows at rest
 
 
@@ -228,3 +249,50 @@ def test_a_row_quiet_by_its_residual_is_one_its_norms_leave_as_it_is(n):
                 loud_at_rest += 1
     assert quiet > 1000
     assert loud_at_rest == 0  # at rest and well below: found quiet from the squares
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_a_row_quiet_by_the_residual_loop_s_count_is_quiet_by_its_squares(n):
+    """Wherever :func:`quiet_sums` finds a row quiet from the count the residual's loop
+    takes (each entry against its share of eq. 40's bound), :func:`quiet_row` finds it
+    quiet too, hence its norms leave it as it is: residual norms at μ, at its neighbouring
+    floats and split over two components, factors from 1e-170 to 1e170 (beyond the range
+    the loop tests, :data:`~dftc_mujoco.onboard.decision.TESTED`), unbounded robots
+    (b_k = +inf), zero, NaN and inf entries; and rows at rest well below their thresholds
+    are found quiet by the count alone. (Without the margin below the bound, or without the
+    own block's test, this fails.)"""
+    rng = np.random.default_rng(61 + n)
+    quiet = clean_quiet = clean_rows = 0
+    for case in range(3000):
+        m = int(rng.integers(1, 9))
+        clean = case % 5 == 0
+        scales = [-3, 0, 2] if clean else [-170, -60, -3, 0, 2, 60, 170]
+        th = _factored(rng, m)
+        th = th._replace(coef=th.coef * 10.0 ** rng.choice(scales))
+        if case % 7 == 3:  # an observer without in-neighbours: cᵢ = 0
+            th.coef[rng.integers(0, m)] = 0.0
+        with np.errstate(invalid="ignore"):
+            mu = np.outer(th.coef, th.bound)
+        dec = _record(rng, m, int(rng.integers(0, 30)), case % 3, settled=0.8)
+        if clean:
+            rows = np.zeros((m, m * n))
+            rows[:, ::n] = np.where(np.isfinite(mu), mu * 0.5, 1.0)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                rows = _around_rows(rng, np.where(np.isnan(mu), 1.0, mu), n)
+                # blocks whose every component sits at μ/√n, or a hair either side: the
+                # count's share of the bound at its edge
+                even = rng.random((m, m)) < 0.3
+                hair = rng.choice([0.0, 1e-16, -1e-16, 1e-13, -1e-13, 1e-10, -1e-10], (m, m))
+                edge = mu / np.sqrt(n) * (1.0 + hair)
+                blocks = rows.reshape(m, m, n)
+                blocks[even] = edge[even][:, None]
+        for i in range(m):
+            if _quiet_sums(rows[i], n, th, i, dec):
+                quiet += 1
+                assert _quiet(rows[i], n, th, i, dec), (case, i, mu[i], rows[i])
+                clean_quiet += clean
+            elif clean and dec.rest_rows[i] and th.coef[i] > 0:
+                clean_rows += 1
+    assert quiet > 500
+    assert clean_quiet > 100 and clean_rows == 0  # at rest, well below: found by the count

@@ -1,11 +1,11 @@
 """Arrays handed to compiled code by address: one (K, 6) table instead of K arguments.
 
 numba unboxes every array argument on every call: it types the array, takes a reference and
-allocates a memory record for it, about 75 ns each. The period's records hold 48 arrays:
-3.8 µs a call, more than the compiled work of a period at N = 16 (measured with an empty
-function of the period's arguments). A StructRef or a typed List of the arrays unboxes in
-0.7 or 1.0 µs, but building one costs 0.41 or 0.50-0.58 s in every process, even from
-numba's cache.
+allocates a memory record for it, about 75 ns each. The period's records held 48 arrays
+(50 since 2026-12-01): 3.8 µs a call, more than the compiled work of a period at N = 16
+(measured with an empty function of the period's arguments). A StructRef or a typed List
+of the arrays unboxes in 0.7 or 1.0 µs, but building one costs 0.41 or 0.50-0.58 s in every
+process, even from numba's cache.
 
 :func:`address_table` writes each array's address, dtype number, ndim and shape in one row
 of an int64 table; the compiled side rebuilds the arrays as views (:func:`view1`,

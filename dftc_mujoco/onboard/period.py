@@ -385,7 +385,7 @@ def team_period_flat(
 ):  # fmt: skip  # pragma: no cover - compiled
     """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
     building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 48,
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 50,
     about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
     thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
     or int32, :func:`~.decision.timer_type`); then the records' 24 numbers in one float64
