@@ -9,6 +9,7 @@ from numba import njit
 
 from dftc_mujoco.onboard.decision import (
     ISOLATION,
+    Decision,
     DecisionRecord,
     bound_squares,
     decide,
@@ -296,3 +297,17 @@ def test_a_row_quiet_by_the_residual_loop_s_count_is_quiet_by_its_squares(n):
                 clean_rows += 1
     assert quiet > 500
     assert clean_quiet > 100 and clean_rows == 0  # at rest, well below: found by the count
+
+
+def test_a_flag_moved_by_hand_before_the_blocks_update_is_decided_as_before():
+    """A plug-in decision that raises a flag by hand in a row at rest, then calls the block's
+    update, has that flag lowered by the window at the next round, as when the test of a
+    row at rest read the row's flags: the block reads every row's rest anew first."""
+    d = Decision.standalone(3, window=0.03, dt=0.01)
+    below, mu = np.zeros((3, 3)), np.ones((3, 3))
+    for _ in range(6):  # every row at rest: timers at -need, flags down
+        d.update(below, mu)
+    assert d.record().rest_rows.all()
+    d.flag[0, 1] = True  # by hand, as a subclass might
+    d.update(below, mu)
+    assert not d.flag.any()

@@ -87,11 +87,13 @@ def settled_row(i, dec):  # pragma: no cover - compiled
 @njit(inline="always")
 def at_rest(i, dec):  # pragma: no cover - compiled
     """Whether robot i's row of the decision is at rest (:func:`settled_row`), as
-    :func:`decide_row` left it: ``rest_rows[i]``. Only :func:`decide_row` moves a row's
-    timers and flags and it writes the answer after each move, so the answer is the row's;
-    a record made anew or resized starts with every row not at rest, which costs its first
-    round a decision per row and nothing else. At N = 1000 the test read 2 MB of timers
-    and flags from memory a round (2026-12-01: the pass 0.3-0.6 ms faster on one core)."""
+    :func:`decide_row` left it: ``rest_rows[i]``. :func:`decide_row` writes the answer after
+    each move of a row's timers and flags, so in the compiled period, where nothing else
+    moves them, the answer is the row's; a record made anew or resized starts with every
+    row not at rest, which costs its first round a decision per row and nothing else, and
+    the block's :meth:`Decision.update` reads every row anew first (:func:`settle_rows`).
+    At N = 1000 the test read 2 MB of timers and flags from memory a round (2026-12-01:
+    the pass 0.3-0.6 ms faster on one core)."""
     return dec.rest_rows[i]
 
 
@@ -313,6 +315,15 @@ def decide(r_norm, th, dec):  # pragma: no cover - compiled
     return count
 
 
+@njit(cache=True)
+def settle_rows(dec):  # pragma: no cover - compiled
+    """Every row's ``rest_rows`` read anew from the row itself (:func:`settled_row`): for a
+    caller that may have moved timers or flags outside :func:`decide_row` (the block's
+    :meth:`Decision.update`, which a plug-in's subclass may call after changing them)."""
+    for i in range(dec.rest_rows.shape[0]):
+        dec.rest_rows[i] = settled_row(i, dec)
+
+
 class DecisionRecord(NamedTuple):
     """What the compiled period (:mod:`.period`) reads and writes of the decision."""
 
@@ -379,7 +390,9 @@ class Decision(Block):
     def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
         """Feed ‖ⁱr_k‖ and ⁱμ_k (M, M); return the flags raised at this instant (M, M) bool."""
         th = dense_thresholds(np.ascontiguousarray(mu, float))
-        decide(np.ascontiguousarray(r_norm, float), th, self.record())
+        record = self.record()
+        settle_rows(record)  # a subclass may have moved timers or flags since the last round
+        decide(np.ascontiguousarray(r_norm, float), th, record)
         return self._raised
 
     def record(self) -> DecisionRecord:
