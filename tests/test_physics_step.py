@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import loop
+from dftc_mujoco.onboard import resident, sharing
 from dftc_mujoco.onboard import team as team_mod
 from tests.conftest import make, ring_team, scenario_dict
 
@@ -25,13 +26,17 @@ def _ring(duration: float):
     return make(d)
 
 
-def _run(shared: bool, monkeypatch, hook=None):
+def _run(shared: bool, monkeypatch, hook=None, engine="resident"):
     monkeypatch.setattr(team_mod, "PARALLEL_FROM", 4)
     monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", shared)
+    monkeypatch.setattr(sharing, "RESIDENT_ALLOWED", engine == "resident")
     with loop.Simulation(_ring(26.0), hook=hook) as sim:
         assert sim.team.shares == shared
         result = sim.run(progress=False)
         spent = sim.team._sharing.timings[0] if shared else 0.0
+        if shared:  # who ran the helpers' rows (resident helpers: x86-64 Linux)
+            ran = engine if engine == "pool" or resident.available() else "pool"
+            assert sim.team._sharing.engine == ran
     return result, spent
 
 
@@ -46,11 +51,12 @@ def _same(a, b):
     assert sa == sb
 
 
-def test_the_physics_beside_a_shared_pass_gives_the_very_same_run(monkeypatch):
+@pytest.mark.parametrize("engine", ["resident", "pool"])
+def test_the_physics_beside_a_shared_pass_gives_the_very_same_run(engine, monkeypatch):
     """Through a detection and an exclusion (a re-planned formation, a resized team):
     every log array, event and summary entry is bit for bit that of the run in one thread,
-    and the physics step was the work run beside the pass."""
-    shared, spent = _run(True, monkeypatch)
+    whoever ran the helpers' rows, and the physics step was the work run beside the pass."""
+    shared, spent = _run(True, monkeypatch, engine=engine)
     alone, _ = _run(False, monkeypatch)
     kinds = {e["kind"] for e in shared.events.items}
     assert {"fault", "detection", "exclusion"} <= kinds

@@ -86,8 +86,10 @@ class OwnTable:
 
 @intrinsic
 def _pointer(typingctx, address, dtype):  # pragma: no cover - compiled
-    """The integer ``address`` as a pointer to ``dtype`` (a NumPy scalar type)."""
-    sig = types.CPointer(dtype.instance_type)(types.int64, dtype)
+    """The integer ``address`` as a pointer to ``dtype`` (a NumPy scalar type, or an array's
+    ``dtype`` inside compiled code)."""
+    kind = dtype.dtype if isinstance(dtype, types.DType) else dtype.instance_type
+    sig = types.CPointer(kind)(types.int64, dtype)
 
     def codegen(context, builder, signature, args):
         return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
@@ -130,3 +132,15 @@ def view3(table, k, dtype):  # pragma: no cover - compiled
     """Row ``k`` of ``table`` as a 3-D array of ``dtype`` (a view: see the module)."""
     shape = (table[k, SHAPE], table[k, SHAPE + 1], table[k, SHAPE + 2])
     return carray(_checked(table, k, dtype, 3), shape)
+
+
+@njit(inline="always")
+def at1(address, size, dtype):  # pragma: no cover - compiled
+    """The 1-D array of ``size`` ``dtype`` at ``address`` (a view: see the module)."""
+    return carray(_pointer(address, dtype), (size,))
+
+
+@njit(inline="always")
+def at2(address, rows, cols, dtype):  # pragma: no cover - compiled
+    """The 2-D array of ``rows`` × ``cols`` ``dtype`` at ``address`` (a view: see the module)."""
+    return carray(_pointer(address, dtype), (rows, cols))

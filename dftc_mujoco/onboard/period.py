@@ -378,20 +378,11 @@ def team_period(
     return code | RAISED if raised else code
 
 
-@njit(cache=True)
-def team_period_flat(
-    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
-    table, mu, timer, numbers,
-):  # fmt: skip  # pragma: no cover - compiled
-    """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
-    building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 50,
-    about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
-    thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
-    or int32, :func:`~.decision.timer_type`); then the records' 24 numbers in one float64
-    array ``numbers``, in their order (:data:`NUMBERS`: 0.3 µs a call less than 24 scalars),
-    each read back as its field's type (every bool and int is exact in a float64).
-    :meth:`.team.Team._flat_records` takes the records apart in the same order."""
+@njit(inline="always")
+def unpack(table, mu, timer, numbers):  # pragma: no cover - compiled
+    """The records after :class:`PeriodInputs`, in :data:`RECORDS`' order, rebuilt from their
+    arrays' address ``table`` (:mod:`.addresses`), ``mu``, ``timer`` and ``numbers`` as
+    :func:`team_period_flat` takes them (:func:`flat_arguments` takes them apart)."""
     f8, i8, b1 = np.float64, np.int64, np.bool_
     networked, ko, dt, dt_o = numbers[0] != 0.0, numbers[1], numbers[2], numbers[3]
     kc, theta, release, mate_safe, mate_act = (
@@ -403,8 +394,6 @@ def team_period_flat(
         numbers[17], numbers[18], i8(numbers[19]), numbers[20] != 0.0
     )  # fmt: skip
     eta, need, exclusive = numbers[21], i8(numbers[22]), i8(numbers[23])
-    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
-                       stream)  # fmt: skip
     ob = ObserverRecord(
         view3(table, 0, f8), view3(table, 1, f8), view3(table, 2, f8), view2(table, 3, f8),
         view1(table, 4, i8), view1(table, 5, i8), view1(table, 6, f8), view2(table, 7, f8),
@@ -443,6 +432,26 @@ def team_period_flat(
         view1(table, 49, f8),
     )  # fmt: skip
     ctl = ControllerRecord(kc)
+    return ob, ctl, sup, seen, drive, est, alarm, th, dec, out
+
+
+@njit(cache=True)
+def team_period_flat(
+    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
+    table, mu, timer, numbers,
+):  # fmt: skip  # pragma: no cover - compiled
+    """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
+    building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
+    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 50,
+    about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
+    thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
+    or int32, :func:`~.decision.timer_type`); then the records' 24 numbers in one float64
+    array ``numbers``, in their order (:data:`NUMBERS`: 0.3 µs a call less than 24 scalars),
+    each read back as its field's type (every bool and int is exact in a float64).
+    :meth:`.team.Team._flat_records` takes the records apart in the same order."""
+    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
+                       stream)  # fmt: skip
+    ob, ctl, sup, seen, drive, est, alarm, th, dec, out = unpack(table, mu, timer, numbers)
     return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
 
 

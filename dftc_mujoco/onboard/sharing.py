@@ -24,6 +24,8 @@ from typing import Any
 
 import numba
 
+from . import resident
+
 #: a team of this many members or more shares its pass between threads (below it, handing
 #: work to a thread costs more than it saves: N = 100, 303 µs a period alone, 407 shared;
 #: N = 150, 503-543 alone, 442-447 shared)
@@ -48,6 +50,9 @@ def workers() -> int:
     return max(1, numba.get_num_threads())
 
 
+#: False keeps the pool's helpers where resident ones could run (benchmarks, tests)
+RESIDENT_ALLOWED = True
+
 #: [s] how much earlier than the caller the helpers aim to end (a thread's wake-up)
 MARGIN = 1e-4
 
@@ -68,6 +73,7 @@ class Sharing:
         # at most m - threads + 1: a helper without rows has no timing to move it back)
         self.timings = (0.0, 0.0, 0.0)  # the last period: beside work, helpers, the caller
         self.passes = 0  # shared passes run, and the sums of their timings (SUMMED)
+        self.engine = ""  # who ran the helpers' shares last: "resident" or "pool"
         self.sums = (0.0,) * len(SUMMED)
 
     def run(
@@ -75,9 +81,13 @@ class Sharing:
         rows: Callable[[int, int, int], int],
         m: int,
         beside: Callable[[], None] | None = None,
+        posted: tuple | None = None,
     ) -> int:
         """The pass over robots 0 .. m - 1 and ``beside()``, at once; returns the sum of what
-        ``rows`` returned. An exception in ``beside`` is raised once the pass has ended."""
+        ``rows`` returned. An exception in ``beside`` is raised once the pass has ended.
+        ``posted``: the pass as resident helpers take it (:func:`.resident.post`'s table,
+        mu, timer, numbers and flags; the same rows as ``rows``): they run the helpers' shares
+        where they can (:func:`.resident.residents`), else the pool's threads do."""
         w = self.threads
         if w < 2:
             count = rows(0, m, 0)
@@ -88,6 +98,31 @@ class Sharing:
         share = m // w if self.own_rows < 0 else min(self.own_rows, most)
         rest = m - share  # robots 0 .. rest - 1 for the helpers, the last ones for the caller
         cuts = [rest * j // (w - 1) for j in range(w)]
+        crew = None
+        if posted is not None and RESIDENT_ALLOWED:
+            crew = resident.residents(w - 1, posted[2].dtype)
+        if crew is not None:
+            self.engine = "resident"
+            count, now, error = self._resident(crew, posted, rows, share, rest, m, cuts, beside)
+        else:
+            self.engine = "pool"
+            count, now, error = self._pooled(rows, share, rest, m, cuts, beside)
+        helper_end, caller_end, spent = now[1], now[2], now[4] * (w - 1)
+        self.timings = now[:3]
+        self.passes += 1
+        self.sums = tuple(s + x for s, x in zip(self.sums, now, strict=True))
+        if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
+            per_row = spent / rest  # one thread's time for a robot
+            late = helper_end - caller_end + MARGIN
+            target = share + late / per_row * (w - 1) / w
+            self.own_rows = round(0.5 * share + 0.5 * min(max(target, 0.0), most))
+        if error is not None:
+            raise error
+        return count
+
+    def _pooled(self, rows, share, rest, m, cuts, beside) -> tuple:
+        """The pass with the pool's helpers: (count, the timings of SUMMED, beside's error)."""
+        w = self.threads
         pool = _helpers(w - 1)
         t0 = time.perf_counter()
         helpers: list[Future[Any]] = [
@@ -111,18 +146,38 @@ class Sharing:
         helper_end = max(end for _, _, end in ends) - t0
         spent = sum(end - start for _, start, end in ends)
         began = max(start for _, start, _ in ends) - t0
-        now = (t1 - t0, helper_end, t2 - t0, began, spent / (w - 1), t3 - t0)  # SUMMED
-        self.timings = now[:3]
-        self.passes += 1
-        self.sums = tuple(s + x for s, x in zip(self.sums, now, strict=True))
-        if rest > 0 and spent > 0.0:  # the caller's share that ends MARGIN after the helpers
-            per_row = spent / rest  # one thread's time for a robot
-            late = helper_end - (t2 - t0) + MARGIN
-            target = share + late / per_row * (w - 1) / w
-            self.own_rows = round(0.5 * share + 0.5 * min(max(target, 0.0), most))
-        if error is not None:
-            raise error
-        return count
+        return count, (t1 - t0, helper_end, t2 - t0, began, spent / (w - 1), t3 - t0), error
+
+    def _resident(self, crew, posted, rows, share, rest, m, cuts, beside) -> tuple:
+        """The pass with resident helpers (:mod:`.resident`), timed by the processor's
+        counter: (count, the timings of SUMMED, beside's error)."""
+        error: BaseException | None = None
+        try:
+            t0 = resident.now()
+            for j, helper in enumerate(crew):
+                helper.start(posted, cuts[j], cuts[j + 1], j + 1)
+            try:
+                if beside is not None:
+                    try:
+                        beside()
+                    except Exception as exc:  # raised once the team's rows are whole
+                        error = exc
+                t1 = resident.now()
+                count = rows(rest, m, 0) if share else 0
+                t2 = resident.now()
+            finally:  # nothing is left running on the team's arrays
+                ends = [helper.finish() for helper in crew]
+        finally:
+            for helper in crew:
+                helper.lock.release()
+        rate = resident.tick_rate()
+        count += sum(e[0] for e in ends)
+        helper_end = (max(e[2] for e in ends) - t0) / rate
+        spent = sum(e[2] - e[1] for e in ends) / rate
+        began = (max(e[1] for e in ends) - t0) / rate
+        joined = (max(e[3] for e in ends) - t0) / rate
+        timings = ((t1 - t0) / rate, helper_end, (t2 - t0) / rate, began)
+        return count, (*timings, spent / len(crew), joined), error
 
 
 def _join(pending: list[Future[Any]]) -> None:

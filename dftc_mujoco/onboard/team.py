@@ -418,8 +418,12 @@ class Team:
                 if beside is not None:
                     beside()
 
+            table, mu, timer, numbers = self._flat_records()  # the same arrays, by address
+            bits = (fdir, now, keep, norms, self._stream)  # as resident.FLAGS holds them
+            flags = sum(int(bool(on)) << j for j, on in enumerate(bits))
+            posted = (table, mu, timer, numbers, flags)
             try:
-                if sharing.run(rows, len(self.members), command_then_beside):
+                if sharing.run(rows, len(self.members), command_then_beside, posted):
                     code |= RAISED
             finally:
                 integrate(ob, buf)
