@@ -22,6 +22,7 @@ same arrays, whoever runs it.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import platform
 import sys
@@ -332,9 +333,13 @@ def residents(count: int, timer: np.dtype) -> list[Resident] | None:
 
 
 def close_all() -> None:
-    """End this process's resident helpers (the next shared pass starts new ones)."""
+    """End this process's resident helpers (the next shared pass starts new ones); run at
+    the interpreter's exit too, so that no helper is left in its loop while Python ends."""
     for crew in _residents.values():
         for r in crew:
             if r._thread.is_alive():
                 r.close()
     _residents.clear()
+
+
+atexit.register(close_all)
