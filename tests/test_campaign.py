@@ -14,6 +14,7 @@ import pytest
 
 from dftc_mujoco.campaign import cluster, report, runner, spec
 from dftc_mujoco.campaign.__main__ import main as campaign_main
+from dftc_mujoco.campaign.pool import Pool
 from dftc_mujoco.errors import ScenarioError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,6 +60,19 @@ def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, t
     finally:
         ray.shutdown()
     assert _rows(tmp_path) == _rows(local_run)
+
+
+def test_workers_helpers_watch_for_rows_only_where_every_thread_has_a_core(monkeypatch):
+    """Resident helpers (onboard/resident.py) keep a core while they watch for rows: a
+    pool lets its workers' helpers watch only where the workers' threads fit the cores."""
+    cores = len(os.sched_getaffinity(0))
+    loaded = spec.load(TINY)
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    assert Pool(loaded, workers=1).helpers_watch()
+    assert not Pool(loaded, workers=2).helpers_watch()  # every worker's team takes each core
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    assert Pool(loaded, workers=cores).helpers_watch()
+    assert not Pool(loaded, workers=cores + 1).helpers_watch()
 
 
 @pytest.mark.parametrize("path", sorted((ROOT / "campaigns").glob("*.toml")), ids=lambda p: p.stem)

@@ -11,8 +11,9 @@ atomic loads, rebuilds the period's records from the addresses posted there (the
 caller runs) and posts back how many flags it raised and when it began and ended, by the
 processor's time-stamp counter. The caller waits for that answer in compiled code too.
 Between passes the helper checks the mailbox, pausing the processor and yielding it to any
-other thread that wants it (``sched_yield``); after :data:`PATIENCE` without a pass it goes
-back to Python and sleeps until the next one wakes it.
+other thread that wants it (``sched_yield``); after :data:`PATIENCE` without a pass, or
+once it finds it was kept off the processor (:data:`PREEMPTED`: another thread wants it), it
+goes back to Python and sleeps until the next pass wakes it.
 
 It is built on x86-64 Linux only (:func:`available`): the time-stamp counter, the ``pause``
 instruction and the system call are that platform's; elsewhere the pool's helpers run the
@@ -56,6 +57,10 @@ STOP = -1  # a SEQ that ends the helper's loop
 PATIENCE = 0.05
 #: [s] how long it only pauses between two looks before it also yields the processor
 YIELD_AFTER = 2e-5
+#: [s] two looks at the mailbox this far apart mean the processor ran another thread
+#: meanwhile: the helper sleeps rather than take the processor from it (two campaign workers
+#: on two cores, N = 400: helpers that kept watching made each run 10-20 % slower)
+PREEMPTED = 2e-4
 #: [s] how long the caller waits for a helper's rows before it gives up on the helper
 GIVE_UP = 30.0
 
@@ -160,23 +165,26 @@ def now():  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def serve(mail, like, patience, patient):  # pragma: no cover - compiled
+def serve(mail, like, patience, patient, preempted):  # pragma: no cover - compiled
     """The helper's loop: each pass posted in ``mail`` (a new SEQ) run and answered, until
-    ``patience`` ticks pass without one or SEQ is :data:`STOP`; ``like`` is an empty array
-    of the decision's timer type; the loop only pauses for ``patient`` ticks after a pass,
-    then yields the processor at each look too."""
+    ``patience`` ticks pass without one, two looks at the mailbox lie more than
+    ``preempted`` ticks apart (the processor went to another thread: it is wanted), or SEQ
+    is :data:`STOP`; ``like`` is an empty array of the decision's timer type; the loop only
+    pauses for ``patient`` ticks after a pass, then yields the processor at each look too."""
     none2, none1, rows0 = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
     done = load(mail, DONE)
     store(mail, STATE, WATCHING)
     last = ticks()
+    look = last
     while True:
         seq = load(mail, SEQ)
         if seq == STOP:
             store(mail, STATE, ASLEEP)
             return
         if seq == done:
-            waited = ticks() - last
-            if waited > patience:
+            t = ticks()
+            waited, gap, look = t - last, t - look, t
+            if waited > patience or gap > preempted:
                 store(mail, STATE, ASLEEP)
                 if load(mail, SEQ) == done:  # a pass posted now sees ASLEEP and wakes us
                     return
@@ -205,6 +213,7 @@ def serve(mail, like, patience, patient):  # pragma: no cover - compiled
         store(mail, DONE, seq)  # after the rows and the answers above
         done = seq
         last = ticks()
+        look = last
 
 
 @njit(cache=True, nogil=True)
@@ -224,10 +233,11 @@ def post(mail, table, mu, timer, numbers, flags, lo, hi, b, seq):  # pragma: no 
 
 
 @njit(cache=True, nogil=True)
-def wait(mail, seq, limit):  # pragma: no cover - compiled
+def wait(mail, seq, limit, patient):  # pragma: no cover - compiled
     """Wait until the helper of ``mail`` answered pass ``seq``; returns the ticks then, or
     -1 if the helper failed, -2 after ``limit`` ticks without an answer. It holds no lock
-    on Python, so that a helper still asleep can take it to wake."""
+    on Python, so that a helper still asleep can take it to wake, and after ``patient``
+    ticks it yields the processor at each look: the helper may be waiting for it."""
     start = ticks()
     while load(mail, DONE) != seq:
         if load(mail, STATE) == FAILED:
@@ -235,7 +245,10 @@ def wait(mail, seq, limit):  # pragma: no cover - compiled
         t = ticks()
         if t - start > limit:
             return -2
-        _pause()
+        if t - start > patient:
+            _yield()
+        else:
+            _pause()
     return ticks()
 
 
@@ -261,6 +274,7 @@ class Resident:
         self.error: BaseException | None = None
         rate = tick_rate()
         self._patience, self._patient = int(PATIENCE * rate), int(YIELD_AFTER * rate)
+        self._preempted = int(PREEMPTED * rate)
         self._limit = int(GIVE_UP * rate)
         self._wake = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="dftc-resident", daemon=True)
@@ -273,7 +287,7 @@ class Resident:
             if self.mail[SEQ] == STOP:
                 return
             try:
-                serve(self.mail, self.like, self._patience, self._patient)
+                serve(self.mail, self.like, self._patience, self._patient, self._preempted)
             except BaseException as exc:  # a table its reader does not expect: the caller raises it
                 self.error = exc
                 put(self.mail, STATE, FAILED)
@@ -292,7 +306,7 @@ class Resident:
     def finish(self) -> tuple[int, int, int, int]:
         """Wait for the posted rows: (flags raised, ticks when they began, ended, and when
         the caller saw the answer)."""
-        seen = wait(self.mail, self.seq, self._limit)
+        seen = wait(self.mail, self.seq, self._limit, self._patient)
         if seen < 0:
             if self.error is not None:
                 raise self.error
