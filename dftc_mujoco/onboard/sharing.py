@@ -157,11 +157,14 @@ class Sharing:
         """The pass with resident helpers (:mod:`.resident`), timed by the processor's
         counter: (count, the timings of SUMMED, beside's error)."""
         error: BaseException | None = None
+        started: list[resident.Resident] = []
+        ends: list[tuple[int, int, int, int]] = []
         try:
-            t0 = resident.now()
-            for j, helper in enumerate(crew):
-                helper.start(posted, cuts[j], cuts[j + 1], j + 1)
             try:
+                t0 = resident.now()
+                for j, helper in enumerate(crew):
+                    helper.start(posted, cuts[j], cuts[j + 1], j + 1)
+                    started.append(helper)
                 if beside is not None:
                     try:
                         beside()
@@ -170,8 +173,15 @@ class Sharing:
                 t1 = resident.now()
                 count = rows(rest, m, 0) if share else 0
                 t2 = resident.now()
-            finally:  # nothing is left running on the team's arrays
-                ends = [helper.finish() for helper in crew]
+            finally:  # nothing is left running on the team's arrays: every helper waited for
+                failed: BaseException | None = None
+                for helper in started:
+                    try:
+                        ends.append(helper.finish())
+                    except Exception as exc:  # the first one's raised once all have ended
+                        failed = failed or exc
+                if failed is not None:
+                    raise failed
         finally:
             for helper in crew:
                 helper.lock.release()
