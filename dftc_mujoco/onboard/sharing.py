@@ -133,16 +133,10 @@ class Sharing:
         helpers: list[Future[Any]] = [
             pool.submit(_timed, rows, cuts[j], cuts[j + 1], j + 1) for j in range(w - 1)
         ]
-        error: BaseException | None = None
         try:
-            if beside is not None:
-                try:
-                    beside()
-                except Exception as exc:  # raised once the team's rows are whole
-                    error = exc
-            t1 = time.perf_counter()
-            count = rows(rest, m, 0) if share else 0
-            t2 = time.perf_counter()
+            t1, count, t2, error = _beside_then_rows(
+                beside, rows, share, rest, m, time.perf_counter
+            )
         finally:  # nothing is left running on the team's arrays
             _join(helpers)
         t3 = time.perf_counter()
@@ -156,7 +150,6 @@ class Sharing:
     def _resident(self, crew, posted, rows, share, rest, m, cuts, beside) -> tuple:
         """The pass with resident helpers (:mod:`.resident`), timed by the processor's
         counter: (count, the timings of SUMMED, beside's error)."""
-        error: BaseException | None = None
         started: list[resident.Resident] = []
         ends: list[tuple[int, int, int, int]] = []
         try:
@@ -165,14 +158,7 @@ class Sharing:
                 for j, helper in enumerate(crew):
                     helper.start(posted, cuts[j], cuts[j + 1], j + 1)
                     started.append(helper)
-                if beside is not None:
-                    try:
-                        beside()
-                    except Exception as exc:  # raised once the team's rows are whole
-                        error = exc
-                t1 = resident.now()
-                count = rows(rest, m, 0) if share else 0
-                t2 = resident.now()
+                t1, count, t2, error = _beside_then_rows(beside, rows, share, rest, m, resident.now)
             finally:  # nothing is left running on the team's arrays: every helper waited for
                 failed: BaseException | None = None
                 for helper in started:
@@ -193,6 +179,21 @@ class Sharing:
         joined = (max(e[3] for e in ends) - t0) / rate
         timings = ((t1 - t0) / rate, helper_end, (t2 - t0) / rate, began)
         return count, (*timings, spent / len(crew), joined), error
+
+
+def _beside_then_rows(beside, rows, share, rest, m, clock) -> tuple:
+    """The caller's part of a shared pass: ``beside()``, then its rows ``rest`` .. ``m - 1``;
+    (``clock()`` between the two, the rows' count, ``clock()`` after them, beside's error,
+    kept to be raised once the team's rows are whole)."""
+    error: BaseException | None = None
+    if beside is not None:
+        try:
+            beside()
+        except Exception as exc:  # raised once the team's rows are whole
+            error = exc
+    t1 = clock()
+    count = rows(rest, m, 0) if share else 0
+    return t1, count, clock(), error
 
 
 def _join(pending: list[Future[Any]]) -> None:
