@@ -54,11 +54,14 @@ class ActuatorFaults:
         # after this instant a bias profile no longer changes (1 − e^{−40} rounds to 1)
         self._b_settled = np.where(self._b_ramp, np.inf, self._b_t + 40.0 * self._b_tau)
         self._phi = np.zeros((len(self.actuator), 2))  # bias_phi's result, reused
-        # the bias faults as Python numbers (bias_phi every period: no NumPy scalars)
+        self._phi_flat = self._phi.reshape(-1)  # a view: its entries written one by one
+        # the bias faults as Python numbers (bias_phi every period: no NumPy arrays; paper_case:
+        # 3.7-5.5 µs a call when each fault's value was an array, 1.4-2.4 µs since)
+        vx, vy = self._b_value.T.tolist()
         self._b_list = list(
             zip(
-                self._b_robot.tolist(), self._b_t.tolist(), self._b_end.tolist(),
-                self._b_tau.tolist(), self._b_ramp.tolist(), list(self._b_value), strict=True,
+                (2 * self._b_robot).tolist(), self._b_t.tolist(), self._b_end.tolist(),
+                self._b_tau.tolist(), self._b_ramp.tolist(), vx, vy, strict=True,
             )
         )  # fmt: skip
         self.due = min((f.t for f in faults), default=np.inf)  # next time apply() has work
@@ -194,16 +197,16 @@ class ActuatorFaults:
 
     def bias_phi(self, t: float) -> np.ndarray:
         """Σ of value·(1 − e^{−(t − t_f)/τ}) for t ≥ t_f over each robot's bias faults, (N, 2)."""
-        phi = self._phi
-        phi[:] = 0.0
-        for robot, start, end, tau, ramp, value in self._b_list:
+        flat = self._phi_flat  # robot r's φ at 2r, 2r + 1
+        flat.fill(0.0)
+        for at, start, end, tau, ramp, vx, vy in self._b_list:
             age = t - start
             if age >= 0.0 and t < end:
-                if ramp:  # a drift: value [m/s²] × age
-                    phi[robot] += age * value
-                else:
-                    phi[robot] += (1.0 - np.exp(-age / tau) if tau > 0 else 1.0) * value
-        return phi
+                # a drift: value [m/s²] × age; NumPy's exp, as the profile after the run
+                shape = age if ramp else (1.0 - np.exp(-age / tau) if tau > 0 else 1.0)
+                flat[at] += shape * vx
+                flat[at + 1] += shape * vy
+        return self._phi
 
     def _bias_profile(self, t: np.ndarray) -> np.ndarray:
         phi = np.zeros((len(t), len(self.actuator), 2))
