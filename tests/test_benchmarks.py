@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
 import subprocess
 import sys
@@ -85,3 +86,38 @@ def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
     # the work is the calling thread's period but its wait, and each helper's rows
     assert threads >= 2 and abs(total - (period - (joined - caller) + (threads - 1) * each)) < 5e-3
     assert abs(ideal - total / threads) < 2e-3 and ideal <= period, work.groups()
+
+
+def test_the_targets_benchmark_judges_each_target_by_its_own_figures(tmp_path):
+    """``targets.py`` at small sizes: one verdict per target (a ratio for each N, real time
+    with set-up, the cold set-up, the peak), each "met" exactly where its figure is within
+    the issue's bound, every replay the closed loop's exact floor, and the table printed with
+    the count of targets met."""
+    record = tmp_path / "targets.json"
+    out = _bench(
+        "targets.py", "--no-paper", "--n", "4", "--duration", "2.5", "--large-n", "8",
+        "--large-duration", "2.5", "--peak-duration", "2.5", "--repeat", "1", "--json", str(record),
+    )  # fmt: skip
+    got = json.loads(record.read_text())
+    verdicts, rows, peak = got["verdicts"], got["rows"], got["peak"]
+    assert [v[0] for v in verdicts] == [
+        "loop / floor ≤ 2 at N = 4 (scale scene, 2.5 s)",
+        "loop / floor ≤ 2 at N = 8 (scale scene, 2.5 s)",
+        "N = 8 at ≥ 2× real time with set-up",
+        "set-up ≤ 1.5 s at N = 8 (a fresh process's)",
+        "peak memory of a 2.5 s run at N = 8 ≤ 1.5 GB",
+    ]
+    assert all(r["exact"] for r in rows), rows
+    large = rows[-1]
+    expected = [r["ratio"] <= 2.0 for r in rows] + [
+        large["rtf_with_setup"] >= 2.0,
+        large["cold_setup_s"] <= 1.5,
+        peak["run_peak_mb"] <= 1536,
+    ]
+    assert [v[2] for v in verdicts] == expected
+    assert got["met"] == all(expected)
+    assert 0 < peak["run_peak_mb"] < 1536  # an 8-robot run is far below the bound
+    assert f"{sum(expected)} of 5 targets met" in out
+    for target, _, met in verdicts:
+        word = "met" if met else "NOT MET"
+        assert re.search(re.escape(target) + r"\s+.*\s" + word + "$", out, flags=re.M), out
