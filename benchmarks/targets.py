@@ -1,6 +1,6 @@
 """Issue 21's speed targets, each measured on this machine and judged: met or not met.
 
-    python benchmarks/targets.py                  # the issue's sizes (3.6 min on 2 slow cores)
+    python benchmarks/targets.py                  # the issue's sizes (3.6-3.9 min on 2 slow cores)
     python benchmarks/targets.py --json out.json  # the figures as well, for a record
     python benchmarks/targets.py --strict         # exit 1 unless every target is met
 
