@@ -7,7 +7,7 @@
 Every measurement runs in a fresh process of its own (``bench_scale.py --one``, or this
 file's ``--paper``), as ``bench_step.py`` and ``bench_scale.py`` make them:
 
-- loop / exact floor ≤ 2.0 at every N: paper_case (N = 4, ``--repeat`` runs of its 60 s)
+- loop / exact floor ≤ 2.0 at every N: paper_case (N = 4, ``--repeat`` runs, at least 3)
   and the scale scene at ``--n`` (``--duration`` s each) and at ``--large-n``
   (``--large-duration`` s); the floor is bare ``mj_step`` replaying the run's own
   commands and fault changes (``replay.py``), and a row whose replay did not end in the
