@@ -105,9 +105,14 @@ class Pool:
         Two workers on two cores, N = 400, 10 s runs: each run 10 % slower with them (loop
         4.1-4.6 s against 3.5-4.5 s, eight of each), since a watching helper or a waiting
         caller keeps a core another worker's thread wants."""
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-        threads = int(os.environ.get("NUMBA_NUM_THREADS", "0")) or (cores or 1)
-        return self.workers * threads <= (cores or 1)
+        # numba's own count, as a spawned worker reads it: NUMBA_NUM_THREADS, else the cores
+        # this process may run on (its environment and affinity are the worker's)
+        if hasattr(os, "sched_getaffinity"):
+            cores = len(os.sched_getaffinity(0))
+        else:
+            cores = os.cpu_count() or 1
+        threads = int(os.environ.get("NUMBA_NUM_THREADS", "0")) or cores
+        return self.workers * threads <= cores
 
     def pids(self) -> list[int]:
         """The worker processes' ids."""
