@@ -36,6 +36,7 @@ from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
 from .onboard.block import Block
 from .onboard.team import Team
+from .onboard.thresholds import prefetch_decay_bounds
 from .physics_step import PhysicsStep
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
@@ -97,6 +98,8 @@ class Simulation:
         # each robot's model; files are recorded by their absolute paths
         self.scenario, self.fleet = scenario, team = fleet.for_scenario(scenario)
         self.robot = team.envelope  # the team's bounds (one model: that model)
+        if self.block_names["thresholds"] == "paper":  # its set-up needs κ/λ (eq. 41):
+            prefetch_decay_bounds(scenario.team.graph, scenario.gains.ko)  # beside the scene
         self.scene = scene.build(scenario, team if team.mixed else self.robot)
         self._build_time = time.perf_counter() - wall0
         self.plant: Plant | None = None

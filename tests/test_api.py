@@ -74,6 +74,27 @@ def test_stepping_then_running_equals_one_run():
     np.testing.assert_allclose(last.x_hat[2], last.x, atol=0.02)  # robot 3 knows the team
 
 
+def test_the_set_up_takes_the_kappa_lambda_it_began_beside_the_scene(monkeypatch):
+    """The paper's rule needs κ, λ (eq. 41) at set-up: the simulation begins them on a helper
+    thread before it builds the scene and its thresholds take them from there (the same
+    numbers, nothing left pending); a set-up with another rule begins nothing."""
+    import dftc_mujoco.loop as loop_mod
+    from dftc_mujoco.onboard.thresholds import decay
+
+    decay._cached_decay_bounds.cache_clear()
+    s = load_scenario("paper_case", {"duration": 0.5})
+    with Simulation(s) as sim:
+        assert not decay._PENDING
+        rule = sim.team.thresholds
+        here = decay._cached_decay_bounds.__wrapped__(*decay._key(rule.graph, rule.ko, 49))
+        assert np.array_equal(rule.kappa, here[0]) and np.array_equal(rule.lam, here[1])
+    begun: list[tuple] = []  # what the set-up begins, recorded instead
+    monkeypatch.setattr(loop_mod, "prefetch_decay_bounds", lambda *a: begun.append(a))
+    with Simulation(s), Simulation(load_scenario("paper_case", {"onboard.thresholds": "l1"})):
+        pass
+    assert len(begun) == 1 and begun[0][0].edges == s.team.graph.edges
+
+
 def test_step_past_the_end_and_reset_with_another_seed():
     s = load_scenario("paper_case", {"duration": 1.0})
     with Simulation(s) as sim:

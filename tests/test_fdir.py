@@ -239,3 +239,63 @@ def test_one_columns_sums_are_its_column_in_a_batch_bit_for_bit(n):
         for whole, alone in zip(batch, one, strict=True):
             assert np.array_equal(whole[:, col], alone[:, 0])
     assert (batch[2][-1] < batch[2][0]).all()  # ‖B_k^n‖_∞ did decay
+
+
+def test_the_compiled_sweep_of_kappa_lambda_does_not_depend_on_its_blocks():
+    """The certified κ, λ run their chunks compiled (``sweep_sums``) into blocks of rows
+    handed back to Python: a block of one chunk and one of 64 chunks stop at the same step
+    with the same sums, brackets, settled robots and maxima, and the sweep holds no GIL."""
+    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.onboard.thresholds.kernels import Adjacency, column_of_row, sweep_sums
+
+    n = 40
+    g = random_strongly_connected(n, 3, np.random.default_rng(7))
+    adj = Adjacency.of(g)
+    beta, ks = 1.0 / (adj.deg.max() + 1.0), np.arange(0, n, 3)
+    args = (adj.src, adj.first, adj.dst, adj.out_first, adj.deg, column_of_row(ks, n), beta, 16)
+
+    def sweep(rows: int) -> tuple:
+        a, u = np.ones((n, len(ks))), np.ones((n, len(ks)))
+        a2, u2 = np.empty_like(a), np.empty_like(u)
+        s_a, s_u, settled = np.empty(len(ks)), np.empty(len(ks)), np.zeros(len(ks), bool)
+        done, work, maxima = 0, 0.0, []
+        while not settled.any():
+            amax, umax = np.empty((rows, len(ks))), np.empty((rows, len(ks)))
+            done, work, wrote = sweep_sums(
+                a, a2, u, u2, *args, 0.02, done, 20_000, work, 4e9, amax, umax, s_a, s_u, settled
+            )
+            maxima += [amax[:wrote], umax[:wrote]]
+        return (
+            done,
+            a,
+            u,
+            s_a,
+            s_u,
+            settled,
+            np.concatenate(maxima[::2]),
+            np.concatenate(maxima[1::2]),
+        )
+
+    small, large = sweep(16), sweep(1024)
+    assert small[0] == large[0] > 16  # the same step, after several chunks
+    for x, y in zip(small[1:], large[1:], strict=True):
+        assert np.array_equal(x, y)
+    assert small[5].any() and (small[3][small[5]] < 1).all()  # settled with a certificate
+    assert sweep_sums.targetoptions["nogil"]
+
+
+def test_kappa_lambda_begun_on_a_helper_thread_are_the_same_numbers_taken_once():
+    """``prefetch_decay_bounds`` computes κ, λ on a helper thread; ``decay_bounds`` of the
+    same graph takes them from it (once) and they equal the ones computed here."""
+    from dftc_mujoco.graph import ring_with_chords
+
+    g = ring_with_chords(150, (2, 5))  # beyond the exact path: the compiled sweep
+    decay._cached_decay_bounds.cache_clear()
+    decay.prefetch_decay_bounds(g, 3.0)
+    key = decay._key(g, 3.0, 49)
+    assert key in decay._PENDING
+    kappa, lam = decay.decay_bounds(g, 3.0)
+    assert key not in decay._PENDING
+    here = decay._cached_decay_bounds.__wrapped__(*key)  # computed in this thread, uncached
+    assert np.array_equal(kappa, here[0]) and np.array_equal(lam, here[1])
+    assert np.isfinite(kappa).all() and (lam > 0).all()

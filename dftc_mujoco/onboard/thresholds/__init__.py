@@ -23,7 +23,7 @@ The registry of rule names is ``dftc_mujoco.blocks.BUILTIN``. The decision of eq
 
 from .block_row import BLOCK_ROW_MAX, BlockRow, row_envelope
 from .compensation import compensation_offset, estimator_gain
-from .decay import decay_bound, decay_bounds, observer_matrix
+from .decay import decay_bound, decay_bounds, observer_matrix, prefetch_decay_bounds
 from .delays import predicted_delays
 from .drive import Drive
 from .envelope import Envelope, Start, check_nonnegative, column_envelope, grounded_solve
@@ -47,5 +47,6 @@ __all__ = [
     "grounded_solve",
     "observer_matrix",
     "predicted_delays",
+    "prefetch_decay_bounds",
     "row_envelope",
 ]

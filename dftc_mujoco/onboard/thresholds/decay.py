@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import functools
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from scipy.linalg import expm
 
 from ...graph import Graph, reaches_all, rotation_invariant
-from .kernels import TINY, Adjacency, advance_sums, best_rate, column_of_row, ratios
+from .kernels import TINY, Adjacency, best_rate, column_of_row, sweep_sums
 
 
 def decay_bound(m: np.ndarray, n_lambda: int = 49) -> tuple[float, float]:
@@ -68,15 +69,47 @@ def observer_matrix(graph: Graph, ko: float, k: int) -> np.ndarray:
 EXACT_WORK = 1.1e6
 
 
+_Key = tuple[int, tuple[tuple[int, int], ...], float, int]
+
+
 def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarray, np.ndarray]:
     """κ_k, λ_k (eq. 41) for every monitored robot k of ``graph`` (cached per graph).
 
     See :func:`_decay_bounds`. A graph invariant under the rotation i -> i + 1
     (rings, rings with chords: every robot sees the same graph) needs only k = 0.
-    The last graphs are cached, so campaign workers and reset runs pay once.
+    The last graphs are cached, so campaign workers and reset runs pay once; a graph
+    :func:`prefetch_decay_bounds` began is taken from its helper thread (waiting for it if need be).
     """
-    kappa, lam = _cached_decay_bounds(graph.n, tuple(sorted(graph.edges)), float(ko), n_lambda)
+    key = _key(graph, ko, n_lambda)
+    pending = _PENDING.pop(key, None)
+    kappa, lam = pending.result() if pending is not None else _cached_decay_bounds(*key)
     return kappa.copy(), lam.copy()
+
+
+def prefetch_decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> None:
+    """Begin :func:`decay_bounds` of ``graph`` on a helper thread, for a set-up that has
+    other work to do before it needs them (the simulation builds its scene meanwhile).
+    The certified sweep runs compiled without the GIL (:func:`.kernels.sweep_sums`), so
+    the two share the cores; the numbers are the same either way."""
+    global _HELPER  # made at the first prefetch: a process that never asks has no thread
+    key = _key(graph, ko, n_lambda)
+    if key in _PENDING:
+        return
+    if len(_PENDING) >= 4:  # begun and never asked for: their results stay in the cache
+        _PENDING.clear()
+    if _HELPER is None:
+        _HELPER = ThreadPoolExecutor(1, thread_name_prefix="dftc-kappa-lambda")
+    _PENDING[key] = _HELPER.submit(_cached_decay_bounds, *key)
+
+
+def _key(graph: Graph, ko: float, n_lambda: int) -> _Key:
+    """What κ, λ depend on: the graph's size and edges, k_o and the λ grid."""
+    return graph.n, tuple(sorted(graph.edges)), float(ko), n_lambda
+
+
+#: decay_bounds begun by prefetch_decay_bounds and not yet taken, and the thread that computes them
+_PENDING: dict[_Key, Future] = {}
+_HELPER: ThreadPoolExecutor | None = None
 
 
 @functools.lru_cache(maxsize=16)
@@ -138,37 +171,25 @@ def _decay_bounds_fast(
     hist_u: list[np.ndarray] = [np.ones((1, kk))]  # ‖B^n‖₁
     fractions = np.linspace(0.02, 1.0, n_lambda)
     steps_done, chunk, work = 0, 16, 0.0
+    s_a, s_u, settled = np.empty(kk), np.empty(kk), np.empty(kk, dtype=np.bool_)
     while len(cols):
-        amax, umax = np.empty((chunk, len(cols))), np.empty((chunk, len(cols)))
-        advance_sums(
+        # the chunks run compiled until a column settles (sweep_sums); its maxima by block
+        rows = chunk * max(1, min(256, (1 << 20) // (len(cols) * chunk)))
+        amax, umax = np.empty((rows, len(cols))), np.empty((rows, len(cols)))
+        steps_done, work, rows = sweep_sums(
             a, a2, u, u2, adj.src, adj.first, adj.dst, adj.out_first, adj.deg,
-            column_of_row(ks[cols], n), beta, chunk, amax, umax,
+            column_of_row(ks[cols], n), beta, chunk, settle, steps_done, max_steps, work,
+            max_work, amax, umax, s_a, s_u, settled,
         )  # fmt: skip
         for hist, m in ((hist_a, amax), (hist_u, umax)):
-            full = np.full((chunk, kk), np.nan)
-            full[:, cols] = m
+            full = np.full((rows, kk), np.nan)
+            full[:, cols] = m[:rows]
             hist.append(full)
-        steps_done += chunk
-        # chunk is even: the newest sums are in a, u and the previous ones in a2, u2
-        ra, ru = ratios(a, a2), ratios(u, u2)
-        s_a, s_u = ra.max(axis=0), ru.max(axis=0)
-        settled = (
-            (1.0 - s_a >= (1.0 - settle) * (1.0 - ra.min(axis=0)))
-            & (1.0 - s_u >= (1.0 - settle) * (1.0 - ru.min(axis=0)))
-            & (s_a < 1.0)
-            & (s_u < 1.0)
-        )
-        # past the budget any certificate with s < 1 is valid, only looser (λ_cert lower)
-        work += 2 * chunk * len(cols) * (n + len(adj.src))
-        if work > max_work:
-            settled |= (s_a < 1.0) & (s_u < 1.0)
-        if steps_done >= max_steps:
-            settled[:] = True
-        if not settled.any():
+        if not settled[: len(cols)].any():
             continue
         na_all, nu_all = np.concatenate(hist_a), np.concatenate(hist_u)
         slack = (np.arange(len(na_all)) + 1.0) * TINY  # the flushed subnormals
-        for pos in np.flatnonzero(settled):
+        for pos in np.flatnonzero(settled[: len(cols)]):
             c = cols[pos]
             lam_cert = q * (1.0 - max(s_a[pos], s_u[pos]))
             if lam_cert > 0:
@@ -179,7 +200,7 @@ def _decay_bounds_fast(
             else:  # not settled within max_steps: the exact method for this robot
                 k_, l_ = decay_bound(observer_matrix(graph, ko, int(ks[c])), n_lambda)
             kappa[good[c]], lam[good[c]] = k_ * (1.0 + 1e-9), l_
-        keep = ~settled
+        keep = ~settled[: len(cols)]
         a, a2, u, u2 = (np.ascontiguousarray(x[:, keep]) for x in (a, a2, u, u2))
         cols = cols[keep]
     return kappa, lam

@@ -299,6 +299,65 @@ def _advance_sums_one(
         cu, nu = nu, cu
 
 
+@njit(inline="always")
+def _ratio_bracket(new, old, b):  # pragma: no cover - compiled
+    """max_i and min_i of :func:`ratios` (new, old) in column b: its Collatz-Wielandt bracket."""
+    hi, lo = -np.inf, np.inf
+    for i in range(new.shape[0]):
+        o, v = old[i, b], new[i, b]
+        r = v / o if o > 0 else (np.inf if v > 0 else 0.0)
+        hi = max(hi, r)
+        lo = min(lo, r)
+    return hi, lo
+
+
+@njit(cache=True, nogil=True)
+def sweep_sums(
+    a, a2, u, u2, src, first, dst, out_first, deg, col_of_row, beta, chunk, settle, done,
+    max_steps, work, max_work, amax, umax, s_a, s_u, settled,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Chunks of ``chunk`` (even) steps of :func:`advance_sums` from step ``done``, their
+    maxima into the rows of ``amax``, ``umax`` (rows, K), until a column is settled (as
+    :func:`.decay._decay_bounds_fast` defines it) or the next chunk would not fit.
+
+    After each chunk the bracket of each column's decay rate (:func:`_ratio_bracket` of the
+    newest sums over the previous ones) gives ``s_a``, ``s_u`` (K,) and ``settled`` (K,):
+    within ``settle``, or any certificate (s_a, s_u < 1) once ``work`` entry updates exceed
+    ``max_work``, or every column at ``max_steps``. Returns (steps done, work, rows written).
+    Compiled and without the GIL, so κ, λ can be computed on a helper thread."""
+    n, kk = a.shape
+    edges = src.shape[0]
+    rows = 0
+    while rows + chunk <= amax.shape[0]:
+        advance_sums(
+            a, a2, u, u2, src, first, dst, out_first, deg, col_of_row, beta, chunk,
+            amax[rows : rows + chunk], umax[rows : rows + chunk],
+        )  # fmt: skip
+        rows += chunk
+        done += chunk
+        any_settled = False
+        work += 2 * chunk * kk * (n + edges)
+        for b in range(kk):  # chunk is even: the newest sums in a, u, the previous in a2, u2
+            ha, la = _ratio_bracket(a, a2, b)
+            hu, lu = _ratio_bracket(u, u2, b)
+            s_a[b], s_u[b] = ha, hu
+            certified = (ha < 1.0) & (hu < 1.0)
+            ok = (
+                (1.0 - ha >= (1.0 - settle) * (1.0 - la))
+                & (1.0 - hu >= (1.0 - settle) * (1.0 - lu))
+                & certified
+            )
+            if work > max_work:  # past the budget any certificate is valid, only looser
+                ok |= certified
+            if done >= max_steps:
+                ok = True
+            settled[b] = ok
+            any_settled |= ok
+        if any_settled:
+            break
+    return done, work, rows
+
+
 @njit(cache=True)
 def best_rate(log_a, log_u, q, lam_cert, fractions):  # pragma: no cover - compiled
     """κ, λ minimising κ/λ over λ = ``lam_cert`` × ``fractions``, with
