@@ -115,6 +115,37 @@ def test_phi_bar_without_a_lag_is_the_ideal_plants():
     assert estimator_gain(3 * np.eye(2), 0.01 * np.eye(2), H, 0.001, 0.005, lag=2.5) > 1.0
 
 
+@pytest.mark.parametrize("steps", [1, 63, 64, 65, 831, 832, 100000])
+@pytest.mark.parametrize("lag", [0.0, 0.2])
+def test_phi_bar_is_the_sum_of_the_impulse_responses_norms_step_by_step(steps, lag):
+    """Φ̄'s batched sums are the step-by-step sum of ‖C Ad^t B‖₂ up to the first state below
+    1e-14 (or ``steps``), bit for bit, also where that step falls at a block's edge."""
+    from dftc_mujoco.onboard.applied import lag_coefficients
+
+    K, G, eta_bar, xi_bar = 3 * np.eye(2), 0.01 * np.eye(2), 0.001, 0.005
+    gi, eye, zero = np.linalg.inv(G), np.eye(2), np.zeros((2, 2))
+    a, b = lag_coefficients(lag, H)
+    C, D = np.hstack([gi, gi @ K]), gi
+    Ad = np.block([[eye - H * (1 - b) * gi - H * K, -H * (1 - b) * gi @ K], [H * eye, eye]])
+    B_eta, B_xi = np.vstack([-H * (1 - b) * gi - H * K, H * eye]), np.vstack([H * eye, zero])
+    if a > 0.0:
+        Ad = np.block([[Ad, np.vstack([-H * b * eye, zero])], [a * gi, a * gi @ K, (1 - a) * eye]])
+        C, B_eta, B_xi = np.hstack([C, zero]), np.vstack([B_eta, a * gi]), np.vstack([B_xi, zero])
+    total_eta, total_xi = float(np.linalg.norm(D, 2)), 0.0
+    xe, xx, taken = B_eta, B_xi, 0
+    for _ in range(steps):
+        total_eta += float(np.linalg.norm(C @ xe, 2))
+        total_xi += float(np.linalg.norm(C @ xx, 2))
+        taken += 1
+        if max(np.abs(xe).max(), np.abs(xx).max()) < 1e-14:
+            break
+        xe, xx = Ad @ xe, Ad @ xx
+    if lag == 0.0:  # the paper's gains: the state is below 1e-14 at its 831st step
+        assert taken == min(steps, 831)
+    expected = float(total_eta * eta_bar + total_xi * xi_bar)
+    assert estimator_gain(K, G, H, eta_bar, xi_bar, steps=steps, lag=lag) == expected
+
+
 def slow_case(**extra) -> dict:
     return {"team.robot_model": str(SLOWBASE), "onboard.thresholds": "l1", **extra}
 
