@@ -157,10 +157,16 @@ class PathTable:
 
 def slot_spacing(formation: Formation, n_robots: int) -> float:
     """The smallest distance between two slots of ``formation`` [m] (inf for one robot)."""
+    if n_robots <= 1:
+        return float("inf")
+    from scipy.spatial import cKDTree  # a k-d tree, not the N × N distances (80 ms at 1000)
+
     offsets = formation_offsets(formation, n_robots)
-    d = np.hypot(*(offsets[:, None, :] - offsets[None]).transpose(2, 0, 1))
-    np.fill_diagonal(d, np.inf)
-    return float(d.min()) if n_robots > 1 else float("inf")
+    tree = cKDTree(offsets)
+    nearest = tree.query(offsets, k=2)[0][:, 1].min()
+    # the pairs that near, measured as np.hypot measures them (the tree rounds its own way)
+    pairs = tree.query_pairs(nearest * (1 + 1e-9), output_type="ndarray")
+    return float(np.hypot(*(offsets[pairs[:, 0]] - offsets[pairs[:, 1]]).T).min())
 
 
 def _filleted_path(waypoints: np.ndarray, corner_radius: float):

@@ -88,3 +88,21 @@ def test_a_mission_scaled_for_a_bigger_robot_gives_the_paper_outcome():
     flags = {(e["by"], e["robot"]) for e in r.events.items if e["kind"] == "detection"}
     assert flags and all(k == 1 for _, k in flags) and len(flags) >= 2
     assert [e["robot"] for e in r.events.items if e["kind"] == "exclusion"] == [1]
+
+
+@pytest.mark.parametrize("shape", ["grid", "polygon", "line"])
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 100, 1000])
+def test_slot_spacing_is_the_smallest_distance_between_two_slots(shape, n):
+    """The k-d tree's pairs give the very number the N × N distances give (measured as
+    np.hypot measures them), ties of a grid included; one robot has no pair."""
+    from dftc_mujoco.mission import Formation, formation_offsets, slot_spacing
+
+    f = Formation(shape=shape, side=0.7071)
+    spacing = slot_spacing(f, n)
+    if n == 1:
+        assert spacing == float("inf")
+        return
+    o = formation_offsets(f, n)
+    d = np.hypot(*(o[:, None, :] - o[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    assert spacing == float(d.min())
