@@ -342,3 +342,53 @@ def test_robots_attached_in_groups_make_the_same_model(name, monkeypatch):
                 continue
             assert np.array_equal(getattr(m, a), getattr(models[0], a), equal_nan=True), a
     assert mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, f"robot15/{robot.base}") > 0
+
+
+def test_the_team_s_start_state_and_roots_are_a_walk_robot_by_robot():
+    """The scene finds every robot's start state (its keyframe on its own joints, a free
+    base left where its MJCF puts it, its actuators' ctrl) and how to re-pose its base in
+    array passes over the whole team: the numbers a walk robot by robot gives, for a
+    mixed team of slides and a hinge, a free base, omni wheels and the disk."""
+    from pathlib import Path
+
+    from dftc_mujoco import load_scenario
+    from dftc_mujoco.sim import fleet, tree
+
+    data = Path(__file__).parent / "data" / "robots"
+    team = [str(data / "holobase.robot.toml"), "diffdrive", str(data / "omnibase.robot.toml")]
+    s = load_scenario("paper_case", {"team.robot_model": [*team, "disk"]})
+    s, models = fleet.for_scenario(s)
+    sc = scene.build(s, models)
+    m = sc.model
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    qpos, ctrl = m.qpos0.copy(), np.zeros(m.nu)
+    owner = tree.owners(m, sc.body)
+    on = tree.actuator_bodies(m)
+    root = np.full((4, 3), -1)
+    sense = np.ones((4, 3))
+    for i, (b, robot) in enumerate(zip(sc.body, models.models, strict=True)):
+        mine = [j for j in range(m.njnt) if owner[m.jnt_bodyid[j]] == i]
+        adr = np.concatenate([np.arange(m.jnt_qposadr[j], m.jnt_qposadr[j] + {0: 7, 1: 4}.get(
+            int(m.jnt_type[j]), 1)) for j in mine])  # fmt: skip
+        qpos[adr] = robot.init_qpos
+        for j in mine:
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                a = m.jnt_qposadr[j]
+                qpos[a : a + 7] = m.qpos0[a : a + 7]
+        ctrl[[a for a in range(m.nu) if on[a] >= 0 and owner[on[a]] == i]] = robot.init_ctrl
+        for j in range(m.body_jntadr[b], m.body_jntadr[b] + m.body_jntnum[b]):
+            hinge = m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+                root[i] = [m.jnt_qposadr[j], scene.FREE_ROW, scene.FREE_ROW]
+                break
+            if hinge and abs(d.xaxis[j][2]) < 0.999:
+                continue
+            col = 2 if hinge else int(np.argmax(np.abs(d.xaxis[j][:2])))
+            root[i, col], sense[i, col] = m.jnt_qposadr[j], np.sign(d.xaxis[j][col])
+    yaw = [np.arctan2(d.xmat[b][3], d.xmat[b][0]) for b in sc.body]
+    assert np.array_equal(sc.qpos_init, qpos) and np.array_equal(sc.ctrl_init, ctrl)
+    assert np.array_equal(sc.root_qpos, root)
+    assert (sc.root_qpos[:, 1] == scene.FREE_ROW).sum() == 2  # diffdrive, omnibase: free
+    assert np.array_equal(sc.origin, np.hstack([d.xpos[sc.body], np.c_[yaw], sense]))
+    assert np.array_equal(tree.qpos_addresses(m, np.arange(m.njnt)), np.arange(m.nq))

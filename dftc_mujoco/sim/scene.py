@@ -33,7 +33,7 @@ from ..paths import MODELS
 from ..scenario import Obstacle, Scenario
 from .fleet import Fleet, Group
 from .robots import CONTROL_SITE, OPTION_NAMES, RobotModel, option_value
-from .tree import actuator_bodies, owners, qpos_addresses
+from .tree import actuator_bodies, owners, qpos_addresses, qpos_widths, ranges
 
 # Collision bits of the arena, above the 16 bits the robots' own models use
 FLOOR, OBSTACLE, HULL, ROBOT = 1 << 16, 1 << 17, 1 << 18, 1 << 19
@@ -209,8 +209,10 @@ def _initial_state(
     A robot's joints in the scene are those of its base's subtree, in the same order as
     in its own model; a free joint keeps the base's MJCF pose in the scene (its robot's
     frame included), whatever the keyframe says of it. Each robot's attached actuators
-    take their initial ctrl, in order.
+    take their initial ctrl, in order. Every robot at once: its joints' qpos addresses
+    and its actuators grouped by robot, its keyframe's values laid after one another.
     """
+    n = len(body)
     qpos = model.qpos0.copy()
     ctrl = np.zeros(model.nu)
     # which robot each body, joint and actuator belongs to: one pass, not one per robot
@@ -218,70 +220,87 @@ def _initial_state(
     joint_owner = owner[model.jnt_bodyid]
     on = actuator_bodies(model)
     actuator_owner = np.where(on >= 0, owner[np.maximum(on, 0)], -1)
-    by_joint = _group(joint_owner, len(body))
-    by_actuator = _group(actuator_owner, len(body))
-    for i in range(len(body)):
-        key_q, key_c = np.asarray(robots[i].init_qpos), np.asarray(robots[i].init_ctrl)
-        joints = by_joint[i]
-        adr = qpos_addresses(model, joints)
-        if len(adr) != len(key_q):
-            raise ValueError(f"robot {i + 1}: {len(adr)} joint coordinates, expected {len(key_q)}")
-        qpos[adr] = key_q
-        for j in joints:
-            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-                # a keyframe's root pose is ignored: the base sits where its MJCF puts it,
-                # at its planned place on the floor (a keyframe 1 m under the floor flung
-                # robots 8 m up); only the other joints come from the keyframe
-                a = model.jnt_qposadr[j]
-                qpos[a : a + 7] = model.qpos0[a : a + 7]
-        acts = by_actuator[i]
-        if len(acts) != len(key_c):
-            raise ValueError(f"robot {i + 1}: {len(acts)} actuators, expected {len(key_c)}")
-        ctrl[acts] = key_c
+    joints, joint_count = _grouped(joint_owner, n)  # robot 0's joints, then robot 1's, ...
+    acts, act_count = _grouped(actuator_owner, n)
+    qpos_count = np.bincount(
+        np.repeat(np.arange(n), joint_count), weights=qpos_widths(model, joints), minlength=n
+    ).astype(np.int64)
+    key_q = [np.asarray(r.init_qpos, float).ravel() for r in robots]
+    key_c = [np.asarray(r.init_ctrl, float).ravel() for r in robots]
+    _same_counts(qpos_count, key_q, act_count, key_c)
+    if len(joints):
+        qpos[qpos_addresses(model, joints)] = np.concatenate(key_q)
+    # a keyframe's root pose is ignored: the base sits where its MJCF puts it, at its
+    # planned place on the floor (a keyframe 1 m under the floor flung robots 8 m up);
+    # only the other joints come from the keyframe
+    free = joints[model.jnt_type[joints] == mujoco.mjtJoint.mjJNT_FREE]
+    at = ranges(model.jnt_qposadr[free], np.full(len(free), 7))
+    qpos[at] = model.qpos0[at]
+    if len(acts):
+        ctrl[acts] = np.concatenate(key_c)
     return qpos, ctrl
 
 
-def _group(owner: np.ndarray, n: int) -> list[np.ndarray]:
-    """For each of ``n`` owners, the indices it owns, in order (-1: nobody's)."""
+def _grouped(owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The indices owned by each of ``n`` owners, owner by owner and in order within each
+    (-1: nobody's, left out), and how many each owner has."""
     order = np.argsort(owner, kind="stable")
     bounds = np.searchsorted(owner[order], np.arange(n + 1))
-    return [order[bounds[i] : bounds[i + 1]] for i in range(n)]
+    return order[bounds[0] : bounds[n]], np.diff(bounds)
+
+
+def _same_counts(
+    qpos_count: np.ndarray, key_q: list[np.ndarray], act_count: np.ndarray, key_c: list[np.ndarray]
+) -> None:
+    """Refuse the first robot whose scene has other than its keyframe's number of joint
+    coordinates (``qpos_count``, ``key_q``) or of actuators (``act_count``, ``key_c``)."""
+    want_q, want_c = np.array([len(k) for k in key_q]), np.array([len(k) for k in key_c])
+    wrong = np.flatnonzero((qpos_count != want_q) | (act_count != want_c))
+    if len(wrong):
+        i = int(wrong[0])
+        found, what, want = (
+            (qpos_count[i], "joint coordinates", want_q[i])
+            if qpos_count[i] != want_q[i]
+            else (act_count[i], "actuators", want_c[i])
+        )
+        raise ValueError(f"robot {i + 1}: {found} {what}, expected {want}")
 
 
 def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How to put each base back at a logged pose (:func:`place`): the qpos address of its
     free joint, or of its x, y slides and yaw hinge (-1: none); and where the base sits
-    with those joints at zero (x, y, z, yaw), with each slide's sense along its axis."""
+    with those joints at zero (x, y, z, yaw), with each slide's sense along its axis.
+    Every base at once: its own joints laid robot after robot, the last joint of each
+    role kept (as a walk through them in order would)."""
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)  # every joint at zero: where the base frame sits
-    root, origin, origin_sense = [], [], []
-    for b in body:
-        joints = range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])
-        free = [j for j in joints if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-        if free:
-            root.append([model.jnt_qposadr[free[0]], FREE_ROW, FREE_ROW])
-            origin_sense.append([1.0, 1.0, 1.0])
-        else:
-            slots, sense = [-1, -1, -1], [1.0, 1.0, 1.0]
-            for j in joints:
-                axis = data.xaxis[j]
-                col = (
-                    2
-                    if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
-                    else int(np.argmax(np.abs(axis[:2])))
-                )
-                if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and abs(axis[2]) < 0.999:
-                    continue
-                slots[col] = model.jnt_qposadr[j]
-                sense[col] = float(np.sign(axis[col]))
-            root.append(slots)
-            origin_sense.append(sense)
-        mat = data.xmat[b]
-        origin.append([*data.xpos[b], np.arctan2(mat[3], mat[0])])
-    kinds = np.array(root, dtype=int)
-    if (kinds[:, 1] == FREE_ROW).all():  # free joints
-        return kinds[:, :1], np.array(origin)
-    return kinds, np.hstack([np.array(origin), np.array(origin_sense)])
+    n = len(body)
+    count = model.body_jntnum[body]
+    joints = ranges(model.body_jntadr[body], count)
+    row = np.repeat(np.arange(n), count)
+    kind = model.jnt_type[joints]
+    is_free = kind == mujoco.mjtJoint.mjJNT_FREE
+    first_free = np.full(n, len(model.jnt_type))
+    np.minimum.at(first_free, row[is_free], joints[is_free])
+    free = first_free < len(model.jnt_type)
+    root = np.full((n, 3), -1, dtype=int)
+    sense = np.ones((n, 3))
+    root[free] = FREE_ROW
+    root[free, 0] = model.jnt_qposadr[first_free[free]]
+    axis = data.xaxis[joints]
+    hinge = kind == mujoco.mjtJoint.mjJNT_HINGE
+    col = np.where(hinge, 2, np.argmax(np.abs(axis[:, :2]), axis=1))
+    use = ~free[row] & ~(hinge & (np.abs(axis[:, 2]) < 0.999))  # a hinge not about z: none
+    last = np.full((n, 3), -1)
+    np.maximum.at(last, (row[use], col[use]), joints[use])  # the last joint of each role
+    held = last >= 0
+    root[held] = model.jnt_qposadr[last[held]]
+    sense[held] = np.sign(data.xaxis[last[held], np.nonzero(held)[1]])
+    mat = data.xmat[body]
+    origin = np.hstack([data.xpos[body], np.arctan2(mat[:, 3], mat[:, 0])[:, None]])
+    if free.all():  # free joints
+        return root[:, :1], origin
+    return root, np.hstack([origin, sense])
 
 
 def _notes(robot: RobotModel, spec: mujoco.MjSpec) -> tuple[str, ...]:

@@ -7,8 +7,6 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-_NQ = {int(mujoco.mjtJoint.mjJNT_FREE): 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}
-
 
 def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     """(nbody,) bool: the bodies of the subtree of body ``root`` (numbered depth first)."""
@@ -54,13 +52,25 @@ def attached_actuators(model: mujoco.MjModel, body: int) -> np.ndarray:
     return np.flatnonzero((on >= 0) & inside[np.maximum(on, 0)])
 
 
+def qpos_widths(model: mujoco.MjModel, joints: np.ndarray) -> np.ndarray:
+    """How many qpos coordinates each of ``joints`` has (7 for a free joint, 4 for a ball)."""
+    kind = model.jnt_type[np.asarray(joints, dtype=np.int64)]
+    return np.where(
+        kind == mujoco.mjtJoint.mjJNT_FREE, 7, np.where(kind == mujoco.mjtJoint.mjJNT_BALL, 4, 1)
+    )
+
+
 def qpos_addresses(model: mujoco.MjModel, joints: np.ndarray) -> np.ndarray:
     """The qpos addresses of ``joints``, in order (7 for a free joint, 4 for a ball)."""
-    parts = [
-        np.arange(model.jnt_qposadr[j], model.jnt_qposadr[j] + _NQ.get(int(model.jnt_type[j]), 1))
-        for j in joints
-    ]
-    return np.concatenate(parts) if parts else np.zeros(0, int)
+    joints = np.asarray(joints, dtype=np.int64)
+    return ranges(model.jnt_qposadr[joints], qpos_widths(model, joints))
+
+
+def ranges(start: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """start[0] … start[0] + length[0] − 1, then start[1] …: the ranges end to end (int64)."""
+    ends = np.cumsum(length, dtype=np.int64)
+    first = np.asarray(start, dtype=np.int64) - ends + length
+    return np.repeat(first, length) + np.arange(ends[-1] if len(ends) else 0, dtype=np.int64)
 
 
 def _wheel_radius(model, data, wheel: int, anchor: np.ndarray, axis: np.ndarray) -> float:
