@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import functools
 import math
-from concurrent.futures import Future, ThreadPoolExecutor
+import threading
+from concurrent.futures import Future
 
 import numpy as np
 from scipy.linalg import expm
@@ -90,16 +91,23 @@ def prefetch_decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> None:
     """Begin :func:`decay_bounds` of ``graph`` on a helper thread, for a set-up that has
     other work to do before it needs them (the simulation builds its scene meanwhile).
     The certified sweep runs compiled without the GIL (:func:`.kernels.sweep_sums`), so
-    the two share the cores; the numbers are the same either way."""
-    global _HELPER  # made at the first prefetch: a process that never asks has no thread
+    the two share the cores; the numbers are the same either way. The thread is a daemon:
+    a process interrupted during its set-up does not wait for it to finish."""
     key = _key(graph, ko, n_lambda)
     if key in _PENDING:
         return
     if len(_PENDING) >= 4:  # begun and never asked for: their results stay in the cache
         _PENDING.clear()
-    if _HELPER is None:
-        _HELPER = ThreadPoolExecutor(1, thread_name_prefix="dftc-kappa-lambda")
-    _PENDING[key] = _HELPER.submit(_cached_decay_bounds, *key)
+    future: Future = Future()
+
+    def work() -> None:
+        try:
+            future.set_result(_cached_decay_bounds(*key))
+        except BaseException as exc:  # raised where decay_bounds takes it
+            future.set_exception(exc)
+
+    threading.Thread(target=work, name="dftc-kappa-lambda", daemon=True).start()
+    _PENDING[key] = future
 
 
 def _key(graph: Graph, ko: float, n_lambda: int) -> _Key:
@@ -107,9 +115,8 @@ def _key(graph: Graph, ko: float, n_lambda: int) -> _Key:
     return graph.n, tuple(sorted(graph.edges)), float(ko), n_lambda
 
 
-#: decay_bounds begun by prefetch_decay_bounds and not yet taken, and the thread that computes them
+#: decay_bounds begun by prefetch_decay_bounds and not yet taken
 _PENDING: dict[_Key, Future] = {}
-_HELPER: ThreadPoolExecutor | None = None
 
 
 @functools.lru_cache(maxsize=16)
