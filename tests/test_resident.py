@@ -110,3 +110,22 @@ def test_a_helper_that_fails_raises_in_the_caller_instead_of_hanging(monkeypatch
         crew[0].lock.release()
     split.step(0.01, x, np.zeros(2), np.zeros(2))
     assert split._sharing.engine == "resident"
+
+
+def test_a_failed_helper_is_replaced_while_its_thread_is_still_ending():
+    """A helper that failed keeps its error and ends its thread; until the thread has ended
+    it looked alive, and CI once posted the next pass to it, which raised the old error
+    again. A crew with a failed helper is made anew whether or not its thread has ended."""
+    crew = resident.residents(1, np.dtype(np.uint8))
+    if crew is None:
+        pytest.skip("no resident helpers on this platform")
+    old = crew[0]
+    old.lock.release()
+    old.error = TypeError("its pass failed")  # what _loop sets just before its thread ends
+    try:
+        assert old._thread.is_alive()  # idle in its loop: the moment the race found
+        again = resident.residents(1, np.dtype(np.uint8))
+        assert again is not None and again[0] is not old and again[0].error is None
+        again[0].lock.release()
+    finally:
+        old.close()

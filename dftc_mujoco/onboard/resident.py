@@ -334,7 +334,8 @@ def residents(count: int, timer: np.dtype) -> list[Resident] | None:
         return None
     key = (count, np.dtype(timer).str)
     crew = _residents.get(key)
-    if crew is None or any(not r._thread.is_alive() for r in crew):
+    # a helper that failed is replaced at once: its thread may not have ended yet
+    if crew is None or any(r.error is not None or not r._thread.is_alive() for r in crew):
         crew = _residents[key] = [Resident(np.zeros((0, 0), timer)) for _ in range(count)]
     taken: list[Resident] = []
     for r in crew:
