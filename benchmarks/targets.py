@@ -19,7 +19,14 @@ file's ``--paper``), as ``bench_step.py`` and ``bench_scale.py`` make them:
   a fresh process (as ``python -m dftc_mujoco.run`` makes it, figures aside).
 
 The machine's floor is printed beside each ratio: the targets are ratios and times on
-*this* machine, and the shared machines' speed moves by 10-50 % between invocations.
+*this* machine, and the shared machines' speed moves by 10-50 % between invocations. What
+the figures stand on is printed first (:func:`machine`): the cores, what one Python call
+costs (a small team's period outside the physics and its compiled stages is Python calls)
+and how CPython was built,
+and how fast one core streams memory (what the pass over a large team's N × N state waits
+on): the figures to compare before two invocations' ratios are. paper_case's ratio read
+1.96-1.98 on the machine of 2026-11-28 (nineteenth session) and 2.8-4.0 on the slower
+machines of the sessions since (README, "Speed").
 paper_case's records bit-identical to the code before issue 21 is a test
 (``tests/test_api.py``), not a benchmark.
 """
@@ -28,8 +35,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import subprocess
 import sys
+import sysconfig
+import time
+import timeit
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -42,6 +54,53 @@ def _child(*args: str) -> dict:
     if done.returncode != 0:
         sys.exit(f"targets.py: {' '.join(args)} failed:\n{done.stderr.strip()}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def machine() -> dict:
+    """What the figures stand on, measured here: cores, processor, the cost of one Python
+    call with two arguments (ns, the minimum of 5 × 200,000), whether CPython was built with
+    profile-guided optimisation and as a shared library (each about 10-30 % on interpreted
+    code), and one core's memory stream (GB/s read + written, a 64 MB float64 copy, best of
+    5)."""
+    import numpy as np
+
+    def f(a: int, b: int) -> int:
+        return a
+
+    call = min(timeit.repeat("f(1, 2)", globals={"f": f}, number=200_000, repeat=5)) / 200_000
+    a, b = np.ones(8 << 20), np.empty(8 << 20)
+    best = np.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        np.copyto(b, a)
+        best = min(best, time.perf_counter() - t0)
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            cpu = next(ln.split(":", 1)[1].strip() for ln in info if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    config = str(sysconfig.get_config_var("CONFIG_ARGS") or "")
+    return {
+        "cores": os.cpu_count(),
+        "cpu": cpu,
+        "python": platform.python_version(),
+        "pgo": "--enable-optimizations" in config,
+        "shared": bool(sysconfig.get_config_var("Py_ENABLE_SHARED")),
+        "call_ns": call * 1e9,
+        "stream_gb_s": 2 * a.nbytes / best / 1e9,
+    }
+
+
+def describe(m: dict) -> str:
+    """:func:`machine`'s figures in one line."""
+    build = "with" if m["pgo"] else "without"
+    shared = ", as a shared library" if m["shared"] else ""
+    return (
+        f"machine: {m['cpu']}, {m['cores']} cores; Python {m['python']} built {build} "
+        f"profile-guided optimisation{shared}, a call {m['call_ns']:.0f} ns; one core streams "
+        f"{m['stream_gb_s']:.1f} GB/s"
+    )
 
 
 def _paper(repeat: int) -> dict:
@@ -93,6 +152,8 @@ def main() -> None:
     if args.paper:
         print(json.dumps(_paper(args.repeat)))
         return
+    here = machine()  # before the children: nothing else runs on this process's cores
+    print(describe(here), flush=True)
     scale = str(HERE / "bench_scale.py")
     rows = []
     if not args.no_paper:
@@ -116,8 +177,8 @@ def main() -> None:
     met_all = all(m for _, _, m in verdicts)
     print(f"{sum(bool(m) for _, _, m in verdicts)} of {len(verdicts)} targets met")
     if args.json is not None:
-        args.json.write_text(json.dumps({"rows": rows, "peak": peak, "met": met_all,
-                                         "verdicts": verdicts}, indent=1))  # fmt: skip
+        record = {"machine": here, "rows": rows, "peak": peak, "met": met_all, "verdicts": verdicts}
+        args.json.write_text(json.dumps(record, indent=1))
     sys.exit(1 if args.strict and not met_all else 0)
 
 

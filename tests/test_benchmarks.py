@@ -92,14 +92,20 @@ def test_the_targets_benchmark_judges_each_target_by_its_own_figures(tmp_path):
     """``targets.py`` at small sizes: one verdict per target (a ratio for each N, real time
     with set-up, the cold set-up, the peak), each "met" exactly where its figure is within
     the issue's bound, every replay the closed loop's exact floor, and the table printed with
-    the count of targets met."""
+    the count of targets met, after the line of what the machine measured (the figures the
+    ratios stand on)."""
     record = tmp_path / "targets.json"
     out = _bench(
         "targets.py", "--no-paper", "--n", "4", "--duration", "2.5", "--large-n", "8",
         "--large-duration", "2.5", "--peak-duration", "2.5", "--repeat", "1", "--json", str(record),
     )  # fmt: skip
     got = json.loads(record.read_text())
-    verdicts, rows, peak = got["verdicts"], got["rows"], got["peak"]
+    verdicts, rows, peak, here = got["verdicts"], got["rows"], got["peak"], got["machine"]
+    assert here["cores"] >= 1 and 0 < here["call_ns"] < 10_000 and here["stream_gb_s"] > 0.1
+    assert isinstance(here["pgo"], bool) and isinstance(here["shared"], bool)
+    first = out.splitlines()[0]
+    assert first.startswith(f"machine: {here['cpu']}, {here['cores']} cores"), first
+    assert f"a call {here['call_ns']:.0f} ns" in first, first
     assert [v[0] for v in verdicts] == [
         "loop / floor ≤ 2 at N = 4 (scale scene, 2.5 s)",
         "loop / floor ≤ 2 at N = 8 (scale scene, 2.5 s)",
