@@ -124,7 +124,7 @@ def judge(rows: list[dict], large: dict, peak: dict, large_n: int) -> list[tuple
             out.append((f"loop / floor ≤ {RATIO:g} at {r['label']}", f"{floor}: inexact", None))
             continue
         out.append((f"loop / floor ≤ {RATIO:g} at {r['label']}",
-                    f"{r['ratio']:.2f} ({floor})", r["ratio"] <= RATIO))  # fmt: skip
+                    f"{r['ratio']:.3f} ({floor})", r["ratio"] <= RATIO))  # fmt: skip
     out.append((f"N = {large_n} at ≥ {RTF:g}× real time with set-up",
                 f"{large['rtf_with_setup']:.2f}× (loop alone {large['rtf']:.2f}×)",
                 large["rtf_with_setup"] >= RTF))  # fmt: skip

@@ -127,3 +127,19 @@ def test_the_targets_benchmark_judges_each_target_by_its_own_figures(tmp_path):
     for target, _, met in verdicts:
         word = "met" if met else "NOT MET"
         assert re.search(re.escape(target) + r"\s+.*\s" + word + "$", out, flags=re.M), out
+
+
+def test_a_ratio_just_beyond_the_line_does_not_read_as_met():
+    """The judged ratio is printed to three decimals: 2.0021 (N = 16, 2026-12-02) read
+    "2.00 ... NOT MET" with two."""
+    spec = importlib.util.spec_from_file_location("targets", ROOT / "benchmarks" / "targets.py")
+    assert spec is not None and spec.loader is not None
+    targets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(targets)
+    row = {"label": "N = 16", "loop_us": 88.9, "bare_us": 44.4, "exact": True}
+    large = {"rtf_with_setup": 2.5, "rtf": 3.0, "cold_setup_s": 1.0, "setup_s": 0.9}
+    peak = {"duration": 60.0, "run_peak_mb": 700.0}
+    rows = [{**row, "ratio": 2.0021}, {**row, "label": "N = 64", "ratio": 1.9996}]
+    (_, above, above_met), (_, below, below_met) = targets.judge(rows, large, peak, 1000)[:2]
+    assert above.startswith("2.002 ") and above_met is False
+    assert below.startswith("2.000 ") and below_met is True
