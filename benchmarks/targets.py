@@ -21,10 +21,10 @@ file's ``--paper``), as ``bench_step.py`` and ``bench_scale.py`` make them:
 The machine's floor is printed beside each ratio: the targets are ratios and times on
 *this* machine, and the shared machines' speed moves by 10-50 % between invocations. What
 the figures stand on is printed first (:func:`machine`): the cores, what one Python call
-costs (a small team's period outside the physics and its compiled stages is Python calls)
-and how CPython was built,
-and how fast one core streams memory (what the pass over a large team's N × N state waits
-on): the figures to compare before two invocations' ratios are. paper_case's ratio read
+costs and how CPython was configured (a small team's period outside the physics and its
+compiled stages is Python calls), and how fast one core streams memory (what the pass over
+a large team's N × N state waits on): the figures to compare before two invocations'
+ratios are. paper_case's ratio read
 1.96-1.98 on the machine of 2026-11-28 (nineteenth session) and 2.8-4.0 on the slower
 machines of the sessions since (README, "Speed").
 paper_case's records bit-identical to the code before issue 21 is a test
@@ -58,10 +58,9 @@ def _child(*args: str) -> dict:
 
 def machine() -> dict:
     """What the figures stand on, measured here: cores, processor, the cost of one Python
-    call with two arguments (ns, the minimum of 5 × 200,000), whether CPython was built with
-    profile-guided optimisation and as a shared library (each about 10-30 % on interpreted
-    code), and one core's memory stream (GB/s read + written, a 64 MB float64 copy, best of
-    5)."""
+    call with two arguments (ns, the minimum of 5 × 200,000), whether CPython was configured
+    with ``--enable-optimizations`` (profile-guided) and ``--enable-shared``, and one core's
+    memory stream (GB/s read + written, a 64 MB float64 copy, best of 5)."""
     import numpy as np
 
     def f(a: int, b: int) -> int:
@@ -95,10 +94,10 @@ def machine() -> dict:
 def describe(m: dict) -> str:
     """:func:`machine`'s figures in one line."""
     build = "with" if m["pgo"] else "without"
-    shared = ", as a shared library" if m["shared"] else ""
+    shared = ", with --enable-shared" if m["shared"] else ", without --enable-shared"
     return (
-        f"machine: {m['cpu']}, {m['cores']} cores; Python {m['python']} built {build} "
-        f"profile-guided optimisation{shared}, a call {m['call_ns']:.0f} ns; one core streams "
+        f"machine: {m['cpu']}, {m['cores']} cores; Python {m['python']} configured {build} "
+        f"--enable-optimizations{shared}, a call {m['call_ns']:.0f} ns; one core streams "
         f"{m['stream_gb_s']:.1f} GB/s"
     )
 
