@@ -21,8 +21,8 @@ file's ``--paper``), as ``bench_step.py`` and ``bench_scale.py`` make them:
 The machine's floor is printed beside each ratio: the targets are ratios and times on
 *this* machine, and the shared machines' speed moves by 10-50 % between invocations. What
 the figures stand on is printed first (:func:`machine`): the cores, what one Python call
-costs and how CPython was configured (a small team's period outside the physics and its
-compiled stages is Python calls), and how fast one core streams memory (what the pass over
+costs and how CPython was configured (outside the physics and its compiled stages, a small
+team's period is Python calls), and how fast one core streams memory (what the pass over
 a large team's N × N state waits on): the figures to compare before two invocations'
 ratios are. paper_case's ratio read
 1.96-1.98 on the machine of 2026-11-28 (nineteenth session) and 2.8-4.0 on the slower
