@@ -11,25 +11,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 
 import numpy as np
 from replay import measure
+from targets import cpu_name
 
 from dftc_mujoco import load_scenario
 from dftc_mujoco.onboard import team as team_mod
-
-
-def cpu_name() -> str:
-    """The CPU model from /proc/cpuinfo (Linux), else what platform knows."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def main() -> None:
