@@ -582,12 +582,17 @@ def test_a_healthy_robot_whose_own_alarm_came_down_before_t_r_is_kept():
 
 
 def test_a_healthy_diffdrive_still_out_at_t_r_is_held_for_twice_its_response():
-    """Run 168 of campaigns/no_false_exclusion_edge.toml, cut to 31 s: sixteen diffdrives at
+    """Run 168 of campaigns/no_false_exclusion_edge.toml, cut to 34 s: sixteen diffdrives at
     0.5 m/s, no fault. Robot 2 swerves with no speed left; its velocity misses its command
-    by up to 1.7 m/s for 0.64 s and its estimate is out from 25.33 s; every robot flags it at
-    25.57-25.69 s, and at t_r = 25.99 s (Δt_d,max = 0.42 s) its estimate is still out, 0.66 s
-    in a row: the rule "up at t_r" alone excluded it. The hold (the window and twice its
-    0.52 s response time) keeps it; the alarm never goes up again, and it is kept."""
+    by up to 1.7 m/s for 0.64 s and its estimate is out from about 25.3 s; every robot flags
+    it, and at t_r (the first flag + Δt_d,max = 0.42 s) its estimate is still out: the rule
+    "up at t_r" alone excluded it. The hold (the window and twice its 0.52 s response time)
+    keeps it; the alarm goes down, the exclusion is cancelled, and it is kept.
+
+    The swerve is an edge of the physics, and its instants move with MuJoCo's own numerics:
+    with mujoco 4.0.0 the first flag is at 25.57 s, t_r 25.99 s and the cancellation at
+    30.19 s; with 4.0.1 at 25.62, 26.04 and 32.34 s. The test pins the mechanism (flag, hold
+    at t_r for the estimate, cancellation, nobody excluded), the instants to that window."""
     from dftc_mujoco import scenario
     from dftc_mujoco.campaign import spec as campaign_spec
 
@@ -595,10 +600,16 @@ def test_a_healthy_diffdrive_still_out_at_t_r_is_held_for_twice_its_response():
     sp = campaign_spec.load(root / "campaigns" / "no_false_exclusion_edge.toml")
     d = campaign_spec.scenario_dict(sp, campaign_spec.draw(sp, 168))
     assert (d["team"]["robots"], d["team"]["robot_model"], d["faults"]) == (16, "diffdrive", [])
-    r = simulate(scenario.from_dict({**d, "duration": 31.0}), progress=False)
+    r = simulate(scenario.from_dict({**d, "duration": 34.0}), progress=False)
     assert not r.events.of_kind("exclusion") and r.summary["healthy_exclusions"] == 0
-    waited = [(e["robot"], e["reason"], e["t"]) for e in r.events.of_kind("exclusion_postponed")]
-    assert (2, "estimate", 25.99) in waited
-    assert (2, "not flagged") in [
-        (e["robot"], e["reason"]) for e in r.events.of_kind("exclusion_cancelled")
+    scheduled = [e["t"] for e in r.events.of_kind("exclusion_scheduled") if e["robot"] == 2]
+    assert len(scheduled) == 1 and 25.4 <= scheduled[0] <= 25.8, scheduled
+    waited = [
+        (e["reason"], e["t"]) for e in r.events.of_kind("exclusion_postponed") if e["robot"] == 2
     ]
+    assert waited == [("estimate", pytest.approx(scheduled[0] + 0.42, abs=0.011))], waited
+    cancelled = [
+        (e["reason"], e["t"]) for e in r.events.of_kind("exclusion_cancelled") if e["robot"] == 2
+    ]
+    assert len(cancelled) == 1 and cancelled[0][0] == "not flagged", cancelled
+    assert waited[0][1] < cancelled[0][1] < 34.0
