@@ -156,6 +156,39 @@ def test_fault_acts_through_the_actuators(kind):
     assert np.array_equal(sc.model.actuator_gainprm[sc.actuator, 0], np.full((4, 2), 200.0))
 
 
+def test_the_disks_bias_terms_are_the_drives_map_of_phi_bit_for_bit():
+    """The disk's b0 is written from Python numbers (sim/faults.py, ``_direct``: slides along
+    the plane's axes, velocity servos); it must equal the general map kv·gear·φ of
+    :meth:`~.actuators.Actuation.bias_terms` bit for bit: two biases and a drift summed on
+    robot 2 in the faults' order, a bias on robot 4, robot 2 stopped from 1.5 s (its b0 is
+    then the stop's, not the bias's) and healthy again from 2.5 s."""
+    _, sc, adapter, _ = _plant()
+    faults = (
+        scenario.Fault(1, "bias", 0.2, np.array([0.3, -0.35]), 0.45),
+        scenario.Fault(3, "bias", 0.3, np.array([-0.1, 0.2]), 0.0),
+        scenario.Fault(1, "drift", 0.4, np.array([0.05, 0.02]), 0.0),
+        scenario.Fault(1, "bias", 0.6, np.array([-0.07, 0.11]), 0.2),
+        scenario.Fault(1, "stop", 1.5, np.zeros(2), 0.0, end=2.5),
+    )
+    inj = sim_faults.ActuatorFaults(sc.model, faults, adapter)
+    b0 = sc.model.actuator_biasprm[:, 0]
+    ids = sc.actuator
+    written, stopped = 0, 0
+    for k in range(300):
+        t = k * 0.01
+        inj.apply(t)
+        want = adapter.actuation.bias_terms(adapter.joint_velocity(inj.bias_phi(t)), True)
+        for robot in (1, 3):
+            if inj.stopped[robot]:
+                stopped += 1
+            else:
+                assert np.array_equal(b0[ids[robot]], want[robot]), (t, robot)
+                written += bool(want[robot].any())
+        assert np.array_equal(b0[ids[[0, 2]]], np.zeros((2, 2)))
+    # robot 2: 0.21-1.49 s and 2.5-2.99 s (at 0.2 s its profile is 0), robot 4: 0.3-2.99 s
+    assert (written, stopped) == (129 + 50 + 270, 100)
+
+
 def test_stop_fault_in_the_closed_loop():
     s = scenario.load("paper_case").with_overrides(duration=44.0)
     r = loop.simulate(s)

@@ -170,6 +170,16 @@ class Actuation:
     def any_position(self) -> bool:
         return bool(self.pos.any())
 
+    @property
+    def velocity_only(self) -> bool:
+        """Every actuator a velocity servo: b0 = kv·gear·φ (:meth:`bias_terms`)."""
+        return self._velocity_only
+
+    @property
+    def bias_per_velocity(self) -> np.ndarray:
+        """(A,) kv·gear per column: b0 per unit of joint velocity offset (velocity servos)."""
+        return self._bias_per_velocity
+
     def reset(self) -> None:
         """Position targets at the joints' current positions; no integrated bias."""
         self.target[:] = self.data.qpos[self.qpos_adr]

@@ -35,6 +35,7 @@ class Drive:
     """What every drive shares: the actuation of its driven and held joints."""
 
     pose_dependent = False  # joint velocities depend on the robot's heading
+    planar_joints = False  # joint_velocity(u) is u itself (slides along +x and +y)
 
     def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
         self.robot, self.scene, self.data = robot, scene, data
@@ -64,7 +65,7 @@ class Drive:
             and not self._clip
             and self.actuation._velocity_only
             and bool((self.actuation.per_velocity == 1.0).all())
-            and getattr(self, "_plain", False)
+            and self.planar_joints
         )
 
     def _planar_limit(self, joint_limit: float) -> float:
@@ -112,6 +113,7 @@ class Holonomic(Drive):
     def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
         self.sign = np.array([robot.params.get("sign_x", 1.0), robot.params.get("sign_y", 1.0)])
         self._plain = bool((self.sign == 1.0).all())  # both slides point along +x, +y
+        self.planar_joints = self._plain
         super().__init__(robot, scene, data, dt)
 
     def _planar_limit(self, joint_limit: float) -> float:
