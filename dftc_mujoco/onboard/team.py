@@ -349,8 +349,8 @@ class Team:
             self.observer.broadcast(self.rounds.stepped())
         if self.sighting is not None and sensed_bodies is not None:
             self.events += self.sighting.watch(t, self, c, c_dot, (offsets, rates), sensed_bodies)
-        if code & RAISED:
-            self._report(t, self._raised)
+        if code & RAISED:  # the compiled period's flags are the decision's own array
+            self._report(t, self.decision.raised if self.compiled else self._raised)
         if radios is not None and self.rounds.now and self.config.fdir:
             mf = self.config.max_faults  # corrupted messages flag every column at once
             self.events += radios.message_faults(t, self.flag, self.members, mf)
@@ -371,6 +371,16 @@ class Team:
     def mu(self, value: np.ndarray) -> None:
         self._mu = value
         self._th = dense_thresholds(np.ascontiguousarray(value, dtype=float))
+
+    @property
+    def threshold_factors(self) -> Any:
+        """The :class:`~.thresholds.paper.ThresholdRecord` of eq. 40's factors the compiled
+        period read this round, from which :attr:`mu` is written (``Thresholds.mu``: the
+        same numbers); None where the thresholds are an array (a rule's own, one set
+        through :attr:`mu`, none yet after an exclusion over a network) or the period is
+        not compiled."""
+        th = self._th
+        return th if self.compiled and th.dense.size == 0 else None
 
     def receive(self, links: np.ndarray, rounds: np.ndarray, offset: np.ndarray) -> None:
         """The network delivered messages (:meth:`.radio.Radios.receive`)."""
@@ -399,10 +409,11 @@ class Team:
         norms = keep or bool(rec.pending) or rec.dt_d_max < 2 * dt or self.radios is not None
         self._norms_kept = norms
         fdir, now = self.config.fdir, self.rounds.now
-        inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms, self._stream)
         sharing = self._sharing
         if sharing is not None:  # a large team: the pass shared, the commands beside it
-            inp, buf, th = PeriodInputs(*inputs), self._buffers, self._th
+            inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms)
+            inp = PeriodInputs(*inputs, self._stream)
+            buf, th = self._buffers, self._th
             ob, dec = self.observer.record(), self.decision.record()
             ctl, sup, seen, drive, est, alarm = self._records()
             refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
@@ -428,12 +439,15 @@ class Team:
             finally:
                 integrate(ob, buf)
         else:  # one compiled call, the records taken apart (team_period_flat)
-            code = team_period_flat(*inputs, *self._flat_records())
+            table, mu, timer, numbers = self._flat_records()
+            code = team_period_flat(
+                x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms,
+                self._stream, table, mu, timer, numbers,
+            )  # fmt: skip
             if beside is not None:
                 beside()
-        if self.rounds.now:
+        if now:
             self.observer.advance()  # ŷ of the next period (eq. 19)
-        self._raised = self.decision.raised
         return code
 
     def _flat_records(self) -> tuple:
