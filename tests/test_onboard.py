@@ -247,7 +247,8 @@ def test_the_compiled_stages_of_a_shared_period_hold_no_lock_on_python():
     after it was handed them, the commands' time, instead of 0.04 ms)."""
     from dftc_mujoco.onboard import period
 
-    for stage in (period.commands, period.team_rows):
+    stages = (period.commands, period.team_rows, period.shared_commands, period.shared_rows)
+    for stage in stages:
         assert stage.targetoptions.get("nogil") is True, stage.py_func.__name__
 
 

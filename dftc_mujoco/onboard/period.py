@@ -455,6 +455,62 @@ def team_period_flat(
     return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
 
 
+#: :func:`team_rows` called, not inlined, from the shared pass's flat stages and the resident
+#: helpers' loop (:mod:`.resident`): one compiled copy of the pass (inlined in the helpers'
+#: loop, it took 44 s to compile)
+rows_call = njit(cache=True, nogil=True)(team_rows.py_func)
+
+
+@njit(cache=True)
+def shared_begin(
+    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
+    table, mu, timer, numbers,
+):  # fmt: skip  # pragma: no cover - compiled
+    """A shared period's first stage, the records taken apart as :func:`team_period_flat`
+    takes them: the bound of eq. 40 (:func:`~.thresholds.paper.refresh_bound`), then
+    :func:`begin`. From Python numba types a record argument element by element on every
+    call (5.7 µs for :func:`begin`'s five at N = 4, 1.2 µs for these arguments)."""
+    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
+                       stream)  # fmt: skip
+    ob, ctl, _, _, _, _, _, th, _, out = unpack(table, mu, timer, numbers)
+    refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
+    begin(inp, ob, ctl, th, out)
+
+
+@njit(cache=True, nogil=True)
+def shared_commands(
+    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
+    table, mu, timer, numbers,
+):  # fmt: skip  # pragma: no cover - compiled
+    """A shared period's :func:`commands` (beside the pass: no lock on Python), the records
+    taken apart as :func:`shared_begin` takes them; returns SWITCHED | SATURATED bits."""
+    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
+                       stream)  # fmt: skip
+    _, _, sup, seen, drive, est, alarm, _, _, out = unpack(table, mu, timer, numbers)
+    return commands(inp, sup, seen, drive, est, alarm, out)
+
+
+@njit(cache=True, nogil=True)
+def shared_rows(
+    fdir, round_now, estimates, norms, stream, table, mu, timer, numbers, lo, hi, b
+):  # pragma: no cover - compiled
+    """Robots ``lo`` .. ``hi - 1`` of a shared period's pass (:func:`team_rows`, scratch row
+    ``b``), the records taken apart as :func:`shared_begin` takes them; the pass reads none
+    of the period's input arrays, only its flags. Returns how many flags were raised."""
+    none2, none1, rows0 = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
+    inp = PeriodInputs(none2, rows0, none1, none1, none2, none2, fdir, round_now, estimates,
+                       norms, stream)  # fmt: skip
+    ob, ctl, _, _, _, _, _, th, dec, out = unpack(table, mu, timer, numbers)
+    return rows_call(inp, ob, ctl, th, dec, out, lo, hi, b)
+
+
+@njit(cache=True)
+def shared_integrate(table, mu, timer, numbers):  # pragma: no cover - compiled
+    """A shared period's last stage, :func:`integrate`, after the pass."""
+    ob, _, _, _, _, _, _, _, _, out = unpack(table, mu, timer, numbers)
+    integrate(ob, out)
+
+
 #: the records :func:`team_period` takes, in order (``team_period_flat`` rebuilds them)
 RECORDS = (
     PeriodInputs,

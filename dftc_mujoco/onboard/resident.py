@@ -7,7 +7,7 @@ its rows 0.11-0.2 ms after they were handed over, and the caller join it 0.2-0.3
 both had ended, each period (2026-12-01, ``benchmarks/bench_pass.py``). A *resident* helper
 never leaves its compiled loop while passes come: it watches a mailbox (an int64 array) with
 atomic loads, rebuilds the period's records from the addresses posted there (the team's
-:func:`~.period.unpack` table), runs its rows (:func:`~.period.team_rows`, the very code the
+:func:`~.period.unpack` table), runs its rows (:func:`~.period.shared_rows`, the very code the
 caller runs) and posts back how many flags it raised and when it began and ended, by the
 processor's time-stamp counter. The caller waits for that answer in compiled code too.
 Between passes the helper checks the mailbox, pausing the processor and yielding it to any
@@ -38,11 +38,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from .addresses import at1, at2
-from .period import PeriodInputs, team_rows, unpack
-
-#: :func:`~.period.team_rows` called, not inlined, from the helper's loop (the same code as
-#: the caller's own call from Python; inlined, the loop took 44 s to compile)
-_rows = njit(cache=True, nogil=True)(team_rows.py_func)
+from .period import shared_rows
 
 # the mailbox: what the caller posts (its own cache lines) ...
 SEQ, TABLE, TABLE_ROWS, MU, MU_ROWS, MU_COLS = 0, 1, 2, 3, 4, 5
@@ -171,7 +167,6 @@ def serve(mail, like, patience, patient, preempted):  # pragma: no cover - compi
     ``preempted`` ticks apart (the processor went to another thread: it is wanted), or SEQ
     is :data:`STOP`; ``like`` is an empty array of the decision's timer type; the loop only
     pauses for ``patient`` ticks after a pass, then yields the processor at each look too."""
-    none2, none1, rows0 = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
     done = load(mail, DONE)
     store(mail, STATE, WATCHING)
     last = ticks()
@@ -200,13 +195,10 @@ def serve(mail, like, patience, patient, preempted):  # pragma: no cover - compi
         timer = at2(mail[TIMER], mail[TIMER_ROWS], mail[TIMER_COLS], like.dtype)
         numbers = at1(mail[NUMBERS], mail[NUMBERS_SIZE], np.float64)
         f = mail[FLAGS]
-        inp = PeriodInputs(
-            none2, rows0, none1, none1, none2, none2, (f & FDIR) != 0, (f & ROUND_NOW) != 0,
-            (f & ESTIMATES) != 0, (f & NORMS) != 0, (f & STREAM) != 0,
+        count = shared_rows(
+            (f & FDIR) != 0, (f & ROUND_NOW) != 0, (f & ESTIMATES) != 0, (f & NORMS) != 0,
+            (f & STREAM) != 0, table, mu, timer, numbers, mail[LO], mail[HI], mail[SCRATCH],
         )  # fmt: skip
-        records = unpack(table, mu, timer, numbers)  # the pass reads five of them
-        ob, ctl, th, dec, out = records[0], records[1], records[7], records[8], records[9]
-        count = _rows(inp, ob, ctl, th, dec, out, mail[LO], mail[HI], mail[SCRATCH])
         mail[COUNT] = count
         mail[BEGAN] = began
         mail[ENDED] = ticks()

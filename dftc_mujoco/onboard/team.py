@@ -44,13 +44,12 @@ from .period import (
     RAISED,
     SWITCHED,
     PeriodBuffers,
-    PeriodInputs,
-    begin,
-    commands,
     flat_arguments,
-    integrate,
+    shared_begin,
+    shared_commands,
+    shared_integrate,
+    shared_rows,
     team_period_flat,
-    team_rows,
 )
 from .radio import Radios, Rounds
 from .recovery import Recovery, split_event
@@ -61,7 +60,7 @@ from .supervisor import Supervisor, Surroundings, grid_work, obstacle_label
 from .team_axis import expand
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
-from .thresholds.paper import dense_thresholds, refresh_bound
+from .thresholds.paper import dense_thresholds
 from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
@@ -410,36 +409,33 @@ class Team:
         self._norms_kept = norms
         fdir, now = self.config.fdir, self.rounds.now
         sharing = self._sharing
+        table, mu, timer, numbers = self._flat_records()  # the records' arrays, by address
         if sharing is not None:  # a large team: the pass shared, the commands beside it
-            inputs = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms)
-            inp = PeriodInputs(*inputs, self._stream)
-            buf, th = self._buffers, self._th
-            ob, dec = self.observer.record(), self.decision.record()
-            ctl, sup, seen, drive, est, alarm = self._records()
-            refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
-            begin(inp, ob, ctl, th, buf)  # each robot's own block of the state, before it moves
+            args = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms,
+                    self._stream, table, mu, timer, numbers)  # fmt: skip
+            # the stages called one by one, each with the records taken apart (period.py)
+            shared_begin(*args)  # each robot's own block of the state, before it moves
             code = 0
+            bits = (fdir, now, keep, norms, self._stream)  # as resident.FLAGS holds them
+            flat = (*bits, table, mu, timer, numbers)
 
             def rows(lo: int, hi: int, b: int) -> int:
-                return team_rows(inp, ob, ctl, th, dec, buf, lo, hi, b)
+                return shared_rows(*flat, lo, hi, b)
 
             def command_then_beside() -> None:  # in this thread while helpers take rows
                 nonlocal code
-                code = commands(inp, sup, seen, drive, est, alarm, buf)
+                code = shared_commands(*args)
                 if beside is not None:
                     beside()
 
-            table, mu, timer, numbers = self._flat_records()  # the same arrays, by address
-            bits = (fdir, now, keep, norms, self._stream)  # as resident.FLAGS holds them
             flags = sum(int(bool(on)) << j for j, on in enumerate(bits))
             posted = (table, mu, timer, numbers, flags)
             try:
                 if sharing.run(rows, len(self.members), command_then_beside, posted):
                     code |= RAISED
             finally:
-                integrate(ob, buf)
+                shared_integrate(table, mu, timer, numbers)
         else:  # one compiled call, the records taken apart (team_period_flat)
-            table, mu, timer, numbers = self._flat_records()
             code = team_period_flat(
                 x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms,
                 self._stream, table, mu, timer, numbers,
