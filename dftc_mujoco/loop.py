@@ -313,6 +313,9 @@ class Simulation:
             self.log_every,
             s.physics.substeps,
         )
+        if self.team.shares:  # each period's noise computed beside the pass (NoiseStream)
+            self.noise.spread = True
+            self._physics.ahead = self.noise.ahead
         self._build = self._build_time + (time.perf_counter() - wall0)
         self._wall = self._build
         self._build_time = 0.0

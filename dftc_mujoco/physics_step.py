@@ -13,6 +13,7 @@ physics step would have raised it, so both ways give the same records.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -69,6 +70,9 @@ class PhysicsStep:
         self.stepped = False
         self.error: BaseException | None = None
         self.before: Before | None = None
+        #: work for the next period, run after the physics step (the loop's noise stream's
+        #: :meth:`~.sim.plant.NoiseStream.ahead`), so that it too runs beside the pass
+        self.ahead: Callable[[], None] | None = None
 
     def drive(self, robot: int, velocity: np.ndarray | None) -> None:
         """Robot ``robot`` (0-based) told ``velocity`` (planar, m/s) from outside the team
@@ -146,5 +150,7 @@ class PhysicsStep:
                 return
             self.stepped = True
             plant.step(self.ctrl, self.nsub)
+            if self.ahead is not None:
+                self.ahead()
         except BaseException as exc:  # raised by the loop where its physics step stood
             self.error = exc
