@@ -435,6 +435,9 @@ class Simulation:
         position, velocity = self.path.position, self.path.velocity
         last = len(position) - 1
         x, x_m, physics = self._x, self._x_m, self._physics
+        # a large team's monitor runs beside its pass, on the ideal network (a network's
+        # checks come before it in a period)
+        physics.monitor = monitor if watch and channel is None else None
         cmd = physics.cmd
         k0 = self.k
         bar = tqdm(
@@ -480,7 +483,7 @@ class Simulation:
                         (k % log_every == 0 and log.row_nn >= 0) or k == steps or k == k_end - 1
                     )
                     # a team that shares its pass runs the physics step beside it (physics_step.py)
-                    beside = physics.set(k, xi) if team.shares else None
+                    beside = physics.set(k, xi, t, eta) if team.shares else None
                     try:
                         team.step(t, x_m, position[j], velocity[j], x, bumpers.read(), beside)
                     except (SimulationError, KeyboardInterrupt):
@@ -504,8 +507,11 @@ class Simulation:
                         raise physics.error or RuntimeError("the physics step did not run")
                     else:  # read before the physics advanced
                         before, ctrl = physics.before, physics.ctrl
-                    if watch:
-                        monitor.period(t, x, eta, team.u, team.u_bar, team.phi_hat, *before[:5])
+                    if beside is None or not physics.watched:
+                        if watch:
+                            monitor.period(t, x, eta, team.u, team.u_bar, team.phi_hat, *before[:5])
+                    elif physics.watch_error is not None:  # the monitor ran beside the pass
+                        raise physics.watch_error
                     if team.events:
                         self._take_team_events(t)
                     for f in onsets:  # after the team's step: an exclusion now restarts the rule

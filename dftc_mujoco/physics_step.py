@@ -20,6 +20,7 @@ import numpy as np
 
 from . import checks
 from .onboard.team import Team
+from .premises import Monitor
 from .sim.plant import Plant
 
 
@@ -73,6 +74,12 @@ class PhysicsStep:
         #: work for the next period, run after the physics step (the loop's noise stream's
         #: :meth:`~.sim.plant.NoiseStream.ahead`), so that it too runs beside the pass
         self.ahead: Callable[[], None] | None = None
+        #: the premises' monitor, run on :class:`Before` beside the pass where the loop sets
+        #: it (:meth:`watch`); then :attr:`watched` and, if it raised, :attr:`watch_error`
+        self.monitor: Monitor | None = None
+        self.t, self.eta = 0.0, np.zeros((0, 2))
+        self.watched = False
+        self.watch_error: BaseException | None = None
 
     def drive(self, robot: int, velocity: np.ndarray | None) -> None:
         """Robot ``robot`` (0-based) told ``velocity`` (planar, m/s) from outside the team
@@ -117,15 +124,22 @@ class PhysicsStep:
         contact = data.contact
         return Before(*self._live, contact.geom, contact.dist, ncon, self.pose)
 
-    def set(self, k: int, xi: np.ndarray) -> PhysicsStep:
-        """Period ``k`` with the drives' errors ``xi``: ready to be run beside the pass."""
-        self.k, self.xi = k, xi
+    def set(
+        self, k: int, xi: np.ndarray, t: float = 0.0, eta: np.ndarray | None = None
+    ) -> PhysicsStep:
+        """Period ``k`` (at ``t``, with the noise ``eta`` the monitor reads) with the drives'
+        errors ``xi``: ready to be run beside the pass."""
+        self.k, self.xi, self.t = k, xi, t
+        if eta is not None:
+            self.eta = eta
         self.ctrl, self.stepped, self.error, self.before = None, False, None, None
+        self.watched, self.watch_error = False, None
         return self
 
     def __call__(self) -> None:
-        """The commands, the copy of what the loop reads, then (unless the run ends at this
-        period, as the loop decides) MuJoCo's step; an error is kept in :attr:`error`."""
+        """The commands, the copy of what the loop reads, the premises' monitor where the loop
+        gave it (:meth:`watch`), then (unless the run ends at this period, as the loop decides,
+        or the monitor stopped it) MuJoCo's step; an error is kept in :attr:`error`."""
         k, plant, team = self.k, self.plant, self.team
         try:
             self.ctrl = self.commands(self.xi)
@@ -144,6 +158,8 @@ class PhysicsStep:
                 ncon,
                 self.pose,
             )
+            if self.monitor is not None and not self.watch():
+                return  # the run stops here, before the physics advances, as in one thread
             # the loop's own test for the last period (its log row marks a robot off the floor)
             leaves = logged and np.abs(self.x).max() > checks.ARENA_HALF
             if k == self.steps or team.ended or leaves:
@@ -154,3 +170,18 @@ class PhysicsStep:
                 self.ahead()
         except BaseException as exc:  # raised by the loop where its physics step stood
             self.error = exc
+
+    def watch(self) -> bool:
+        """The premises' monitor on this period (:meth:`.premises.Monitor.period`), as the loop
+        calls it after the team's step: the team's commands are out and :attr:`before` is
+        what MuJoCo held before it advanced. An error is kept in :attr:`watch_error` (and
+        False returned), which the loop raises where it would have called the monitor."""
+        team, monitor, before = self.team, self.monitor, self.before
+        assert monitor is not None and before is not None
+        self.watched = True
+        try:
+            monitor.period(self.t, self.x, self.eta, team.u, team.u_bar, team.phi_hat, *before[:5])
+        except BaseException as exc:
+            self.watch_error = exc
+            return False
+        return True

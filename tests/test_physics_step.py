@@ -26,13 +26,16 @@ def _ring(duration: float):
     return make(d)
 
 
-def _run(shared: bool, monkeypatch, hook=None, engine="resident"):
+def _run(shared: bool, monkeypatch, hook=None, engine="resident", scenario=None):
     monkeypatch.setattr(team_mod, "PARALLEL_FROM", 4)
     monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", shared)
     monkeypatch.setattr(sharing, "RESIDENT_ALLOWED", engine == "resident")
-    with loop.Simulation(_ring(26.0), hook=hook) as sim:
+    with loop.Simulation(scenario or _ring(26.0), hook=hook) as sim:
         assert sim.team.shares == shared
+        watched = []  # the periods whose premises' monitor ran beside the pass
+        sim.hook = lambda t, plant: (watched.append(sim._physics.watched), hook and hook(t, plant))
         result = sim.run(progress=False)
+        assert any(watched) == shared  # a shared team's monitor runs beside its pass
         spent = sim.team._sharing.timings[0] if shared else 0.0
         if shared:  # who ran the helpers' rows (resident helpers: x86-64 Linux)
             ran = engine if engine == "pool" or resident.available() else "pool"
@@ -111,4 +114,26 @@ def test_a_robot_carried_off_the_floor_ends_the_mission_at_the_next_log_row(monk
     assert "robot 3 left the arena" in ended[0]["reason"]
     assert 2.0 < shared.log["t"][-1] <= 2.1 and shared.log["x"][-1, 2, 0] > 50.0
     assert np.all(np.abs(shared.log["x"][:-1]) < 50.0)  # the row before: all on the floor
+    _same(shared, alone)
+
+
+def test_a_robot_lifted_beside_the_pass_stops_the_run_where_it_would_have(monkeypatch):
+    """The premises' monitor runs beside a shared pass: a robot lifted off the floor stops
+    the run at the period, with the message, log and events of the run in one thread."""
+
+    def lift(t, plant):
+        if 2.0 <= t < 2.01:
+            m, body = plant.model, plant.scene.body[2]
+            plant.data.qpos[m.jnt_qposadr[m.body_jntadr[body]] + 2] += 0.3
+
+    d = scenario_dict()
+    d["team"] = ring_team(N, 0.5, chord=2)
+    d["team"]["robot_model"] = "diffdrive"
+    d["obstacles"], d["duration"], d["faults"] = [], 6.0, []
+    d["gains"]["G"] = 0.02
+    d["fdir"]["initial_error_bound"] = "auto"
+    shared, _ = _run(True, monkeypatch, hook=lift, scenario=make(d))
+    alone, _ = _run(False, monkeypatch, hook=lift, scenario=make(d))
+    assert not shared.ok and "robot 3 left the plane at t = 2.01 s" in str(shared.error)
+    assert str(shared.error) == str(alone.error)
     _same(shared, alone)

@@ -63,6 +63,7 @@ GIVE_UP = 30.0
 FDIR, ROUND_NOW, ESTIMATES, NORMS, STREAM = 1, 2, 4, 8, 16  # FLAGS' bits (PeriodInputs)
 
 
+@functools.cache
 def available() -> bool:
     """Whether resident helpers run here (x86-64 Linux)."""
     return sys.platform.startswith("linux") and platform.machine() in ("x86_64", "AMD64")
@@ -315,7 +316,7 @@ class Resident:
         self._thread.join()
 
 
-_residents: dict[tuple[int, str], list[Resident]] = {}
+_residents: dict[tuple[int, np.dtype], list[Resident]] = {}
 
 
 def residents(count: int, timer: np.dtype) -> list[Resident] | None:
@@ -324,10 +325,10 @@ def residents(count: int, timer: np.dtype) -> list[Resident] | None:
     run (:func:`available`) or another thread holds one."""
     if not available():
         return None
-    key = (count, np.dtype(timer).str)
+    key = (count, timer)  # dtypes of one kind hash and compare equal
     crew = _residents.get(key)
     # a helper that failed is replaced at once: its thread may not have ended yet
-    if crew is None or any(r.error is not None or not r._thread.is_alive() for r in crew):
+    if crew is None or not all([r.error is None and r._thread.is_alive() for r in crew]):
         crew = _residents[key] = [Resident(np.zeros((0, 0), timer)) for _ in range(count)]
     taken: list[Resident] = []
     for r in crew:
