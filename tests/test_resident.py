@@ -64,7 +64,7 @@ def test_a_helper_gone_to_sleep_is_woken_by_the_next_pass(monkeypatch):
     def pause(k):
         if k % 97 == 50:  # longer than the patience, then the next pass
             time.sleep(0.02)
-            crew = resident._residents.get((1, np.dtype(split.decision.timer.dtype).str), [])
+            crew = resident._residents.get((1, split.decision.timer.dtype), [])
             asleep.extend(r.mail[resident.STATE] == resident.ASLEEP for r in crew)
 
     try:
