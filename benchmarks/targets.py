@@ -1,6 +1,6 @@
 """Issue 21's speed targets, each measured on this machine and judged: met or not met.
 
-    python benchmarks/targets.py                  # the issue's sizes (3.6-3.9 min on 2 slow cores)
+    python benchmarks/targets.py                  # the issue's sizes (1.7-3.9 min on 2 cores)
     python benchmarks/targets.py --json out.json  # the figures as well, for a record
     python benchmarks/targets.py --strict         # exit 1 unless every target is met
 
@@ -24,9 +24,9 @@ the figures stand on is printed first (:func:`machine`): the cores, what one Pyt
 costs and how CPython was configured (outside the physics and its compiled stages, a small
 team's period is Python calls), and how fast one core streams memory (what the pass over
 a large team's N × N state waits on): the figures to compare before two invocations'
-ratios are. paper_case's ratio read
-1.96-1.98 on the machine of 2026-11-28 (nineteenth session) and 2.8-4.0 on the slower
-machines of the sessions since (README, "Speed").
+ratios are. paper_case's ratio read 1.84-1.86 on the machine of 2026-12-06 (a call 19-20
+ns, one core 40 GB/s) and 2.1-4.0 on the slower machines of the sessions before (README,
+"Speed"; docs/speed.md).
 paper_case's records bit-identical to the code before issue 21 is a test
 (``tests/test_api.py``), not a benchmark.
 """
