@@ -8,7 +8,10 @@ this step *beside* that pass (:meth:`PhysicsStep.__call__`, given to
 writes. What the loop reads of MuJoCo's state for the period after the team's step (the
 premises monitor's poses and contacts, the log row's poses) is then copied before the
 step (:class:`Before`), and a physics error is kept and raised by the loop where its own
-physics step would have raised it, so both ways give the same records.
+physics step would have raised it, so both ways give the same records. On the ideal
+network the premises monitor runs here too, on that copy and before the step
+(:meth:`PhysicsStep.watch`), and so does the next period's noise, after it
+(:attr:`PhysicsStep.ahead`): work the helper threads would otherwise wait through.
 """
 
 from __future__ import annotations
