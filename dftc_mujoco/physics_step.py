@@ -127,14 +127,10 @@ class PhysicsStep:
         contact = data.contact
         return Before(*self._live, contact.geom, contact.dist, ncon, self.pose)
 
-    def set(
-        self, k: int, xi: np.ndarray, t: float = 0.0, eta: np.ndarray | None = None
-    ) -> PhysicsStep:
+    def set(self, k: int, xi: np.ndarray, t: float, eta: np.ndarray) -> PhysicsStep:
         """Period ``k`` (at ``t``, with the noise ``eta`` the monitor reads) with the drives'
         errors ``xi``: ready to be run beside the pass."""
-        self.k, self.xi, self.t = k, xi, t
-        if eta is not None:
-            self.eta = eta
+        self.k, self.xi, self.t, self.eta = k, xi, t, eta
         self.ctrl, self.stepped, self.error, self.before = None, False, None, None
         self.watched, self.watch_error = False, None
         return self
