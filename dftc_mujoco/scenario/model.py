@@ -376,21 +376,15 @@ def load(name_or_path: str | Path) -> Scenario:
 def load_scenario(name_or_path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
     """Load a scenario by name or path, apply dotted-key overrides, and validate it.
 
-    Args:
-        name_or_path: A name (``scenarios/NAME.toml``) or a path to a ``.toml`` file.
-        overrides: Values by dotted key, e.g. ``{"gains.ko": 3, "faults.1.t": 12.0}``
-            (see :func:`apply_overrides`). An overridden ``duration`` acts as
-            :meth:`Scenario.with_overrides` does: faults that would start after the
-            new end are dropped and a ``mission.transient`` that is not shorter
-            becomes ``min(5, duration / 2)``, unless those keys are overridden too.
-
-    Returns:
-        The validated scenario; its ``source`` is the file.
-
-    Raises:
-        ScenarioError: Every problem found, one line each naming the file and the
-            key; a problem with an overridden key names the file as
-            ``FILE (override)``.
+    :param name_or_path: A name (``scenarios/NAME.toml``) or a path to a ``.toml`` file.
+    :param overrides: Values by dotted key, e.g. ``{"gains.ko": 3, "faults.1.t": 12.0}``
+        (see :func:`apply_overrides`). An overridden ``duration`` acts as
+        :meth:`Scenario.with_overrides` does: faults that would start after the
+        new end are dropped and a ``mission.transient`` that is not shorter
+        becomes ``min(5, duration / 2)``, unless those keys are overridden too.
+    :returns: The validated scenario; its ``source`` is the file.
+    :raises ScenarioError: Every problem found, one line each naming the file and the
+        key; a problem with an overridden key names the file as ``FILE (override)``.
     """
     path = resolve(name_or_path)
     data = read_toml(path)
