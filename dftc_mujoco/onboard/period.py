@@ -284,10 +284,14 @@ def deliver(
             for d in range(2):
                 u_mem[i, d] = u[rows[i], d]
                 du[i, d] = u_mem[i, d] - out.u_g[i, d]
-    else:
-        command[:] = u
+    else:  # loops, not command[:] = u: a slice copy compiles numba's shape-mismatch message
+        for r in range(u.shape[0]):
+            for d in range(2):
+                command[r, d] = u[r, d]
     if not inp.fdir:
-        u_bar[:] = command
+        for r in range(u.shape[0]):
+            for d in range(2):
+                u_bar[r, d] = command[r, d]
         return
     applied = est.applied
     estimate_faults(

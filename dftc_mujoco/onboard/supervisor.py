@@ -73,7 +73,8 @@ def _grid(mates, width, work):  # pragma: no cover - compiled
         start[key[j] + 1] += 1
     for h in range(cells):
         start[h + 1] += start[h]
-    fill[:] = start[:-1]
+    for h in range(cells):  # a loop, not fill[:] = start[:-1]: numba's slice copy compiles
+        fill[h] = start[h]  # its shape-mismatch message, seconds of a cold start
     for j in range(m):
         order[fill[key[j]]] = j
         fill[key[j]] += 1
