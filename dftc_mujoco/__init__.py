@@ -29,6 +29,11 @@ __version__ = "0.2.0"
 from . import numba_cache as _numba_cache
 
 _numba_cache.refresh(_numba_cache.Path(__file__).parent)
+_cache_note = _numba_cache.unwritable_note(_numba_cache.Path(__file__).parent)
+if _cache_note is not None:  # said once, at import
+    import warnings as _warnings
+
+    _warnings.warn(_cache_note, stacklevel=2)
 
 _API = {
     "load_scenario": "scenario",

@@ -17,13 +17,14 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 from tqdm.auto import tqdm
 
-from . import checks, mission, network, premises
+from . import checks, mission, network, numba_cache, premises, warm
 from .assembly import (
     block_names,
     effective_G,
@@ -34,8 +35,10 @@ from .assembly import (
 from .block_failure import block_error, setup_error
 from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
+from .execution import Execution
 from .onboard.block import Block
-from .onboard.team import Team
+from .onboard.period import team_period_flat
+from .onboard.team import Team, runs_compiled
 from .onboard.thresholds import prefetch_decay_bounds
 from .physics_step import PhysicsStep
 from .record import Events, Log, matrix_every
@@ -80,8 +83,11 @@ class Simulation:
         blocks: Mapping[str, Block] | None = None,
         hook: Callable[[float, Plant], None] | None = None,
         search: Sequence[str | Path] = (),
+        execution: Execution | None = None,
     ) -> None:
         wall0 = time.perf_counter()
+        self._clock = numba_cache.clock()
+        compiling0 = self._clock.total()
         if not isinstance(scenario, Scenario):  # an AttributeError from deep inside before
             raise TypeError(
                 f"Simulation(scenario): expected a Scenario (load_scenario(...)), got "
@@ -92,6 +98,11 @@ class Simulation:
         checks.check_memory(scenario)  # before anything big is allocated
         self.scenario = scenario
         self.hook = hook
+        self.execution = execution if execution is not None else Execution()
+        #: seconds numba spent compiling during this simulation's life (not in its wall time)
+        self.compile_time = 0.0
+        #: the compiled period is being compiled by a background process for later runs
+        self.warming: warm.Warming | None = None
         self._search = [Path(p) for p in search]
         self._given = dict(blocks or {})
         self.block_names = block_names(scenario, self._given)
@@ -101,7 +112,7 @@ class Simulation:
         if self.block_names["thresholds"] == "paper":  # its set-up needs κ/λ (eq. 41):
             prefetch_decay_bounds(scenario.team.graph, scenario.gains.ko)  # beside the scene
         self.scene = scene.build(scenario, team if team.mixed else self.robot)
-        self._build_time = time.perf_counter() - wall0
+        self._build_time = self._without_compiling(wall0, compiling0)
         self.plant: Plant | None = None
         self.reset()
 
@@ -148,6 +159,7 @@ class Simulation:
         ):
             raise ValueError(f"reset(seed): expected a whole number in 0..2**63 - 1, got {seed!r}")
         wall0 = time.perf_counter()
+        compiling0 = self._clock.total()
         if seed is not None:
             self.scenario = self.scenario.with_overrides(seed=seed)
         s, model = self.scenario, self.robot
@@ -255,6 +267,7 @@ class Simulation:
         found.raise_refusals()
         for message in found.warnings:
             self.events.add(0.0, "warning", message=message)
+        config = replace(config, compiled=self._compiled_period(blocks))
         try:
             self.team = Team(config, x_m0, self.path.position[0], blocks)
             # eq. 46's domain: faults from the rule's settle time on (docs/thresholds.md)
@@ -316,9 +329,29 @@ class Simulation:
         if self.team.shares:  # each period's noise computed beside the pass (NoiseStream)
             self.noise.spread = True
             self._physics.ahead = self.noise.ahead
-        self._build = self._build_time + (time.perf_counter() - wall0)
+        self._build = self._build_time + self._without_compiling(wall0, compiling0)
         self._wall = self._build
         self._build_time = 0.0
+
+    def _without_compiling(self, wall0: float, compiling0: float) -> float:
+        """Seconds since ``wall0`` less numba's compilation since then (added to
+        :attr:`compile_time`): what a run reports as its own time is simulation only."""
+        spent = self._clock.total() - compiling0
+        self.compile_time += spent
+        return time.perf_counter() - wall0 - spent
+
+    def _compiled_period(self, blocks: Mapping[str, Block]) -> bool:
+        """Whether the team runs the compiled period (:class:`~.execution.Execution`); on a
+        cold cache a small team runs the general path and a background process compiles the
+        compiled period for the runs that follow (:mod:`.warm`)."""
+        if not runs_compiled(blocks):
+            return False  # a plug-in block: the general path in any case
+        compiled, later = self.execution.choose(
+            self.scenario.team.robots, numba_cache.is_cached(team_period_flat)
+        )
+        if later and self.warming is None:
+            self.warming = warm.start(self.scenario, self._search)
+        return compiled
 
     def _monitor(self, x0: np.ndarray) -> premises.Monitor:
         """The premises of the run's threshold rule, watched against the truth."""
@@ -449,6 +482,7 @@ class Simulation:
             leave=False,
         )
         wall0 = time.perf_counter()
+        compiling0 = self._clock.total()
         k = k0
         # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual /
         # threshold; physics trouble is caught explicitly by the plant, not by numpy warnings
@@ -549,7 +583,7 @@ class Simulation:
                 self._take_team_events(k * dt)
             self.k = k
             bar.close()
-            self._wall += time.perf_counter() - wall0
+            self._wall += self._without_compiling(wall0, compiling0)
 
     def _sensor_faults(self, t: float, x_m: np.ndarray) -> None:
         """Add the sensor faults' offsets to ``x_m``; their start and end are events."""
@@ -661,7 +695,10 @@ class Simulation:
         summary["network"] = self.channel.summary() if self.channel is not None else {"ideal": True}
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info
+        summary["compile_time"] = self.compile_time
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}
+        if self.warming is not None:
+            summary["onboard"]["compiling_in_background"] = True
         return RunResult(self.scenario, arrays, self.events, summary, self.error)
 
 
@@ -672,13 +709,14 @@ def simulate(
     hook: Callable[[float, Plant], None] | None = None,
     blocks: Mapping[str, Block] | None = None,
     search: Sequence[str | Path] = (),
+    execution: Execution | None = None,
 ) -> RunResult:
     """Run scenario ``s`` to the end and return its records (a thin wrapper of :class:`Simulation`).
 
     Physics trouble does not raise: the result carries the error and the log
     up to that instant (``result.ok`` is False).
     """
-    with Simulation(s, blocks=blocks, hook=hook, search=search) as sim:
+    with Simulation(s, blocks=blocks, hook=hook, search=search, execution=execution) as sim:
         return sim.run(progress=progress)
 
 

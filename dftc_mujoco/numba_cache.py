@@ -12,7 +12,11 @@ when they differ; numba then compiles afresh, once.
 from __future__ import annotations
 
 import hashlib
+import os
+import tempfile
+import time
 from pathlib import Path
+from typing import Any
 
 STAMP = "numba_sources.stamp"
 
@@ -40,5 +44,106 @@ def refresh(package: Path) -> bool:
         stamp.parent.mkdir(exist_ok=True)
         stamp.write_text(digest)
         return True
+    except OSError:
+        return False
+
+
+class CompileClock:
+    """The seconds numba has spent compiling in this process, counted as it happens.
+
+    A listener on numba's ``numba:compile`` events: the outermost compilation of each
+    burst is timed (a function's callees compile inside it). :attr:`since` is when the
+    compilation now under way began (None: none is), for a progress display in another
+    thread. Compilations run one at a time (numba holds a lock around them)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0  # finished compilations
+        self.since: float | None = None
+        self.functions = 0  # outermost functions compiled
+        self._depth = 0
+
+    def total(self) -> float:
+        """Seconds spent compiling so far, the one under way included."""
+        since = self.since
+        return self.seconds + (0.0 if since is None else time.perf_counter() - since)
+
+    def _started(self) -> None:
+        if self._depth == 0:
+            self.since = time.perf_counter()
+        self._depth += 1
+
+    def _ended(self) -> None:
+        self._depth -= 1
+        if self._depth == 0 and self.since is not None:
+            self.seconds += time.perf_counter() - self.since
+            self.functions += 1
+            self.since = None
+
+
+_CLOCK: CompileClock | None = None
+
+
+def clock() -> CompileClock:
+    """The process's :class:`CompileClock` (listening from the first call on)."""
+    global _CLOCK
+    if _CLOCK is None:
+        from numba.core import event
+
+        watch = CompileClock()
+
+        class _Listener(event.Listener):
+            def on_start(self, ev: event.Event) -> None:
+                watch._started()
+
+            def on_end(self, ev: event.Event) -> None:
+                watch._ended()
+
+        event.register("numba:compile", _Listener())
+        _CLOCK = watch
+    return _CLOCK
+
+
+def is_cached(dispatcher: Any) -> bool:
+    """Whether ``dispatcher`` (a ``numba.njit(cache=True)`` function) has machine code ready:
+    compiled in this process, or in numba's on-disk cache (its index file exists). A signature
+    the cache does not hold yet still compiles at the first call; this only tells a cold
+    cache from a warm one without compiling anything."""
+    if dispatcher.overloads:
+        return True
+    folder = Path(dispatcher.stats.cache_path)
+    func = dispatcher.py_func
+    name = f"{func.__module__.rsplit('.', 1)[-1]}.{func.__qualname__}-"
+    return any(p.stat().st_size > 0 for p in folder.glob(f"{name}*.nbi"))
+
+
+def unwritable_note(package: Path) -> str | None:
+    """None when numba can keep its cache of this package's compiled code; else one line
+    that says where it cannot, what that costs and how to fix it. Beside the sources
+    (``__pycache__``) first, else numba's own folder in the user's cache (or
+    ``NUMBA_CACHE_DIR``); where neither can be written, ``NUMBA_CACHE_DIR`` is pointed at a
+    temporary folder, so that the code still compiles, once per process."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        candidates = [Path(os.environ["NUMBA_CACHE_DIR"])]
+    else:
+        home = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+        candidates = [package / "__pycache__", home / "numba"]
+    for folder in candidates:
+        if _writable(folder):
+            return None
+    fallback = Path(tempfile.mkdtemp(prefix="dftc-numba-"))
+    os.environ["NUMBA_CACHE_DIR"] = str(fallback)
+    where = " or ".join(str(c) for c in candidates)
+    return (
+        f"numba cannot write its cache in {where}: the onboard code compiles again in every "
+        "process (tens of seconds); set NUMBA_CACHE_DIR to a folder you can write"
+    )
+
+
+def _writable(folder: Path) -> bool:
+    """``folder`` exists (or can be made) and a file can be created in it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            return True
     except OSError:
         return False

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import copy
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+
+# the suite runs the compiled period wherever the blocks allow it, as it always did; the
+# "auto" choice of a cold cache (dftc_mujoco.execution) is tested on its own, in processes
+# with a cache of their own (tests/test_numba_cache.py)
+os.environ.setdefault("DFTC_PERIOD", "compiled")
 
 from dftc_mujoco import scenario
 from dftc_mujoco.loop import RunResult, simulate

@@ -25,3 +25,51 @@ def test_a_changed_source_empties_the_cache_once(tmp_path):
     assert numba_cache.refresh(pkg)
     assert not any(c.exists() for c in cached)
     assert (pkg / "a.py").exists() and (pkg / "sub" / "b.py").exists()  # sources untouched
+
+
+def _run(tmp_path, name, env):
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / name
+    done = subprocess.run(
+        [sys.executable, "-m", "dftc_mujoco.run", "paper_case", "--no-video", "--duration", "12",
+         "--out", str(out)],
+        env=env, capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done, json.loads((out / "summary.json").read_text()), out
+
+
+def test_a_cold_cache_runs_at_once_and_the_next_run_is_compiled(tmp_path):
+    """A first run on a machine (numba's cache empty) says that it compiles, reports its
+    simulation time without the compilation, runs the general path (the same numbers) while
+    a background process compiles the one-call period; the next run finds it cached."""
+    import fcntl
+    import os
+
+    import numpy as np
+
+    from dftc_mujoco import warm
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "DFTC_PERIOD": "auto"}
+    first, cold, out1 = _run(tmp_path, "first", env)
+    assert "compiling the onboard code for this machine" in first.stderr
+    assert "compiling the onboard code: once for this machine" in first.stdout
+    assert cold["onboard"]["path"] == "general" and cold["onboard"]["compiling_in_background"]
+    assert cold["compile_time"] > 0
+    # the background process holds its lock until the compiled period is in the cache
+    (lock,) = (tmp_path / "cache").rglob(warm.LOCK)
+    with open(lock) as f:
+        fcntl.flock(f, fcntl.LOCK_EX)  # blocks until it is done
+    log = next((tmp_path / "cache").rglob(warm.LOG)).read_text()
+    assert "compiled the control period for paper_case" in log, log
+    second, warmed, out2 = _run(tmp_path, "second", env)
+    assert warmed["onboard"]["path"] == "compiled"
+    assert "compiling_in_background" not in warmed["onboard"]
+    assert "compiling" not in second.stderr, second.stderr
+    with np.load(out1 / "log.npz") as a, np.load(out2 / "log.npz") as b:
+        for k in a.files:  # the general path is the same computation, bit for bit
+            assert np.array_equal(a[k], b[k], equal_nan=True), k
+    assert cold["events"] == warmed["events"]

@@ -63,7 +63,7 @@ from .thresholds.delays import detection_horizon
 from .thresholds.paper import dense_thresholds
 from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
-__all__ = ["PAPER_BLOCKS", "Team", "TeamConfig"]
+__all__ = ["PAPER_BLOCKS", "Team", "TeamConfig", "runs_compiled"]
 
 #: the paper's block classes, by plug-in point
 PAPER_BLOCKS: dict[str, type[Block]] = {
@@ -85,6 +85,12 @@ HOLD_AFTER_CONTACT = 0.5
 VELOCITY_WINDOW = 0.1
 COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 PARALLEL_ALLOWED = True  # False keeps the compiled period in one thread (benchmarks, tests)
+
+
+def runs_compiled(blocks: Mapping[str, Block]) -> bool:
+    """Whether a team of these blocks can run the compiled period: the paper's own classes
+    in every block it contains (a thresholds rule of any class enters it as an array)."""
+    return all(type(blocks[k]) is PAPER_BLOCKS[k] for k in _COMPILED if k in blocks)
 
 
 class Team:
@@ -145,11 +151,7 @@ class Team:
         # plug-in blocks are told the time of each period (the paper's read none)
         self._timed = [b for name, b in chosen.items() if type(b) is not PAPER_BLOCKS[name]]
         # the compiled period contains the paper's blocks, not subclasses of them
-        self.compiled = bool(
-            config.compiled
-            and COMPILED_ALLOWED
-            and all(type(chosen[k]) is PAPER_BLOCKS[k] for k in _COMPILED)
-        )
+        self.compiled = bool(config.compiled and COMPILED_ALLOWED and runs_compiled(chosen))
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
         self.u = np.zeros((n, 2))
         self.u_bar = np.zeros((n, 2))
