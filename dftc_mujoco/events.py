@@ -77,7 +77,8 @@ def describe(e: Mapping[str, Any]) -> str:
     if k == "detection":
         held = e.get("premises")
         why = f" — while its premises were violated: {', '.join(held)}" if held else ""
-        return f"robot {e['by']} flags robot {r}{why}"
+        who = "itself" if e["by"] == r else f"robot {r}"
+        return f"robot {e['by']} flags {who}{why}"
     if k == "premise_violated":
         who = f"robot {r}" if r else "the team"
         return (
@@ -85,7 +86,7 @@ def describe(e: Mapping[str, Any]) -> str:
             f"(worst {e['value']:.4g} against {e['bound']:.4g})"
         )
     if k == "exclusion_scheduled":
-        return f"robot {r} will be excluded at t_r = {e['t_r']:.2f} s unless nobody flags it then"
+        return f"robot {r} will be excluded at {e['t_r']:.2f} s unless nobody flags it then"
     if k == "exclusion":
         by = ", ".join(str(b) for b in e.get("flagged_by") or [])
         return f"robot {r} excluded from the team" + (f" (still flagged by {by})" if by else "")
@@ -129,28 +130,29 @@ def describe(e: Mapping[str, Any]) -> str:
         again = e.get("restarted")  # the exclusion whose restarted thresholds these are
         after = f" again after the exclusion at {again:.2f} s" if again is not None else ""
         return (
-            f"robot {r}'s fault comes before the thresholds settle{after}: its detection within "
-            f"Δt_d,max is guaranteed (eq. 46) only for faults from {when} on"
+            f"robot {r}'s fault comes while the detection thresholds are still settling{after}: "
+            f"its detection in time (within Δt_d,max, eq. 46) is guaranteed only for faults "
+            f"from {when} on"
         )
     if k == "detection_window_restarted":
         until = e["until"]
         when = f"at {until:.2f} s" if until is not None else "only after the end of the run"
         return (
-            f"an exclusion restarted the thresholds within robot {r}'s Δt_d,max window (its fault "
-            f"at {e['onset']:.2f} s): eq. 46 no longer promises its detection within Δt_d,max "
-            f"(the thresholds settle again {when})"
+            f"an exclusion restarted the detection thresholds while robot {r}'s fault (at "
+            f"{e['onset']:.2f} s) waited to be detected: its detection in time (within "
+            f"Δt_d,max, eq. 46) is no longer guaranteed (the thresholds settle again {when})"
         )
     if k == "detection_past_end":
         return (
-            f"robot {r}'s fault leaves {e['left']:.2f} s of the run, less than Δt_d,max = "
-            f"{e['dt_d_max']:.2f} s: eq. 46 does not promise its detection before the end"
+            f"robot {r}'s fault comes {e['left']:.2f} s before the end of the run, less than "
+            f"the {e['dt_d_max']:.2f} s its detection may take (Δt_d,max): it may end undetected"
         )
     if k == "systemic_anomaly_over":
         return "systemic anomaly over: no robot is flagged by a teammate any more"
     if k == "detection_horizon":
         return (
-            f"Δt_d,max recomputed on the reduced graph (eq. 46): {e['value']:.2f} s "
-            f"(was {e['before']:.2f} s)"
+            f"the time a fault may take to be detected (Δt_d,max, eq. 46) is now "
+            f"{e['value']:.2f} s on the reduced team (was {e['before']:.2f} s)"
         )
     if k == "graph_not_strongly_connected":
         return "WARNING: " + split_text(e)

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
+from . import outcomes
 from .errors import ScenarioError, SimulationError
 from .events import split_text
 from .mission import slot_spacing
@@ -417,6 +418,12 @@ def summarize(
         1 for e in events.of_kind("exclusion") if _healthy_at(onset, e["robot"], e["t"])
     )
     summary["systemic_anomalies"] = len(events.of_kind("systemic_anomaly"))
+    tol = outcomes.tolerance(s.mission.formation, s.team.robots)
+    faulty = {r - 1 for r in onset}
+    summary["mission"] = outcomes.mission_outcome(
+        log, faulty, tol, s.mission.transient, status == "ok" and finished
+    )
+    summary["fault_outcomes"] = outcomes.fault_outcomes(log, events, tol, simulated)
     summary["events"] = events.ordered()
     return summary
 

@@ -36,19 +36,56 @@ from .errors import (
     ScenarioError,
     exit_interrupted,
 )
-from .events import describe
 from .interrupt import Interrupted, Signals
 from .output import OutputError, destination, free_space_check, os_problem, run_folder
 from .render import gl
+from .report import report
 
 if TYPE_CHECKING:
     from .results import RunResult
 
 
+EXAMPLES = """\
+examples:
+  %(prog)s paper_case
+      the paper's case study: records, figures and a video in ./renders/paper_case/
+  %(prog)s paper_case --no-video --duration 20 --seed 3
+  %(prog)s paper_case --robot diffdrive --set onboard.thresholds=l1
+  %(prog)s ../mine/case.toml --out results/case1 --overwrite
+  %(prog)s --list
+      the built-in scenarios, robot models and threshold rules
+
+Documentation: the project's docs/ folder (user guide, command line, every scenario key).
+"""
+
+#: the threshold rules in a few words (--list)
+RULES = {
+    "paper": "eq. 40 of the paper (the default)",
+    "block_row": "a tighter bound, row by row (up to 64 robots)",
+    "l1": "a tight bound that scales to hundreds of robots",
+    "drive": "from the fault estimator's own identity (compensation on)",
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    p = cli.parser("dftc_mujoco.run", "dftc-run", "Run a DFTC scenario on MuJoCo physics.")
-    p.add_argument("scenario", help="scenario name (scenarios/NAME.toml) or path to a .toml file")
+    p = cli.parser(
+        "dftc_mujoco.run",
+        "dftc-run",
+        "Run a DFTC scenario on MuJoCo physics: the team's mission, its faults and what the "
+        "onboard fault detection made of them; writes records, figures and a video.",
+        epilog=EXAMPLES,
+    )
+    p.add_argument(
+        "scenario",
+        nargs="?",
+        help="scenario name (one of --list) or path to a .toml file",
+    )
+    p.add_argument(
+        "--list",
+        action="store_true",
+        help="list the built-in scenarios, robot models and threshold rules, then exit",
+    )
     p.add_argument(
         "--out", type=Path, help="output folder (default: ./renders/<name>/ in this directory)"
     )
@@ -73,6 +110,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_video_options(p)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="also print every premise span, the task errors, set-up and compile times and "
+        "the onboard path",
+    )
     return p
 
 
@@ -145,76 +188,6 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def _factor(x: float) -> str:
-    """A real-time factor as 325x, 3.2x or 0.053x."""
-    return f"{x:.0f}x" if x >= 10 else f"{x:.2g}x"
-
-
-def report(result: RunResult, out: Path) -> str:
-    """The human-readable table printed at the end of a run."""
-    s = result.summary
-    lines = [
-        f"{s['scenario']} (seed {s['seed']}, {s['robots']} x {s['robot_model']}): "
-        f"{s['simulated_time']:.2f} s simulated in {s['wall_time']:.2f} s "
-        f"({_factor(s['real_time_factor'])} real time)  status: {s['status']}",
-        "",
-        "   t [s]  event",
-    ]
-    for e in result.events.ordered():
-        lines.append(f"{e['t']:8.2f}  {describe(e)}")
-    err = s["errors"]
-
-    def m(v: float | None) -> str:
-        return "n/a" if v is None else f"{v:.4f} m"
-
-    lines += [
-        "",
-        f"errors from t = {err['window'][0]:g} s: centroid rms {m(err['centroid_rms'])}, "
-        f"formation rms {m(err['formation_rms'])}; final: centroid {m(err['final_centroid'])}, "
-        f"formation {m(err['final_formation'])}",
-    ]
-    if s["min_obstacle_clearance"] is not None:
-        lines.append(
-            f"closest approach to a cylinder: {s['min_obstacle_clearance']:.4f} m surface gap, "
-            f"{s['min_safe_distance_margin']:+.4f} m from its safe distance d"
-        )
-    if s.get("margin") is not None:
-        lines.append(f"largest residual / threshold on robots without a fault: {s['margin']:.3f}")
-    table = s.get("premises")
-    if table:
-        broken = [
-            f"{p} ({v['spans']} span{'s' * (v['spans'] != 1)}, worst {v['worst']:.4g} vs "
-            f"{v['bound']:.4g}" + (f", robot {v['robot']})" if v["robot"] else ")")
-            for p, v in table.items()
-            if not v["held"]
-        ]
-        lines.append(
-            "premises: all held" if not broken else "premises violated: " + "; ".join(broken)
-        )
-    if s.get("healthy_flags_premises_held"):
-        lines.append(
-            f"DEFECT OF THE THRESHOLD RULE: {s['healthy_flags_premises_held']} flag(s) on "
-            "robots without a fault while every premise held (see docs/thresholds.md)"
-        )
-    for f in s.get("fault_estimates", []):  # one entry per robot, however many biases
-        mean = ", ".join(f"{v:.4f}" for v in f["mean_error"])
-        windows = f.get("windows", [f["window"]])
-        when = (
-            f"from {windows[0][0]:g} s"
-            if len(windows) == 1
-            else f"{len(f['faults'])} biases, " + ", ".join(f"{a:g}-{b:g} s" for a, b in windows)
-        )
-        lines.append(f"fault estimate on robot {f['robot']} ({when}): mean error [{mean}] m/s")
-    o = s.get("onboard", {})
-    custom = {k: v for k, v in o.get("blocks", {}).items() if v != "paper"}
-    lines.append(
-        f"onboard: {o.get('path', '?')} path"
-        + (f", blocks {', '.join(f'{k} = {v}' for k, v in custom.items())}" if custom else "")
-    )
-    lines.append(f"records: {out / 'summary.json'}, {out / 'log.npz'}")
-    return "\n".join(lines)
-
-
 def write_records(result: RunResult, out: Path) -> None:
     """Write ``log.npz``, ``scenario.toml`` then ``summary.json`` (atomically) into ``out``
     (figures and video follow, in :func:`render_outputs`)."""
@@ -223,11 +196,40 @@ def write_records(result: RunResult, out: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # an argument argparse does not know: say why in one line
+        parser.error(cli.stray_arguments(extra, args.overrides))
+    if args.list:
+        print(catalogue())
+        return EXIT_OK
+    if args.scenario is None:
+        parser.error("the scenario is required (a name such as paper_case, or --list)")
     # the records are never cut in two: the work defers signals where it must
     return interrupt.guarded(
         lambda signals: _main(args, signals), " before the run started: nothing was written"
     )
+
+
+def catalogue() -> str:
+    """What ``--list`` prints: the built-in scenarios, robot models and threshold rules."""
+    from .blocks import BUILTIN
+    from .paths import SCENARIOS
+    from .sim.robots import available, get
+
+    lines = ["built-in scenarios (python -m dftc_mujoco.run NAME):"]
+    for path in sorted(SCENARIOS.glob("*.toml")):
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        lines.append(f"  {path.stem:<22} {data.get('description', '')}")
+    lines.append("robot models (team.robot_model, or --robot NAME):")
+    for name in available():
+        model = get(name)
+        lines.append(f"  {name:<22} {model.drive} drive, {model.footprint_radius:.2f} m radius")
+    lines.append("threshold rules (--set onboard.thresholds=NAME):")
+    lines += [f"  {name:<22} {RULES.get(name, '')}" for name in BUILTIN["thresholds"]]
+    lines.append("and your own: a robot file (--robot path/to/bot.robot.toml) or a block")
+    lines.append('("module:Class" in [onboard]); see the documentation')
+    return "\n".join(lines)
 
 
 def _main(args: argparse.Namespace, signals: Signals) -> int:
@@ -251,6 +253,11 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             s = original.with_overrides(
                 seed=args.seed, duration=args.duration, robot_model=args.robot
             )
+        print(  # the first line, before anything is built or compiled
+            f"{s.name}: {s.team.robots} robots ({s.team.robot_model}), {s.duration:g} s of "
+            f"mission, seed {s.seed}",
+            flush=True,
+        )
         for f in scenario_mod.dropped_faults(original, s):
             print(
                 f"note: the {f.kind} fault on robot {f.robot + 1} at {f.t:g} s is after "
@@ -261,7 +268,8 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
         with run_folder(out, args.overwrite) as work:
             # from here on a signal stops the run and keeps its records (none yet when it
             # came while the simulation was being built: signals are deferred until then)
-            with Simulation(s) as sim, signals.stopping(sim):
+            # the set-up and the first period compile the run's code: the notice says so
+            with cli.CompileNotice() as notice, Simulation(s) as sim, signals.stopping(sim):
                 free_space_check(work, sum(a.nbytes for a in sim.log.data.values()) + 50 * 2**20)
                 long = [e for e in sim.events.items if "will take at least" in e.get("message", "")]
                 for e in long:  # said now, not after the hours it announces
@@ -273,8 +281,12 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                         watch(sim)
                     except ViewerUnavailable as exc:
                         print(f"note: {exc}; running without the viewer", file=sys.stderr)
+                if not sim.done:
+                    sim.step(1)
+                notice.close()  # before the progress bar
                 result = sim.run(progress=progress)
-            return _finish(result, work, destination(out), signals, options, progress)
+            verbose = args.verbose
+            return _finish(result, work, destination(out), signals, options, progress, verbose)
     except (ScenarioError, OutputError) as exc:
         return cli.fail(exc)
     except OSError as exc:
@@ -282,14 +294,16 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
         return EXIT_OUTPUT
 
 
-def _finish(result, work: Path, out: Path, signals: Signals, options, progress: bool) -> int:
+def _finish(
+    result, work: Path, out: Path, signals: Signals, options, progress: bool, verbose: bool
+) -> int:
     """Write the records (and figures, video) into ``work``, print the report; the exit code.
 
     ``out`` is where ``work`` is moved once this returns (the paths printed). A signal
     during the figures or the video, or a full disk there, keeps the records (and the
     figures when they were complete) and drops the rest."""
     write_records(result, work)
-    print(report(result, out))
+    print(report(result, out, verbose))
     if signals.signum is not None:
         print(
             f"interrupted by {interrupt.Interrupted(signals.signum).name}: the records up to "
@@ -356,7 +370,7 @@ def render_outputs(
 
     t0 = time.perf_counter()
     paths = figures.draw_all(log, summary, out / "figures")
-    print(f"figures: {len(paths)} in {shown / 'figures'} ({time.perf_counter() - t0:.1f} s)")
+    print(f"figures:      {len(paths)} in {shown / 'figures'} ({time.perf_counter() - t0:.1f} s)")
     if options is None:
         return EXIT_OK
     from .render.video import write_video
@@ -368,10 +382,10 @@ def render_outputs(
         return cli.fail(exc)
     wall = time.perf_counter() - t0
     if not frames:
-        print("video: none: the run logged no period")
+        print("video:        none: the run logged no period")
         return EXIT_OK
     print(
-        f"video: {shown / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
+        f"video:        {shown / 'video.mp4'} ({frames} frames at {options.fps:g} fps, "
         f"{options.width}x{options.height}, rendered and encoded at {frames / wall:.0f} "
         f"frames/s)"
     )

@@ -70,7 +70,7 @@ def test_a_slow_log_rate_reports_the_time_simulated(tmp_path, capsys):
     args = ["--duration", "3", "--no-video", "--out", str(out), "--set", "physics.log_rate=0.001"]
     code = run.main(["paper_case", *args])
     assert code == 0
-    assert "paper_case (seed 1, 4 x disk): 3.00 s simulated" in capsys.readouterr().out
+    assert "paper_case: 3.00 s simulated" in capsys.readouterr().out
     assert json.loads((out / "summary.json").read_text())["simulated_time"] == 3.0
 
 
@@ -93,6 +93,7 @@ def test_two_biases_on_one_robot_give_one_fault_estimate_line(tmp_path, capsys, 
             str(out),
             "--set",
             f"faults={faults}",
+            "--verbose",
         ]
     )
     assert code == 0

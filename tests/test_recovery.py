@@ -463,9 +463,7 @@ def test_a_fault_when_the_thresholds_never_settle_in_the_run_is_written_and_said
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     (note,) = [e for e in summary["events"] if e["kind"] == "detection_not_guaranteed"]
     assert note["until"] is None
-    assert "guaranteed (eq. 46) only for faults from after the end of the run" in (
-        capsys.readouterr().out
-    )
+    assert "guaranteed only for faults from after the end of the run" in (capsys.readouterr().out)
 
 
 def test_a_contacts_decaying_trace_is_waited_out_and_a_faults_signature_is_not():
