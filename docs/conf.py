@@ -29,7 +29,7 @@ import dftc_mujoco  # noqa: E402
 
 project = "dftc-mujoco"
 author = "the dftc-mujoco authors"
-copyright = "the dftc-mujoco authors, MIT licence"  # noqa: A001
+copyright = "the dftc-mujoco authors, MIT licence"
 release = dftc_mujoco.__version__
 version = release
 

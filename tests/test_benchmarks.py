@@ -1,4 +1,5 @@
-"""The benchmarks run as the README says, each in a process of its own."""
+"""The benchmarks run as the docs' performance page (docs/performance.md) runs them, each in
+a process of its own."""
 
 from __future__ import annotations
 
@@ -14,13 +15,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _bench(script: str, *args: str) -> str:
     """``python benchmarks/SCRIPT ARGS`` in a process of its own, from the repository's root,
-    as the README runs it; its standard output, once it exited 0."""
+    as docs/performance.md runs it; its standard output, once it exited 0."""
     done = subprocess.run(
         [sys.executable, f"benchmarks/{script}", *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert done.returncode == 0, done.stderr
     return done.stdout
