@@ -5,7 +5,7 @@
 The pass (``onboard/period.py``, ``team_rows``) is the part of a period that grows as N²:
 every robot estimates the whole team (the paper's design), so each period reads and writes
 N × N × 2 numbers of ŷ and of ∫ⁱû_g and writes N × N × 2 of the next ŷ. At N = 1000 it is
-what keeps the loop above twice the physics floor (README, "Where the loop stands"). On the
+what keeps the loop above twice the physics floor (docs/performance.md). On the
 scale benchmark's scene (``bench_scale.scene``) after 3 s, on one core, the minimum and
 median of ``--repeat`` timings (µs) of:
 

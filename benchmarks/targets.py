@@ -25,8 +25,7 @@ costs and how CPython was configured (outside the physics and its compiled stage
 team's period is Python calls), and how fast one core streams memory (what the pass over
 a large team's N × N state waits on): the figures to compare before two invocations'
 ratios are. paper_case's ratio read 1.84-1.86 on the machine of 2026-12-06 (a call 19-20
-ns, one core 40 GB/s) and 2.1-4.0 on the slower machines of the sessions before (README,
-"Speed"; docs/speed.md).
+ns, one core 40 GB/s) and 2.1-4.0 on slower machines (docs/performance.md).
 paper_case's records bit-identical to the code before issue 21 is a test
 (``tests/test_api.py``), not a benchmark.
 """

@@ -1,4 +1,5 @@
-"""The README's scale figure: detection delay and smallest detectable fault against N, per rule.
+"""Detection delay and smallest detectable fault against N, per rule: docs/scale.png, the
+scale figure of docs/guide/campaigns.md.
 
     python campaigns/scale_figure.py [--out docs/scale.png]
 

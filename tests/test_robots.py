@@ -278,7 +278,7 @@ def test_paper_case_outcome_with_every_robot_model(model, G):
 
 
 def test_a_fourth_model_from_an_mjcf_file(tmp_path):
-    """The README's recipe: write a robot file, calibrate it, run paper_case with it."""
+    """The recipe of docs/guide/robots.md: write a robot file, calibrate it, run paper_case."""
     path = tmp_path / "boxbot.xml"
     path.write_text(BOX_ROBOT)
     assert calibrate.main([str(path), "--write"]) == 0
