@@ -96,8 +96,10 @@ def fault_outcomes(
     avoids an obstacle, nor in the :data:`JUDGED_AFTER` s after an exclusion re-forms the
     team)."""
     faults = events.of_kind("fault")
-    detections = events.of_kind("detection")
     exclusions = events.of_kind("exclusion")
+    flagged: dict[int, list[dict[str, Any]]] = {}  # a large run holds 10⁵ detections
+    for d in events.of_kind("detection"):
+        flagged.setdefault(d["robot"], []).append(d)
     t = log["t"]
     err = _slot_error(log) if len(t) else np.zeros((0, 0))
     out = []
@@ -105,9 +107,7 @@ def fault_outcomes(
         r, onset = f["robot"], f["t"]
         later = [g["t"] for g in faults[j + 1 :] if g["robot"] == r]
         until = min(later) if later else np.inf
-        flags = [
-            d for d in detections if d["robot"] == r and d["by"] != r and onset <= d["t"] < until
-        ]
+        flags = [d for d in flagged.get(r, []) if d["by"] != r and onset <= d["t"] < until]
         gone = [e["t"] for e in exclusions if e["robot"] == r and e["t"] >= onset]
         # judged on its own: not while it avoids an obstacle, nor while the team re-forms
         window = (t >= onset + JUDGED_AFTER) & (t < until) & ~log["reactive"][:, r - 1]

@@ -25,7 +25,17 @@ from .run import add_video_options, setup_video
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     p = cli.parser(
-        "dftc_mujoco.plot", "dftc-plot", "Redraw a run's figures (and video) from its records."
+        "dftc_mujoco.plot",
+        "dftc-plot",
+        "Redraw a run's figures (and video) from its records, without simulating again.",
+        epilog="""\
+examples:
+  %(prog)s renders/paper_case                 the paper's figures again, into figures/
+  %(prog)s renders/paper_case --video         and video.mp4
+  %(prog)s renders/paper_case --still 45.1    the video frame at t = 45.1 s as a PNG
+
+Documentation: the project's docs/ folder (the command line, what a run folder holds).
+""",
     )
     p.add_argument("run_dir", type=Path, help="a folder written by python -m dftc_mujoco.run")
     add_video_options(p)

@@ -250,6 +250,11 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             original = scenario_mod.load_scenario(args.scenario, overrides)
             if args.robot is not None:
                 robots.get(args.robot, where="--robot")
+            if "team.robot_model" in overrides:  # said as the command line's, not the file's
+                given = overrides["team.robot_model"]
+                for name in given if isinstance(given, list) else [given]:
+                    if isinstance(name, str):
+                        robots.get(name, where="--set team.robot_model")
             s = original.with_overrides(
                 seed=args.seed, duration=args.duration, robot_model=args.robot
             )

@@ -85,7 +85,7 @@ def test_a_policy_that_stops_its_robot_is_flagged_by_the_team(tmp_path):
         cwd=tmp_path,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert out.returncode == 0, out.stderr
     flags = [line.split() for line in out.stdout.splitlines() if "flags robot" in line]

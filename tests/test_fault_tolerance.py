@@ -225,7 +225,7 @@ def test_a_team_reduced_to_one_robot_ends_the_mission_with_its_records(tmp_path)
         ],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert out.returncode == 0, out.stderr
     assert "Traceback" not in out.stderr

@@ -22,7 +22,7 @@ def _run(*args, cwd=None):
         [sys.executable, "-m", "dftc_mujoco.run", "paper_case", *args],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
         cwd=cwd,
     )
 
@@ -88,7 +88,7 @@ def test_a_second_process_on_the_same_folder_is_refused(tmp_path):
         assert not out.exists()  # nothing half-written appears at the destination
     finally:
         first.send_signal(signal.SIGINT)
-        first.communicate(timeout=60)
+        first.communicate(timeout=900)
     assert first.returncode == 130
     assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
@@ -106,7 +106,7 @@ def test_a_killed_run_leaves_no_half_written_folder_and_its_lock_is_taken_over(t
     )
     time.sleep(5.0)
     os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(timeout=30)
+    proc.wait(timeout=900)
     assert not out.exists()  # only a private .run.*.tmp folder and a stale lock remain
     names = [p.name for p in tmp_path.iterdir()]
     assert ".run.lock" in names and all(n.startswith(".run.") for n in names)
@@ -153,7 +153,7 @@ def _video_run(out: Path, duration: str = "60") -> subprocess.Popen:
     )
 
 
-def _wait_for(pattern: str, folder: Path, proc: subprocess.Popen, timeout: float = 120) -> Path:
+def _wait_for(pattern: str, folder: Path, proc: subprocess.Popen, timeout: float = 900) -> Path:
     deadline = time.time() + timeout
     while time.time() < deadline and proc.poll() is None:
         found = sorted(folder.glob(pattern))
@@ -173,7 +173,7 @@ def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
     proc = _video_run(out)
     _wait_for(".run.*.tmp/.video.mp4.tmp.mp4", tmp_path, proc)
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=900)
     if sig == signal.SIGTERM:
         assert proc.returncode == 143, err
         assert "Traceback" not in err
@@ -273,7 +273,7 @@ def test_a_full_disk_while_drawing_is_exit_5_and_keeps_the_records(small_disk):
     proc = _video_run(out, duration="20")
     _wait_for(".run.*.tmp/figures/fig10_inputs.png", small_disk, proc)
     _fill(small_disk)
-    _, err = proc.communicate(timeout=120)
+    _, err = proc.communicate(timeout=900)
     assert proc.returncode == 5, err
     errors = [line for line in err.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "no space left on the device" in errors[0], err
@@ -312,7 +312,7 @@ def test_plot_replaces_figures_and_video_only_when_complete(tmp_path):
     )
     _wait_for(".run.*.tmp/.video.mp4.tmp.mp4", tmp_path, proc)
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=900)
     assert proc.returncode == 143 and "Traceback" not in err, err
     assert err.strip().splitlines()[-1].startswith("interrupted by SIGTERM")
     assert _snapshot(folder) == before
@@ -338,7 +338,7 @@ def test_a_signal_while_the_run_is_built_still_leaves_its_records(tmp_path):
             break
         time.sleep(0.01)
     first.send_signal(signal.SIGINT)
-    _, err = first.communicate(timeout=120)
+    _, err = first.communicate(timeout=900)
     assert first.returncode == 130 and "Traceback" not in err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "interrupted"

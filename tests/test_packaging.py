@@ -54,7 +54,7 @@ def wheel(tmp_path_factory) -> Path:
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(dist), str(src)],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert built.returncode == 0, built.stderr
     (whl,) = dist.glob("*.whl")
@@ -94,7 +94,7 @@ def test_an_installed_wheel_runs_from_an_empty_directory(wheel, tmp_path):
         ],
         check=True,
         capture_output=True,
-        timeout=300,
+        timeout=900,
     )
     site = subprocess.run(
         [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
@@ -113,7 +113,7 @@ def test_an_installed_wheel_runs_from_an_empty_directory(wheel, tmp_path):
             cwd=cwd,
             capture_output=True,
             text=True,
-            timeout=300,
+            timeout=900,
             env=env,
         )
 

@@ -19,7 +19,7 @@ EXAMPLES = ROOT / "examples"
 CAMPAIGN = EXAMPLES / "blocks_campaign.toml"
 
 
-def _run(args, cwd, env=None, timeout=300):
+def _run(args, cwd, env=None, timeout=900):
     return subprocess.run(
         [sys.executable, "-m", "dftc_mujoco.run", *args],
         cwd=cwd,
@@ -118,7 +118,7 @@ def test_examples_run(script, expect, tmp_path):
         cwd=tmp_path,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert out.returncode == 0, out.stderr
     assert expect in out.stdout
@@ -140,7 +140,7 @@ def test_viewer_without_a_display_says_so_in_one_line(tmp_path):
         capture_output=True,
         text=True,
         env=env,
-        timeout=300,
+        timeout=900,
     )
     assert out.returncode == 0
     notes = [line for line in out.stderr.splitlines() if "viewer" in line]
@@ -161,7 +161,7 @@ def test_viewer_shows_the_run_under_xvfb(tmp_path):
         ["xvfb-run", "-a", "-s", "-screen 0 800x600x24", sys.executable, "-c", code],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert out.returncode == 0, out.stderr
     frames, done = out.stdout.split()

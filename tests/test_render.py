@@ -170,7 +170,7 @@ def _cli(*args, env=None):
         [sys.executable, "-m", "dftc_mujoco.run", *args],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=900,
         env={**os.environ, **(env or {})},
     )
 
@@ -208,7 +208,7 @@ def test_glfw_without_a_display_says_so(tmp_path):
         ],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=900,
         env=env,
     )
     assert p.returncode == 4

@@ -75,7 +75,7 @@ def test_cli_errors_in_a_real_process(tmp_path):
             [sys.executable, "-m", "dftc_mujoco.run", *args],
             capture_output=True,
             text=True,
-            timeout=60,
+            timeout=900,
         )
         assert p.returncode == 2, p.stderr
         assert "Traceback" not in p.stderr

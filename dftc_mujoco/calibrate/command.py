@@ -19,7 +19,18 @@ def main(argv: list[str] | None = None) -> int:
     from ..sim import robots
 
     p = cli.parser(
-        "dftc_mujoco.calibrate", "dftc-calibrate", "Measure a robot model's mismatch from ẋ = u."
+        "dftc_mujoco.calibrate",
+        "dftc-calibrate",
+        "Measure how a robot model departs from ẋ = u (its mismatch, lag, drift) on MuJoCo "
+        "physics, and store it in its robot file.",
+        epilog="""\
+examples:
+  %(prog)s disk                               measure a built-in robot, print the figures
+  %(prog)s mylab/bot.robot.toml --write       measure your robot, store [calibration]
+  %(prog)s mylab/bot.robot.toml --scenario paper_case --set mission.scale=2
+
+Documentation: the project's docs/ folder (robots and calibration).
+""",
     )
     p.add_argument(
         "model",

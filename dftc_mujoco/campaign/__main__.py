@@ -28,7 +28,20 @@ from ..interrupt import Interrupted, Signals
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    p = cli.parser("dftc_mujoco.campaign", "dftc-campaign", "Run a Monte-Carlo fault campaign.")
+    p = cli.parser(
+        "dftc_mujoco.campaign",
+        "dftc-campaign",
+        "Run a Monte-Carlo fault campaign: many runs of a scenario with drawn faults, starts "
+        "and seeds, and a report of what the fault detection made of them.",
+        epilog="""\
+examples:
+  %(prog)s campaigns/tiny.toml                 a small campaign, on this machine's cores
+  %(prog)s campaigns/stop_faults.toml --workers 2 --limit 10   (run again to resume)
+  %(prog)s campaigns/stop_faults.toml --ray    on Ray (pip install -e ".[cluster]")
+
+Documentation: the project's docs/ folder (campaigns: every key of a spec).
+""",
+    )
     p.add_argument("spec", type=Path, help="campaign spec (TOML), e.g. campaigns/stop_faults.toml")
     p.add_argument(
         "--workers",

@@ -30,7 +30,11 @@ def select(backend: str | None) -> str:
     """Make ``backend`` (or the current ``MUJOCO_GL``, or egl) the one mujoco will use."""
     wanted = (backend or os.environ.get("MUJOCO_GL") or DEFAULT).lower()
     if wanted not in BACKENDS:
-        raise RenderError(f"--gl: expected one of {', '.join(BACKENDS)}, got {wanted!r}")
+        where = "--gl" if backend else "MUJOCO_GL in the environment"
+        raise RenderError(
+            f"{where}: expected one of {', '.join(BACKENDS)}, got {wanted!r}"
+            + ("" if backend else " (unset it for egl, or choose one with --gl)")
+        )
     current = os.environ.get("MUJOCO_GL", "").lower()
     if "mujoco" in sys.modules and current and current != wanted:
         raise RenderError(

@@ -181,6 +181,12 @@ def resolve(name: str, where: str = "team.robot_model", base: Path | None = None
         candidates.append(base / path)
     for c in candidates:
         if c.is_file():
+            if c.suffix not in (".xml", ".toml"):
+                raise ScenarioError(
+                    f"{where}: {name!r} is neither a robot file NAME{ROBOT_SUFFIX} nor an MJCF "
+                    "file (.xml); write a robot file that names your MJCF (see the robots "
+                    "guide of the documentation)"
+                )
             return c.resolve()
     for c in candidates:
         if c.is_dir():
