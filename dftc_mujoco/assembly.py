@@ -173,7 +173,7 @@ def team_config(
         confirm_by_estimate=f.confirm_by_estimate,
         response_time=robot.response_time if robot is not None else 0.0,
         phi_bar=phi_bar,
-        excluded_relay=f.excluded_relay,
+        rewire=rewire_mode(s),
         networked=not s.network.ideal,
         sighting_tolerance=sighting_tolerance(s),
         sighting_range=np.inf if s.network.sighting_range is None else s.network.sighting_range,
@@ -194,11 +194,12 @@ def sighting_tolerance(s: Scenario) -> float:
 
 
 def max_faults(s: Scenario) -> int:
-    """The fault hypothesis: the scenario's ``fdir.max_faults``, or ⌊(N − 1)/2⌋ ("auto", at
-    least 1): more robots flagged at once than that is a systemic anomaly, not faults."""
+    """The fault hypothesis: the scenario's ``fdir.max_faults``, or 0 for "auto" (a minority
+    of the team's members at each instant, :func:`~.onboard.recovery.admitted`): more robots
+    flagged at once than that is a systemic anomaly, not faults."""
     if s.fdir.max_faults != "auto":
         return int(s.fdir.max_faults)
-    return max(1, (s.team.graph.n - 1) // 2)
+    return 0
 
 
 def drive_accel(s: Scenario, robot: robots.RobotModel | None) -> float:
@@ -268,3 +269,43 @@ def make_blocks(
 
 
 #: False skips the run-time premise checks (benchmarks/bench_premises.py measures their cost)
+
+
+def rewire_mode(s: Scenario) -> str:
+    """How the survivors' graph is re-wired after an exclusion (``fdir.rewire``): "adopt"
+    (the default on the ideal network), "relay" (``fdir.excluded_relay = true``) or "none"
+    (the default over a ``[network]``, whose radios carry only the scenario's links)."""
+    f = s.fdir
+    if f.excluded_relay:
+        return "relay"
+    if f.rewire == "auto":
+        return "adopt" if s.network.ideal else "none"
+    return f.rewire
+
+
+def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -> list[str]:
+    """What the robot's calibration says of the scenario's noise and gains, one line each:
+    a robot never calibrated, a ξ̄ below its measured mismatch, a G below its calibrated
+    compensation gain (its compensation loop rings)."""
+    out = []
+    if s.noise.xi_bar is None and "xi_bar" not in model.calibration:
+        out.append(
+            f"the {model.name} model is not calibrated: xi_bar = {xi_bar:g} m/s is the "
+            "paper's value, not a measurement of this robot (python -m "
+            f"dftc_mujoco.calibrate {model.path} --write)"
+        )
+    if xi_bar < model.mismatch:
+        out.append(
+            f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
+            f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
+            f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise false alarms"
+        )
+    need_g = model.calibration.get("compensation_G")
+    g = float(np.linalg.eigvalsh(effective_G(s, model)).min())
+    if s.fdir.enabled and s.fdir.compensate and need_g and g < need_g:
+        out.append(
+            f"gains.G = {g:g} I is below the {model.name} model's calibrated compensation_G = "
+            f"{need_g:g}: its compensation loop rings (healthy robots' phi_hat and commands "
+            f'swing, thresholds raise false alarms); set gains.G = "auto" or at least {need_g:g}'
+        )
+    return out

@@ -18,10 +18,15 @@ every run of a process (``auto``, ``compiled`` or ``general``).
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
 from .errors import InputError
+from .numba_cache import is_cached
+from .onboard.block import Block
+from .onboard.period import team_period_flat
+from .onboard.team import runs_compiled
 
 Period = Literal["auto", "compiled", "general"]
 PERIODS: tuple[Period, ...] = ("auto", "compiled", "general")
@@ -58,12 +63,14 @@ class Execution:
                 f"Execution(period): expected one of {', '.join(PERIODS)}, got {self.period!r}"
             )
 
-    def choose(self, robots: int, cached: bool) -> tuple[bool, bool]:
+    def choose(self, robots: int, blocks: Mapping[str, Block]) -> tuple[bool, bool]:
         """(run the compiled period, compile it in the background for later runs) for a
-        team of ``robots`` whose blocks allow the compiled period, ``cached`` telling
-        whether numba's cache holds it."""
-        if self.period == "general":
+        team of ``robots`` with these ``blocks`` (a plug-in block runs the general path in
+        any case)."""
+        if self.period == "general" or not runs_compiled(blocks):
             return False, False
-        if self.period == "compiled" or cached or robots > GENERAL_UP_TO:
+        if self.period == "compiled" or robots > GENERAL_UP_TO:
+            return True, False
+        if is_cached(team_period_flat):
             return True, False
         return False, True

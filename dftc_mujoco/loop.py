@@ -27,6 +27,7 @@ from tqdm.auto import tqdm
 from . import checks, mission, network, numba_cache, premises, warm
 from .assembly import (
     block_names,
+    calibration_warnings,
     effective_G,
     effective_xi_bar,
     make_blocks,
@@ -37,8 +38,7 @@ from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
 from .execution import Execution
 from .onboard.block import Block
-from .onboard.period import team_period_flat
-from .onboard.team import Team, runs_compiled
+from .onboard.team import Team
 from .onboard.thresholds import prefetch_decay_bounds
 from .physics_step import PhysicsStep
 from .record import Events, Log, matrix_every
@@ -189,40 +189,8 @@ class Simulation:
         )
         self.events = Events()
         self.domain = DetectionDomain(self.events, self.steps * dt)  # eq. 46's
-        if s.noise.xi_bar is None and "xi_bar" not in model.calibration:
-            self.events.add(
-                0.0,
-                "warning",
-                message=(
-                    f"the {model.name} model is not calibrated: xi_bar = {xi_bar:g} m/s is the "
-                    "paper's value, not a measurement of this robot (python -m "
-                    f"dftc_mujoco.calibrate {model.path} --write)"
-                ),
-            )
-        if xi_bar < model.mismatch:
-            self.events.add(
-                0.0,
-                "warning",
-                message=(
-                    f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
-                    f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
-                    f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise "
-                    "false alarms"
-                ),
-            )
-        need_g = model.calibration.get("compensation_G")
-        g = float(np.linalg.eigvalsh(effective_G(s, model)).min())
-        if s.fdir.enabled and s.fdir.compensate and need_g and g < need_g:
-            self.events.add(
-                0.0,
-                "warning",
-                message=(
-                    f"gains.G = {g:g} I is below the {model.name} "
-                    f"model's calibrated compensation_G = {need_g:g}: its compensation loop "
-                    "rings (healthy robots' phi_hat and commands swing, thresholds raise false "
-                    f'alarms); set gains.G = "auto" or at least {need_g:g}'
-                ),
-            )
+        for message in calibration_warnings(s, model, xi_bar):
+            self.events.add(0.0, "warning", message=message)
         for note in sc.notes:
             self.events.add(0.0, "warning", message=note)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
@@ -344,11 +312,7 @@ class Simulation:
         """Whether the team runs the compiled period (:class:`~.execution.Execution`); on a
         cold cache a small team runs the general path and a background process compiles the
         compiled period for the runs that follow (:mod:`.warm`)."""
-        if not runs_compiled(blocks):
-            return False  # a plug-in block: the general path in any case
-        compiled, later = self.execution.choose(
-            self.scenario.team.robots, numba_cache.is_cached(team_period_flat)
-        )
+        compiled, later = self.execution.choose(self.scenario.team.robots, blocks)
         if later and self.warming is None:
             self.warming = warm.start(self.scenario, self._search)
         return compiled

@@ -300,7 +300,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
 
 
 def _finish(
-    result, work: Path, out: Path, signals: Signals, options, progress: bool, verbose: bool
+    result, work: Path, out: Path, signals: Signals, options, progress: bool, verbose=False
 ) -> int:
     """Write the records (and figures, video) into ``work``, print the report; the exit code.
 

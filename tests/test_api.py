@@ -14,7 +14,6 @@ import dftc_mujoco
 from dftc_mujoco import RunResult, Simulation, check_locality, load_scenario, open_run, simulate
 from dftc_mujoco.blocks import paper
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.onboard import team as team_mod
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).resolve().parent.parent
@@ -22,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture(params=["compiled", "general"])
 def path(request, monkeypatch):
-    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", request.param == "compiled")
+    monkeypatch.setenv("DFTC_PERIOD", request.param)
     return request.param
 
 

@@ -171,7 +171,7 @@ def test_a_slow_robot_isolates_a_stop_and_flags_no_healthy_robot():
 
 @pytest.fixture(params=["compiled", "general"])
 def path(request, monkeypatch):
-    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", request.param == "compiled")
+    monkeypatch.setenv("DFTC_PERIOD", request.param)
     return request.param
 
 

@@ -35,7 +35,7 @@ def _integrate(team, x, steps, velocity=(0.1, 0.0), t0=0.0, fault=None):
 @pytest.fixture(params=["compiled", "general"])
 def path(request, monkeypatch):
     """Run a test on the compiled period and on the blocks' Python methods."""
-    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", request.param == "compiled")
+    monkeypatch.setenv("DFTC_PERIOD", request.param)
     return request.param
 
 
@@ -257,7 +257,7 @@ def test_compiled_and_general_paths_are_the_same_computation(n, obstacles, monke
     """The compiled period composes the blocks' own compiled functions: same numbers,
     bit for bit, through obstacles, saturation, anti-windup, a detection and an exclusion."""
     fast, x = _team(n, obstacles=obstacles, command_limit=1.0, phi_bar=0.2)
-    monkeypatch.setattr(team_mod, "COMPILED_ALLOWED", False)
+    monkeypatch.setenv("DFTC_PERIOD", "general")
     slow, _ = _team(n, obstacles=obstacles, command_limit=1.0, phi_bar=0.2)
     assert (fast.path, slow.path) == ("compiled", "general")
     v = np.array([0.0, 0.1]) if obstacles else np.array([0.1, 0.0])

@@ -11,12 +11,19 @@ own sensors see and the mission every robot is given
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..graph import Graph
 from ..mission import Formation
+
+
+def _compiled_by_default() -> bool:
+    """Whether a team composes the compiled period by default: unless ``DFTC_PERIOD`` says
+    ``general`` (:mod:`dftc_mujoco.execution` reads the same variable for a run)."""
+    return os.environ.get("DFTC_PERIOD", "").strip().lower() != "general"
 
 
 @dataclass(frozen=True)
@@ -53,7 +60,9 @@ class TeamConfig:
     # teammates avoided by the supervisor within this safe distance [m] (0: not avoided)
     teammate_safe: float = 0.0
     teammate_activation: float = 0.0
-    max_faults: int = 1  # robots that may be faulty at once (fdir.max_faults, recovery.py)
+    # robots that may be faulty at once (fdir.max_faults, recovery.py); 0: "auto", a minority
+    # of the members at that instant, ⌊(M − 1)/2⌋
+    max_faults: int = 1
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)
     postpone_on_contact: bool = True  # a bumper contact postpones t_r (onboard/recovery.py)
     # an exclusion needs the robot's own estimate out of Φ̄ at t_r, for longer than a healthy
@@ -61,9 +70,13 @@ class TeamConfig:
     confirm_by_estimate: bool = True
     response_time: float = 0.0  # [s] the drive's time to follow a command jump (calibration)
     phi_bar: float = np.inf  # Φ̄ [m/s]: a healthy robot's ‖φ̂‖ bound (inf: none known)
-    excluded_relay: bool = False  # an excluded robot keeps relaying messages (graph.without)
+    # after an exclusion (graph.without): "adopt" (the survivors take over the excluded
+    # robot's links), "relay" (its radio forwards them) or "none" (they go with it)
+    rewire: str = "none"
     lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)
-    compiled: bool = True  # compose the paper's blocks in one compiled period when possible
+    # compose the paper's blocks in one compiled period when possible (DFTC_PERIOD=general in
+    # the environment: never, the blocks' own methods; dftc_mujoco.execution)
+    compiled: bool = field(default_factory=_compiled_by_default)
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
     drift_bound: float = 0.0  # ē [m]: bounded offset of a robot's drift (from calibration)
