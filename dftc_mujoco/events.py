@@ -31,6 +31,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "detection_window_restarted": ("robot", "onset", "until"),
     "detection_horizon": ("value", "before"),
     "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
+    "graph_rewired": ("robot", "links", "how"),
     "warning": ("message",),
     "mission_ended": ("reason", "robots"),
     "simulation_error": ("message",),
@@ -119,8 +120,9 @@ def describe(e: Mapping[str, Any]) -> str:
     if k == "systemic_anomaly":
         who = ", ".join(str(b) for b in e["robots"])
         return (
-            f"SYSTEMIC ANOMALY: robots {who} flagged at once ({e['excluded']} excluded before), "
-            f"more than the {e['max_faults']} faulty robot(s) fdir.max_faults admits; nobody is "
+            f"SYSTEMIC ANOMALY: robots {who} flagged at once, more than the "
+            f"{e['max_faults']} faulty robot(s) at a time the fault hypothesis admits "
+            "(fdir.max_faults); nobody is "
             "excluded until every flag is down"
             + (f" — premises violated: {', '.join(e['premises'])}" if e.get("premises") else "")
         )
@@ -156,6 +158,11 @@ def describe(e: Mapping[str, Any]) -> str:
         )
     if k == "graph_not_strongly_connected":
         return "WARNING: " + split_text(e)
+    if k == "graph_rewired":
+        pairs = [f"{i} hears {j}" for j, i in e["links"]]
+        shown = ", ".join(pairs[:6]) + (f" and {len(pairs) - 6} more" if len(pairs) > 6 else "")
+        via = f" through robot {r}'s radio" if e.get("how") == "relay" else " directly"
+        return f"the team re-wires around robot {r}: robot {shown}{via}"
     if k == "warning":
         return f"WARNING: {e['message']}"
     if k == "mission_ended":
@@ -212,7 +219,7 @@ def split_text(e: Mapping[str, Any]) -> str:
         text += f" ({len(groups)} groups; " + "; ".join(parts) + ")"
     return text + (
         ": those estimates, and the residuals and thresholds built on them, have no bound "
-        "(fdir.excluded_relay = true keeps an excluded robot relaying)"
+        '(fdir.rewire = "adopt", the default on the ideal network, re-wires the survivors)'
     )
 
 

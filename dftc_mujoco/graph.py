@@ -69,6 +69,13 @@ class Graph:
             kept |= {(shift(j), shift(i)) for j in heard for i in told if j != i}
         return Graph(self.n - 1, tuple(sorted(kept)))
 
+    def rewired(self, k: int) -> tuple[Graph, list[tuple[int, int]]]:
+        """The graph without robot ``k`` whose survivors took over its links (j → i for each
+        j → k → i: a path through k has a shortcut, so strong connectivity is kept), and the
+        links added (numbered as in the new graph)."""
+        plain, wired = self.without(k), self.without(k, relay=True)
+        return wired, sorted(set(wired.edges) - set(plain.edges))
+
     def components(self) -> list[list[int]]:
         """The strongly connected components (0-based robots), largest first."""
         src = [j for j, _ in self.edges]

@@ -315,10 +315,12 @@ def refusals(s: Any, rule: str, where: str) -> tuple[list[str], list[str]]:
             'use onboard.thresholds = "l1", "block_row" or "drive" (docs/thresholds.md, '
             '"Over a network")'
         )
-    if s.fdir.excluded_relay:
+    if s.fdir.excluded_relay or s.fdir.rewire in ("adopt", "relay"):
+        key = "excluded_relay" if s.fdir.excluded_relay else "rewire"
         refused.append(
-            f"{where}: fdir.excluded_relay: an excluded robot relaying messages is modelled "
-            "for the ideal network only; set it to false with a [network] table"
+            f"{where}: fdir.{key}: re-wiring the survivors after an exclusion (links adopted "
+            "or relayed) is modelled for the ideal network only: the radios of a [network] "
+            'carry the scenario\'s links; set fdir.rewire = "none" (or leave it "auto")'
         )
     d = int(s.team.graph.in_degree().max()) if s.team.graph.edges else 0
     h_o = h * tm.round

@@ -440,8 +440,10 @@ class Monitor(OwnTable):
             t0, worst, last = self.spans[key]
             if final or t - last >= GAP - 1e-9:
                 name, robot = key
-                if name == "connectivity" and self.split and not final:
-                    continue  # an exclusion split the graph: lasts until the end
+                if name == "connectivity" and self.split:
+                    if not final:
+                        continue  # an exclusion split the graph: it lasts until the end
+                    last = t
                 del self.spans[key]
                 self.count[name] += 1
                 self.events.add(
@@ -464,7 +466,9 @@ class Monitor(OwnTable):
         return [
             p
             for k, p in enumerate(PREMISES)
-            if self.last[k, robot] >= since or self.team_last[k] >= since
+            if self.last[k, robot] >= since
+            or self.team_last[k] >= since
+            or (p == "connectivity" and self.split)  # a split lasts to the end of the run
         ]
 
     def finish(self, t: float) -> None:

@@ -158,11 +158,14 @@ def test_excluded_robot_is_avoided_as_an_obstacle():
 
 
 def test_exclusion_that_breaks_the_graph_is_reported_and_the_run_goes_on():
+    """Without re-wiring (``fdir.rewire = "none"``): the split is a warning, the robots that
+    cannot be judged get infinite thresholds, and the run goes on."""
     d = scenario_dict()
     d["obstacles"] = []
     # paper graph without robot 2: robot 3 has no in-neighbour left
     d["faults"] = [{"robot": 2, "kind": "stop", "t": 5.0}]
     d["duration"] = 20.0
+    d.setdefault("fdir", {})["rewire"] = "none"
     r = loop.simulate(make(d))
     out = r.summary
     assert out["status"] == "ok"

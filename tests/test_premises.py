@@ -224,15 +224,21 @@ def test_a_robot_lifted_off_the_floor_stops_the_run_naming_it():
 
 
 def test_a_graph_that_splits_at_an_exclusion_is_a_violated_premise():
-    """The ring 1 → 2 → 3 → 4 → 1 without robot 1 leaves robot 2 without an in-neighbour."""
-    s = load_scenario(
-        "paper_case", {"team.graph": [[1, 2], [2, 3], [3, 4], [4, 1]], "duration": 52.0}
-    )
-    r = simulate(s)
+    """The ring 1 → 2 → 3 → 4 → 1 without robot 1 leaves robot 2 without an in-neighbour
+    (``fdir.rewire = "none"``): the premise is violated from the exclusion to the end of the
+    run (the span was recorded with no length). Re-wired (the default), robot 2 hears robot
+    4 directly and the premise holds."""
+    ring = {"team.graph": [[1, 2], [2, 3], [3, 4], [4, 1]], "duration": 52.0}
+    r = simulate(load_scenario("paper_case", {**ring, "fdir.rewire": "none"}))
     (span,) = [e for e in r.events.of_kind("premise_violated") if e["premise"] == "connectivity"]
     (excl,) = r.summary["exclusions"]
     assert excl["robot"] == 1 and span["robot"] is None and span["t"] == excl["t"]
+    assert span["until"] == r.summary["simulated_time"] == 52.0
     assert not r.summary["premises"]["connectivity"]["held"]
+    rewired = simulate(load_scenario("paper_case", ring))
+    assert [e["robot"] for e in rewired.summary["exclusions"]] == [1]
+    (wired,) = rewired.events.of_kind("graph_rewired")
+    assert wired["links"] == [[4, 2]] and rewired.summary["premises"]["connectivity"]["held"]
 
 
 def test_paper_case_holds_every_premise_after_its_start_up():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import load_scenario, simulate
-from dftc_mujoco.onboard.recovery import Recovery
+from dftc_mujoco.onboard.recovery import Recovery, admitted
 from dftc_mujoco.onboard.thresholds import Thresholds
 
 
@@ -57,14 +57,21 @@ def test_a_robots_own_flag_neither_schedules_nor_confirms_its_exclusion():
 
 
 def test_more_robots_flagged_than_the_hypothesis_is_a_systemic_anomaly_until_all_flags_drop():
+    """The hypothesis bounds the robots faulty at once; a robot excluded before is no longer
+    counted (it counted, and no team of four could ever exclude a second stopped robot)."""
     rec = Recovery(dt_d_max=1.0, max_faults=2)
-    assert rec.hypothesis(0.1, [4, 5], excluded=0) is None  # two faults: admitted
-    begin = rec.hypothesis(0.2, [4, 5], excluded=1)  # one robot excluded before: three
-    assert begin["kind"] == "systemic_anomaly" and begin["robots"] == [5, 6]
-    assert rec.hypothesis(0.3, [7], excluded=1) is None  # fewer now, but flags are still up
-    end = rec.hypothesis(0.4, [], excluded=1)
-    assert end["kind"] == "systemic_anomaly_over" and end["robots"] == [5, 6, 8]
+    assert rec.hypothesis(0.1, [4, 5], excluded=0, members=8) is None  # two faults: admitted
+    assert rec.hypothesis(0.2, [4, 5], excluded=3, members=5) is None  # those before: gone
+    begin = rec.hypothesis(0.2, [4, 5, 6], excluded=1, members=7)  # three at once
+    assert begin["kind"] == "systemic_anomaly" and begin["robots"] == [5, 6, 7]
+    assert rec.hypothesis(0.3, [7], excluded=1, members=7) is None  # fewer now, flags still up
+    end = rec.hypothesis(0.4, [], excluded=1, members=7)
+    assert end["kind"] == "systemic_anomaly_over" and end["robots"] == [5, 6, 7, 8]
     assert rec.anomaly is None
+    auto = Recovery(dt_d_max=1.0, max_faults=0)  # "auto": a minority of the members now
+    assert auto.hypothesis(0.1, [0, 1], excluded=0, members=5) is None
+    assert auto.hypothesis(0.1, [0, 1], excluded=1, members=4)["max_faults"] == 1
+    assert admitted(0, 4) == 1 and admitted(0, 7) == 3 and admitted(2, 100) == 2
 
 
 # --------------------------------------------------------------------------- on physics
@@ -193,18 +200,19 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     from dftc_mujoco.events import describe
 
     soon, later = _two_stops(18.0), _two_stops(21.0)
-    (gone,) = soon.summary["exclusions"]
-    (restart,) = soon.summary["dt_d_max"]["settle_after_exclusions"]
+    gone, second = soon.summary["exclusions"]  # the second stop is excluded too, later
+    assert second["robot"] == 2 and second["t"] > gone["t"]
+    restart = soon.summary["dt_d_max"]["settle_after_exclusions"][0]
     assert gone["robot"] == 1 and restart["t"] == gone["t"] < 18.0
     t_s = restart["settle_time"]
     assert 18.0 < t_s < 21.0 and t_s > soon.summary["dt_d_max"]["settle_time"]
     (note,) = soon.events.of_kind("detection_not_guaranteed")
     assert note["robot"] == 2 and note["t"] == 18.0 and note["until"] == t_s
     assert note["restarted"] == gone["t"]  # says why: the exclusion restarted the thresholds
-    assert f"settle again after the exclusion at {gone['t']:.2f} s" in describe(note)
+    assert f"settling again after the exclusion at {gone['t']:.2f} s" in describe(note)
     first, second = fault_facts(soon.summary)
     assert first["after_settle"] and not second["after_settle"] and not second["in_domain"]
-    assert later.summary["dt_d_max"]["settle_after_exclusions"] == [restart]  # the same run so far
+    assert later.summary["dt_d_max"]["settle_after_exclusions"][0] == restart  # the same so far
     assert later.events.of_kind("detection_not_guaranteed") == []
     assert [f["after_settle"] for f in fault_facts(later.summary)] == [True, True]
     # a stop that begins in the very period of the exclusion is outside the restarted domain
@@ -240,7 +248,7 @@ def test_an_exclusion_within_a_faults_window_takes_that_fault_out_of_eq46s_domai
     (restart,) = cut.summary["dt_d_max"]["settle_after_exclusions"][:1]
     assert (note["t"], note["robot"], note["onset"]) == (gone["t"], 2, onset)
     assert note["until"] == restart["settle_time"] > gone["t"]
-    assert f"robot 2's Δt_d,max window (its fault at {onset:.2f} s)" in describe(note)
+    assert f"while robot 2's fault (at {onset:.2f} s) waited to be detected" in describe(note)
     first, second = fault_facts(cut.summary)
     window = second["dt_d_max"]
     assert onset < gone["t"] <= onset + window  # the exclusion falls within robot 2's window
@@ -307,7 +315,7 @@ def test_a_fault_too_close_to_the_end_for_eq46s_window_is_said_so():
         "dt_d_max": 5.0,
     }
     assert short.summary["detections"] == [] and short.summary["exclusions"] == []
-    assert "leaves 1.20 s of the run, less than Δt_d,max = 5.00 s" in describe(note)
+    assert "comes 1.20 s before the end of the run, less than the 5.00 s" in describe(note)
     for duration in (48.0, 60.0):
         done = simulate(load_scenario("paper_case", {"duration": duration}))
         assert done.events.of_kind("detection_past_end") == []
@@ -408,33 +416,49 @@ def test_a_healthy_robot_jammed_in_a_crowd_is_not_excluded():
         assert summary["exclusions"] == [] and summary["detections"] == []
 
 
-def test_an_excluded_robot_that_relays_keeps_the_survivors_connected():
+def test_the_survivors_are_rewired_around_an_excluded_robot():
     """A line with back-links 1 ⇄ 2 ⇄ 3 ⇄ 4: robot 2 stops and is excluded, which cuts robot 1
-    off from robots 3 and 4. Without a relay the split is reported (its groups and which
-    estimates lost their bound) and robot 1's own stop at 45 s goes unseen by anyone; with
-    ``fdir.excluded_relay`` robot 2's radio forwards 1 ⇄ 3, the graph stays strongly
-    connected and robots 3 and 4 flag robot 1."""
+    off from robots 3 and 4. Without re-wiring (``fdir.rewire = "none"``) the split is
+    reported (its groups and which estimates lost their bound), the connectivity premise is
+    violated from the split to the end of the run, and robot 1's own stop at 45 s goes unseen
+    by anyone. By default robots 1 and 3 adopt robot 2's links and hear each other directly
+    (a ``graph_rewired`` event), the graph stays strongly connected, robots 3 and 4 flag
+    robot 1's stop and robot 1 is excluded too; ``"relay"`` (robot 2's radio forwards them,
+    also ``fdir.excluded_relay = true``) gives the survivors the same graph."""
     line = [[1, 2], [2, 1], [2, 3], [3, 2], [3, 4], [4, 3]]
     faults = [{"robot": 2, "kind": "stop", "t": 30.0}, {"robot": 1, "kind": "stop", "t": 45.0}]
     out = {}
-    for relay in (False, True):
-        s = load_scenario(
-            "paper_case", {"team.graph": line, "faults": faults, "fdir.excluded_relay": relay}
-        )
-        out[relay] = simulate(s).summary
-    for summary in out.values():
-        assert [e["robot"] for e in summary["exclusions"]] == [2]
-    split = [e for e in out[False]["events"] if e["kind"] == "graph_not_strongly_connected"]
+    for mode in ("none", "auto", "relay"):
+        s = load_scenario("paper_case", {"team.graph": line, "faults": faults, "fdir.rewire": mode})
+        out[mode] = simulate(s).summary
+    assert [e["robot"] for e in out["none"]["exclusions"]] == [2]
+    split = [e for e in out["none"]["events"] if e["kind"] == "graph_not_strongly_connected"]
     assert len(split) == 1
     assert split[0]["components"] == [[3, 4], [1]] and split[0]["unheard"] == [[1], [3, 4]]
-    assert any("robots 3, 4 hear nothing from robots 1" in w for w in out[False]["warnings"])
+    assert any("robots 3, 4 hear nothing from robots 1" in w for w in out["none"]["warnings"])
+    (span,) = [
+        e
+        for e in out["none"]["events"]
+        if e["kind"] == "premise_violated" and e["premise"] == "connectivity"
+    ]
+    assert span["t"] == split[0]["t"] and span["until"] == 60.0  # not a zero-length span
+    assert not out["none"]["premises"]["connectivity"]["held"]
     late = {
-        relay: {d["by"] for d in o["detections"] if d["robot"] == 1 and d["t"] >= 45.0}
-        for relay, o in out.items()
+        mode: {d["by"] for d in o["detections"] if d["robot"] == 1 and d["t"] >= 45.0}
+        for mode, o in out.items()
     }
-    assert late[False] == set() and {3, 4} <= late[True]
-    assert not [e for e in out[True]["events"] if e["kind"] == "graph_not_strongly_connected"]
-    assert out[True]["warnings"] == []
+    assert late["none"] == set()
+    for mode in ("auto", "relay"):
+        summary = out[mode]
+        assert [e["robot"] for e in summary["exclusions"]] == [2, 1]
+        assert {3, 4} <= late[mode]
+        (wired,) = [e for e in summary["events"] if e["kind"] == "graph_rewired"][:1]
+        assert wired["robot"] == 2 and sorted(wired["links"]) == [[1, 3], [3, 1]]
+        assert wired["how"] == ("relay" if mode == "relay" else "adopt")
+        assert not [e for e in summary["events"] if e["kind"] == "graph_not_strongly_connected"]
+        assert summary["premises"]["connectivity"]["held"]
+    relayed = load_scenario("paper_case", {"team.graph": line, "fdir.excluded_relay": True})
+    assert relayed.fdir.excluded_relay  # the older key still means "relay"
 
 
 def test_relayed_edges_join_what_the_excluded_robot_heard_to_whom_it_told():
@@ -497,7 +521,9 @@ def test_a_healthy_robot_pushed_on_a_thinned_graph_is_not_excluded():
     until 26.3 s. The push moved their y_m for good, and on the graph left without robot 3
     the observers forget it with a time constant near 10 s, longer than T_s: their teammates
     still flagged them 32 s after the contact and both, healthy, were excluded at 58.78 s.
-    Now their decaying trace is waited out: robot 3 alone is excluded."""
+    Now their decaying trace is waited out: robot 3 alone is excluded. By default the
+    survivors adopt robot 3's links, the graph is not thinned and the trace decays sooner:
+    robot 3 alone is excluded there too."""
     from pathlib import Path
 
     from dftc_mujoco import scenario
@@ -506,6 +532,9 @@ def test_a_healthy_robot_pushed_on_a_thinned_graph_is_not_excluded():
     sp = spec_mod.load(Path(__file__).parent / "data" / "battery_v2.toml")
     d = spec_mod.scenario_dict(sp, spec_mod.draw(sp, 1380))
     assert d["team"]["robots"] == 16 and d["faults"][0]["robot"] == 3
+    rewired = simulate(scenario.from_dict(d)).summary
+    assert [e["robot"] for e in rewired["exclusions"]] == [3]
+    d.setdefault("fdir", {})["rewire"] = "none"  # the graph the run had: thinned
     summary = simulate(scenario.from_dict(d)).summary
     assert [e["robot"] for e in summary["exclusions"]] == [3]
     waited = [e for e in summary["events"] if e.get("reason") == "decaying"]

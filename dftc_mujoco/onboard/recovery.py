@@ -1,22 +1,24 @@
 """Recovery: the exclusion of a faulty robot at a common instant (eqs. 42-43, docs/notes.md, 10).
 
-The first flag raised on robot k by anyone fixes its exclusion instant
-t_r = min ⁱt_d + Δt_d,max (eq. 43); at t_r robot k is excluded if some member still flags it,
-and the exclusion is cancelled otherwise. Two rules keep the protocol from destroying the
-team (issue 20): exclusion needs teammates (a robot's own flag is reported but neither
-schedules nor confirms its own exclusion, unless ``self_exclusion``, the paper's eq. 43 read
+The first flag raised on robot k by anyone fixes its exclusion instant t_r = min ⁱt_d +
+Δt_d,max (eq. 43); at t_r robot k is excluded if some member still flags it, and the
+exclusion is cancelled otherwise. Two rules keep the protocol from destroying the team:
+exclusion needs teammates (a robot's own flag is reported but neither schedules
+nor confirms its own exclusion, unless ``self_exclusion``, the paper's eq. 43 read
 literally), and a fault hypothesis: when more robots are flagged by teammates at one instant
-than ``max_faults`` admits (those already excluded counted), something systemic is wrong (a
-premise, not a fault): a ``systemic_anomaly`` event names them and nobody is excluded until
-every flag is down. A contact postpones: a robot whose bumper touched something from
-T_s + Δt_d,max before its first flag on (a contact breaks the premises, and the flags it
-causes say nothing of the actuators) is excluded only if a teammate still flags it T_s +
-Δt_d,max after its last contact (``postpone_on_contact``): a contact is a new start for the
-residuals it disturbed, which eq. 46 covers from the thresholds' settle time T_s on (with
-T_s beyond the run, no exclusion of a robot that touched something is due within it).
-:class:`Recovery` keeps that bookkeeping and says what is due; :class:`~.team.Team` owns
-the vectors that an exclusion resizes and applies it (the observers, thresholds and
-decisions drop the robot, the formation is re-planned).
+than :func:`admitted` allows (``max_faults``, or a minority of the members left), something
+systemic is wrong (a premise, not a fault): a ``systemic_anomaly`` event names them and
+nobody is excluded until every flag is down. A robot excluded before is no longer counted: a
+later fault is judged by the team that is left, as the first was. A contact postpones: a
+robot whose bumper touched something from T_s + Δt_d,max before its first flag on (a contact
+breaks the premises, and the flags it causes say nothing of the actuators) is excluded only
+if a teammate still flags it T_s + Δt_d,max after its last contact
+(``postpone_on_contact``): a contact is a new start for the residuals it disturbed, which
+eq. 46 covers from the thresholds' settle time T_s on (with T_s beyond the run, no exclusion
+of a robot that touched something is due within it). :class:`Recovery` keeps that
+bookkeeping and says what is due; :class:`~.team.Team` owns the vectors that an exclusion
+resizes and applies it (the observers, thresholds and decisions drop the robot, the
+formation is re-planned).
 Robots are on the original axis (0-based); events carry them 1-based.
 """
 
@@ -33,6 +35,12 @@ from ..graph import Graph
 #: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
 #: at the last postponement for the flags to count as a contact's decaying trace
 DECAYING = 0.9
+
+
+def admitted(max_faults: int, members: int) -> int:
+    """How many robots may be faulty at once in a team of ``members``: ``max_faults``, or
+    with 0 ("auto") a minority of them, ⌊(M − 1)/2⌋ (at least 1)."""
+    return max_faults if max_faults > 0 else max(1, (members - 1) // 2)
 
 
 class Recovery:
@@ -86,24 +94,26 @@ class Recovery:
         """Whether robot ``by`` flagging ``robot`` counts towards its exclusion."""
         return by != robot or self.self_exclusion
 
-    def hypothesis(self, t: float, flagged: list[int], excluded: int) -> dict[str, Any] | None:
-        """The robots flagged by teammates now, and how many were excluded already: an event
-        when a ``systemic_anomaly`` begins or ends.
+    def hypothesis(
+        self, t: float, flagged: list[int], excluded: int, members: int
+    ) -> dict[str, Any] | None:
+        """The robots flagged by teammates now among ``members`` robots (``excluded`` were
+        excluded before): an event when a ``systemic_anomaly`` begins or ends.
 
-        It begins when the excluded and the flagged robots together are more than
-        ``max_faults`` (the faulty robots of a mission are counted once excluded too, so no
-        run ever excludes more than ``max_faults`` robots), and it lasts until no robot is
-        flagged by a teammate any more: the whole episode is systemic, and every exclusion
-        that comes due meanwhile is cancelled."""
+        It begins when more robots are flagged at once than :func:`admitted` allows in the
+        team as it is now, and it lasts until no robot is flagged by a teammate any more: the
+        whole episode is systemic, and every exclusion that comes due meanwhile is
+        cancelled."""
         if self.anomaly is None:
-            if excluded + len(flagged) <= self.max_faults:
+            bound = admitted(self.max_faults, members)
+            if len(flagged) <= bound:
                 return None
             self.anomaly = sorted(flagged)
             return make(
                 t,
                 "systemic_anomaly",
                 robots=[r + 1 for r in self.anomaly],
-                max_faults=self.max_faults,
+                max_faults=bound,
                 excluded=excluded,
             )
         if flagged:
@@ -258,3 +268,16 @@ def split_event(t: float, graph: Graph, members: np.ndarray) -> dict[str, Any]:
         unheard=cost,  # per component: the robots whose estimates lost their bound
         pairs=int(unheard.sum()),
     )
+
+
+def worst_ratio(r_norm: np.ndarray, mu: np.ndarray, p: int) -> float:
+    """The largest ‖ⁱr_k‖ / ⁱμ_k among robot k's teammates (k at member position ``p``, the
+    (M, M) residual norms and thresholds): what each teammate knows of k, gathered as its
+    flags are (NaN when no teammate can judge it)."""
+    r = np.asarray(r_norm, float)[:, p]
+    m = np.asarray(mu, float)[:, p]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(m > 0, r / m, np.inf)
+    ratio[p] = 0.0  # its own judgement is not a teammate's
+    ratio = ratio[np.isfinite(ratio)]
+    return float(ratio.max()) if len(ratio) else float("nan")

@@ -52,7 +52,7 @@ from .period import (
     team_period_flat,
 )
 from .radio import Radios, Rounds
-from .recovery import Recovery, split_event
+from .recovery import Recovery, admitted, split_event, worst_ratio
 from .sharing import PARALLEL_FROM, Sharing, workers
 from .sighting import Sighting
 from .streaming import streams
@@ -83,7 +83,6 @@ _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decisio
 HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
-COMPILED_ALLOWED = True  # False forces the general path everywhere (benchmarks, tests)
 PARALLEL_ALLOWED = True  # False keeps the compiled period in one thread (benchmarks, tests)
 
 
@@ -151,7 +150,7 @@ class Team:
         # plug-in blocks are told the time of each period (the paper's read none)
         self._timed = [b for name, b in chosen.items() if type(b) is not PAPER_BLOCKS[name]]
         # the compiled period contains the paper's blocks, not subclasses of them
-        self.compiled = bool(config.compiled and COMPILED_ALLOWED and runs_compiled(chosen))
+        self.compiled = bool(config.compiled and runs_compiled(chosen))
         self.active = np.ones(n, bool)  # member of the team, on the original robot axis
         self.u = np.zeros((n, 2))
         self.u_bar = np.zeros((n, 2))
@@ -353,7 +352,8 @@ class Team:
         if code & RAISED:  # the compiled period's flags are the decision's own array
             self._report(t, self.decision.raised if self.compiled else self._raised)
         if radios is not None and self.rounds.now and self.config.fdir:
-            mf = self.config.max_faults  # corrupted messages flag every column at once
+            # corrupted messages flag every column at once
+            mf = admitted(self.config.max_faults, len(self.members))
             self.events += radios.message_faults(t, self.flag, self.members, mf)
         if code & RAISED or self.recovery.anomaly is not None:
             self._hypothesis(t)
@@ -583,8 +583,8 @@ class Team:
         self.events += self.recovery.flagged(t, pairs)
 
     def _hypothesis(self, t: float) -> None:
-        """A ``systemic_anomaly`` begins or ends: more robots flagged by teammates now (and
-        excluded before) than the fault hypothesis admits (``fdir.max_faults``)."""
+        """A ``systemic_anomaly`` begins or ends: more robots flagged by teammates now than
+        the fault hypothesis admits in the team as it is (``fdir.max_faults``)."""
         m = len(self.members)
         out = self._teammates[:m]
         flag = np.asarray(self.flag, bool)
@@ -592,7 +592,8 @@ class Team:
             np.any(flag, axis=0, out=out)
         else:
             flagged_by_teammates(flag, out)
-        event = self.recovery.hypothesis(t, [int(k) for k in self.members[out]], len(self.gone))
+        flagged = [int(k) for k in self.members[out]]
+        event = self.recovery.hypothesis(t, flagged, len(self.gone), m)
         if event is not None:
             self.events.append(event)
 
@@ -613,7 +614,9 @@ class Team:
                 reason = "flagged only by itself" if flaggers else "not flagged"
                 self.events.append(self.recovery.cancel(t, robot, reason))
                 continue
-            later = self.recovery.postpone(t, robot, self._worst_ratio(p))
+            if not self._norms_kept:  # _compiled keeps them while an exclusion is pending
+                raise RuntimeError("the residuals' norms of the last period were not kept")
+            later = self.recovery.postpone(t, robot, worst_ratio(self.r_norm, self.mu, p))
             if later is not None:  # a contact may explain the flags: wait Δt_d,max past it
                 self.events.append(later)
                 continue
@@ -639,19 +642,6 @@ class Team:
             if not self.graph.is_strongly_connected():
                 self.events.append(split_event(t, self.graph, self.members))
 
-    def _worst_ratio(self, p: int) -> float:
-        """The largest ‖ⁱr_k‖ / ⁱμ_k among robot k's teammates (k at member position ``p``):
-        what each teammate knows of k, gathered as its flags are."""
-        if not self._norms_kept:  # _compiled keeps them while an exclusion is pending
-            raise RuntimeError("the residuals' norms of the last period were not kept")
-        r = np.asarray(self.r_norm, float)[:, p]
-        mu = np.asarray(self.mu, float)[:, p]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(mu > 0, r / mu, np.inf)
-        ratio[p] = 0.0  # its own judgement is not a teammate's
-        ratio = ratio[np.isfinite(ratio)]
-        return float(ratio.max()) if len(ratio) else float("nan")
-
     def _after_exclusion(self, t: float) -> None:
         """Eq. 46 for the team left after an exclusion at ``t``: its domain from the
         restarted rule's own T_s on (its thresholds start again from the residuals' bound, a
@@ -673,6 +663,16 @@ class Team:
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
 
+    def _rewire(self, t: float, p: int, gone: int) -> None:
+        """The survivors' graph once robot ``gone`` (member ``p``) left: with ``rewire``
+        "adopt" or "relay" they take over its links (:meth:`~.graph.Graph.rewired`, a
+        ``graph_rewired`` event names the links added); with "none" its links go with it."""
+        how = self.config.rewire
+        self.graph, added = self.graph.rewired(p) if how != "none" else (self.graph.without(p), [])
+        if added:
+            links = [[int(self.members[j]) + 1, int(self.members[i]) + 1] for j, i in added]
+            self.events.append(make(t, "graph_rewired", robot=gone + 1, links=links, how=how))
+
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""
         keep = np.delete(np.arange(len(self.members)), p)
@@ -683,8 +683,9 @@ class Team:
         old_offsets, _ = self.plan.at(t)
         self.gone = np.append(self.gone, self.members[p])
         self.active[self.members[p]] = False
+        gone = int(self.members[p])
         self.members = self.members[keep]
-        self.graph = self.graph.without(p, relay=self.config.excluded_relay)
+        self._rewire(t, p, gone)
         t_rule = self.rounds.restart_time(t)  # the rules restart at the next round
         for name in ("observer", "controller", "supervisor", "thresholds", "decision", "detector"):
             self.blocks[name].drop(p, self.graph, t_rule if name == "thresholds" else t)

@@ -264,6 +264,10 @@ class Fdir:
     # (onboard/estimate_alarm.py)
     confirm_by_estimate: bool = True
     excluded_relay: bool = False  # an excluded robot keeps relaying its neighbours' messages
+    # after an exclusion: "adopt" (each robot that heard the excluded one hears the robots
+    # it heard, directly), "relay" (the excluded robot's radio forwards them), "none" (its
+    # links go with it), or "auto": adopt on the ideal network, none over a [network]
+    rewire: str = "auto"
 
 
 @dataclass(frozen=True)

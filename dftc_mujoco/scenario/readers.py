@@ -569,7 +569,13 @@ def _fdir(t: Table) -> Fdir:
         postpone_on_contact=t.boolean("postpone_on_contact", True),
         confirm_by_estimate=t.boolean("confirm_by_estimate", True),
         excluded_relay=t.boolean("excluded_relay", False),
+        rewire=t.string("rewire", "auto", choices=("auto", "adopt", "relay", "none")),
     )
+    if f.excluded_relay and f.rewire not in ("auto", "relay"):
+        t.report(
+            "excluded_relay",
+            f'true means rewire = "relay", but rewire = "{f.rewire}"; keep one of the two',
+        )
     t.finish()
     return f
 

@@ -458,20 +458,26 @@ class _Enveloped(Thresholds):
 
         For a healthy robot k the rule bounds every ‖ˡr_k(t)‖ by ˡμ_k(t); the initial
         part of the new residual is −P'_k ỹ'_k(t), whose row l differs from the old
-        −(P_k ỹ_k)_l = ˡr_k − δ_lk η_k only by ˡỹ_k − ᵖỹ_k when p was an in-neighbour of l,
-        and ỹ_k = 1 η_kᵀ − P_k⁻¹ r_k gives ‖ˡỹ_k − ᵖỹ_k‖ ≤ Σ_m |[P_k⁻¹]_lm − [P_k⁻¹]_pm| ᵐμ_k.
+        −(P_k ỹ_k)_l = ˡr_k − δ_lk η_k by −(ᵖỹ_k − ˡỹ_k) when p was an in-neighbour of l, and
+        by + (ʲỹ_k − ˡỹ_k) for each in-neighbour j that l gained when the survivors were
+        re-wired around p (``graph`` holds j → l, the old one j → p → l); ỹ_k = 1 η_kᵀ −
+        P_k⁻¹ r_k gives ‖ˡỹ_k − ʲỹ_k‖ ≤ Σ_m |[P_k⁻¹]_lm − [P_k⁻¹]_jm| ᵐμ_k for any j.
         """
         mu = np.array(self.mu(t), dtype=float)
         rows = mu + self._residual_extra() * np.eye(len(mu))
         old = self.graph
-        out_p = [i for j, i in old.edges if j == p]
-        if out_p:
-            diff = _inverse_row_differences(old, p, np.array(out_p))  # (L, N, N): [l, m, k]
+        old_index = np.delete(np.arange(old.n), p)  # the survivors' old numbers
+        gained = set(graph.edges) - set(old.without(p).edges)
+        pairs = [(i, p) for j, i in old.edges if j == p]  # the links that went with p
+        pairs += [(int(old_index[i]), int(old_index[j])) for j, i in sorted(gained)]
+        if pairs:
+            diff = _inverse_row_differences(old, pairs)  # (L, N, N): [pair, m, k]
             with np.errstate(invalid="ignore"):
                 spread = np.nansum(np.abs(diff) * mu[None], axis=1)  # Σ_m |ΔG| μ_mk
             spread[~np.isfinite(diff).all(axis=1)] = np.inf
-            rows[out_p] += spread
-        keep = np.delete(np.arange(old.n), p)
+            for (l, _), extra in zip(pairs, spread, strict=True):
+                rows[l] += extra
+        keep = old_index
         alpha = rows[np.ix_(keep, keep)].max(axis=0)
         self._begin(graph, Start(alpha), t)
 
@@ -535,15 +541,15 @@ def grounded_solve(
     return y - w1 * a1 - w2[:, None] * a2
 
 
-def _inverse_row_differences(graph: Graph, p: int, rows: np.ndarray) -> np.ndarray:
-    """[P_k⁻¹]_{l,m} − [P_k⁻¹]_{p,m} for l in ``rows``, every m and k: (L, N, N) as [l, m, k];
-    NaN where k does not reach every robot (P_k singular)."""
+def _inverse_row_differences(graph: Graph, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """[P_k⁻¹]_{l,m} − [P_k⁻¹]_{j,m} for each pair (l, j) of ``pairs``, every m and k: (L, N, N)
+    as [pair, m, k]; NaN where k does not reach every robot (P_k singular)."""
     n = graph.n
     ks = np.flatnonzero(reaches_all(graph))
-    out = np.full((len(rows), n, n), np.nan)
-    for a, l in enumerate(rows):
+    out = np.full((len(pairs), n, n), np.nan)
+    for a, (l, j) in enumerate(pairs):
         e = np.zeros((n, len(ks)))
         e[l] += 1.0
-        e[p] -= 1.0
+        e[j] -= 1.0
         out[a][:, ks] = grounded_solve(graph, ks, e, transpose=True)
     return out
