@@ -11,6 +11,7 @@ import numpy as np
 
 from ..atomic import atomic_write, write_text
 from ..render.figures import new_figure
+from .task import OUTCOMES
 
 
 def _pct(a: float | None) -> str:
@@ -107,6 +108,30 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "success_after_recovery": _rate([r["success"] for r in excluded_stop]),
         "success_all": _rate([r["success"] for r in ok]),
         "margin_max": max((r["margin"] for r in ok if r.get("margin") is not None), default=None),
+        **_outcomes(ok),
+    }
+
+
+def _outcomes(ok: list[dict[str, Any]]) -> dict[str, Any]:
+    """What the missions and the faults came to (outcomes.py): the share of missions
+    completed, each fault's outcome counted, and the stops that came after an earlier
+    exclusion in their run (a later fault, judged by the team that was left)."""
+    found = [(r, f) for r in ok for f in json.loads(r.get("fault_outcomes") or "[]")]
+    counts = {o: sum(f["outcome"] == o for _, f in found) for o in OUTCOMES}
+    later = []
+    for r, f in found:
+        gone = json.loads(r.get("fault_outcomes") or "[]")
+        before = [g["excluded_at"] for g in gone if g["excluded_at"] is not None]
+        if f["kind"] == "stop" and before and min(before) < f["t"]:
+            later.append(f["outcome"] == "excluded")
+    done = [r["mission_completed"] for r in ok if r.get("mission_completed") is not None]
+    slot = [r["healthy_slot_rms"] for r in ok if r.get("healthy_slot_rms") is not None]
+    return {
+        "fault_outcomes": counts,
+        "later_stops": len(later),
+        "later_stops_excluded": int(sum(later)),
+        "mission_completed_rate": _rate(done),
+        "healthy_slot_rms_median": float(np.median(slot)) if slot else None,
     }
 
 
@@ -187,6 +212,18 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"| mission success after recovery (final errors < 5 cm) | "
         f"{_pct(s['success_after_recovery'])} |"
     )
+    counts = s["fault_outcomes"]
+    lines += [
+        "| faults: excluded / detected, not excluded / compensated / missed / undecided | "
+        + " / ".join(str(counts[o]) for o in OUTCOMES)
+        + " |",
+        f"| stops after an earlier exclusion in their run: excluded | "
+        f"{s['later_stops_excluded']} of {s['later_stops']} |",
+        f"| missions completed (the survivors in formation, within tolerance, at the end) | "
+        f"{_pct(s['mission_completed_rate'])} |",
+        f"| healthy robots' distance from their slots after the transient: median of runs' "
+        f"rms | {_num(s['healthy_slot_rms_median'], 4)} m |",
+    ]
     lines.append("")
     if ok and any(r["delay_first"] is not None for r in ok):
         d = [r["delay_first"] for r in ok if r["delay_first"] is not None]
@@ -458,8 +495,9 @@ def _method_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
         "| method | runs | stops detected | by all | first flag: median / p95 / max [s] | "
         "last flag: max [s] | excluded: max [s] | biases detected | healthy flags: all / "
         "premises held | by premise | healthy excluded | final formation error: median [m] | "
-        "estimation error: largest, median over runs [m] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "estimation error: largest, median over runs [m] | missions completed | faults: "
+        "excluded / detected / compensated / missed / undecided |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (name,), rs in groups.items():
         m = summarise(rs)
@@ -474,7 +512,10 @@ def _method_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
             f"{m['false_flags']} / {m['false_flags_premises_held']} | {premise} | "
             f"{m['healthy_exclusions']} | "
             f"{_num(float(np.median(formation)) if formation else None, 3)} | "
-            f"{_num(float(np.median(est)) if est else None, 3)} |"
+            f"{_num(float(np.median(est)) if est else None, 3)} | "
+            f"{_pct(m['mission_completed_rate'])} | "
+            + " / ".join(str(m["fault_outcomes"][o]) for o in OUTCOMES)
+            + " |"
         )
     fig, axes = new_figure(figsize=(9, 3.5), ncols=2)
     names = [k[0] for k in groups]

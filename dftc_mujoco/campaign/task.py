@@ -284,6 +284,8 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) ->
             and err["final_centroid"] < 0.05
             and err["final_formation"] < 0.05
         ),
+        # what the mission achieved, apart from who is still counted (outcomes.py)
+        **_mission_facts(summary),
         "margin": summary.get("margin"),
         "min_obstacle_clearance": summary["min_obstacle_clearance"],
         "warnings": len(summary["warnings"]),
@@ -291,4 +293,23 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) ->
         "thresholds": summary.get("onboard", {}).get("blocks", {}).get("thresholds"),
         "blocks": json.dumps(summary.get("onboard", {}).get("blocks", {}), sort_keys=True),
         "duration": summary["duration"],
+    }
+
+
+#: each fault's outcome (outcomes.fault_outcomes), counted per row
+OUTCOMES = ("excluded", "detected", "compensated", "missed", "undecided")
+
+
+def _mission_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """The mission's outcome and each fault's, from the summary (None where it has none:
+    the row of a run written before they existed)."""
+    m = summary.get("mission") or {}
+    found = summary.get("fault_outcomes") or []
+    return {
+        "mission_completed": m.get("completed"),
+        "healthy_slot_rms": m.get("healthy_slot_rms"),
+        "final_slot_error": m.get("final_slot_error"),
+        "final_centroid_error": m.get("final_centroid_error"),
+        "fault_outcomes": json.dumps(found),
+        **{f"faults_{o}": sum(f["outcome"] == o for f in found) for o in OUTCOMES},
     }
