@@ -44,9 +44,9 @@ def _factor(x: float) -> str:
 def _length(v: float) -> str:
     """A length for a reader: 14.8 cm, 1.9 mm, 2.35 m."""
     a = abs(v)
-    if a >= 1.0:
+    if a >= 0.9995:
         return f"{v:.3g} m"
-    if a >= 0.01:
+    if a >= 0.009995:
         return f"{v * 100:.3g} cm"
     return f"{v * 1000:.2g} mm"
 
@@ -93,15 +93,13 @@ def mission_line(s: dict[str, Any]) -> str:
     if not m or not m["survivors"]:
         return "mission:      not judged (no robot left in the team)"
     n = len(m["survivors"])
-    who = "the team" if n == s["robots"] else f"the {n} remaining robots"
+    who = "the team" if n == s["robots"] else f"the {n} robots left"
     where = (
-        f"{who} ended in formation within {_length(m['final_slot_error'])} of their slots "
-        f"(tolerance {_length(m['tolerance'])}), {_length(m['final_centroid_error'])} from "
-        "the path"
+        f"{who} ended {_length(m['final_slot_error'])} from their slots (tolerance "
+        f"{_length(m['tolerance'])}), {_length(m['final_centroid_error'])} from the path"
     )
     if m["completed"]:
         return f"mission:      completed: {where}"
-    where = where.replace("ended in formation within", "ended up to")
     if s["status"] != "ok":
         return f"mission:      not completed: the run ended early ({s['status']}); {where}"
     return f"mission:      NOT completed: {where}"
@@ -115,22 +113,21 @@ def fault_lines(s: dict[str, Any]) -> list[str]:
         kind = f["outcome"]
         if kind in ("excluded", "detected"):
             delay = f["first_flag"] - f["t"]
-            by = f["flagged_by"]
-            said = f"first flagged {delay:.2f} s after it, by robot{'s' * (len(by) > 1)} "
-            said += _robots(by)
+            by = ", ".join(str(b) for b in f["flagged_by"])
+            said = f"flagged {delay:.2f} s later (by {by})"
             if kind == "excluded":
-                said = f"excluded at {f['excluded_at']:.2f} s; " + said
+                said += f", excluded at {f['excluded_at']:.2f} s"
             else:
-                said = "detected, not excluded: " + said
+                said += ", NOT excluded"
         elif kind == "compensated":
             said = (
-                "compensated on board: flagged by no teammate, and the robot stayed within "
-                f"{_length(f['max_slot_error'])} of its slot"
+                f"compensated on board, flagged by nobody (off its slot by "
+                f"{_length(f['max_slot_error'])} at most)"
             )
         elif kind == "missed":
             said = (
-                f"MISSED: flagged by no teammate while the robot drifted up to "
-                f"{_length(f['max_slot_error'])} from its slot"
+                f"MISSED: flagged by nobody while it drifted {_length(f['max_slot_error'])} "
+                "from its slot"
             )
         else:
             said = "undecided: too close to the end of the run to tell"
@@ -164,8 +161,7 @@ def false_alarm_line(s: dict[str, Any]) -> str:
     if margin is None:
         return "false alarms: none (detection is off)"
     return (
-        f"false alarms: none (residuals of robots without a fault peaked at {margin:.0%} of "
-        "their thresholds)"
+        f"false alarms: none (healthy robots' residuals peaked at {margin:.0%} of their thresholds)"
     )
 
 
@@ -177,11 +173,11 @@ def obstacle_line(s: dict[str, Any]) -> str | None:
     margin = s["min_safe_distance_margin"]
     verdict = "no contact" if gap > 0 else f"CONTACT ({_length(-gap)} deep)"
     inside = (
-        f"kept outside the safe distance d by {_length(margin)}"
+        f"outside the safe distance d by {_length(margin)}"
         if margin >= 0
         else f"{_length(-margin)} inside the safe distance d at the closest"
     )
-    return f"obstacles:    {verdict}; closest surface gap {_length(gap)}, {inside}"
+    return f"obstacles:    {verdict} (closest gap {_length(gap)}); {inside}"
 
 
 def premises_line(result: RunResult) -> str | None:
@@ -198,10 +194,9 @@ def premises_line(result: RunResult) -> str | None:
         return "premises:     all held (what the detection thresholds assume)"
     if set(broken) <= start and not later:
         end = max(e["until"] for e in spans)
-        words = "; ".join(f"{p}: {PLAIN.get(p, p)}" for p in sorted(start))
         return (
-            f"premises:     all held but in the start from rest (its first {end:.2f} s: "
-            f"{words}, as the drives catch up with their first commands)"
+            f"premises:     all held after the start from rest ({', '.join(sorted(start))} "
+            f"for its first {end:.2f} s: the drives lag their first commands)"
         )
     parts = []
     for p in broken:
