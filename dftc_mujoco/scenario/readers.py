@@ -286,7 +286,8 @@ def _initial_positions(
     t: Table, n: int | None, mission: Mission | None, seed: int
 ) -> np.ndarray | None:
     """A list of N [x, y], or a generated layout: {layout = "formation", jitter = m} (the
-    planned slots at t = 0), {layout = "random", spread = m, spacing = m} (uniform in a square
+    planned slots at t = 0, each moved by up to ±jitter per axis; with ``spacing``, robots at
+    least that far apart), {layout = "random", spread = m, spacing = m} (uniform in a square
     of half-width ``spread`` around the path's start, points ``spacing`` apart) or
     {layout = "circle", radius = m} (on a circle around the start, in a shuffled order;
     radius 0: the formation's)."""
@@ -306,7 +307,8 @@ def _initial_positions(
     layout = lay.string("layout", choices=("formation", "random", "circle"))
     jitter = lay.number("jitter", 0.0, low=0.0, strict_low=False)
     spread = lay.number("spread", 5.0, low=0.0)  # random: half-width of the square [m]
-    spacing = lay.number("spacing", 0.5, low=0.0, strict_low=False)  # random: least gap [m]
+    # the least distance between two robots [m] (random; formation: only where given)
+    spacing = lay.number("spacing", 0.5, low=0.0, strict_low=False)
     radius = lay.number("radius", 0.0, low=0.0, strict_low=False)  # circle: 0 = formation's
     lay.finish()
     if (
@@ -358,7 +360,22 @@ def _initial_positions(
         pts_ = start + r * np.c_[np.cos(ang), np.sin(ang)]
         _off_the_floor(t, "initial_positions", pts_, "the layout puts robot {}")
         return _ro(pts_)
-    pts_ = start + offsets + rng.uniform(-jitter, jitter, (n, 2))
+    if "spacing" not in lay.data:  # each slot moved by up to ±jitter per axis
+        pts_ = start + offsets + rng.uniform(-jitter, jitter, (n, 2))
+    else:  # and each robot at least ``spacing`` from the ones placed before it
+        pts_ = np.empty((n, 2))
+        for i in range(n):
+            for _ in range(1000):
+                pts_[i] = start + offsets[i] + rng.uniform(-jitter, jitter, 2)
+                if i == 0 or np.hypot(*(pts_[:i] - pts_[i]).T).min() >= spacing:
+                    break
+            else:
+                lay.report(
+                    "spacing",
+                    f"cannot keep robot {i + 1} {spacing:g} m from the others within ±{jitter:g}"
+                    " m of its slot: lower spacing or jitter",
+                )
+                return None
     _off_the_floor(t, "initial_positions", pts_, "the layout puts robot {}")
     return _ro(pts_)
 
