@@ -309,3 +309,13 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
             f'swing, thresholds raise false alarms); set gains.G = "auto" or at least {need_g:g}'
         )
     return out
+
+
+def governed_text(s: Scenario, name: str, applied: float, flown: float) -> str:
+    """The warning of a path flown slower than asked (:func:`~.mission.governed_speed`)."""
+    return (
+        f"mission.centroid.speed = {s.mission.centroid.speed:g} m/s leaves the {name} robots no "
+        f"room in their applied range of ±{applied:.3g} m/s per axis (the command "
+        "range less the compensation's headroom): the path is flown at "
+        f"{flown:.3g} m/s, so that their commands stay inside it (summary: mission_speed)"
+    )

@@ -30,6 +30,7 @@ from .assembly import (
     calibration_warnings,
     effective_G,
     effective_xi_bar,
+    governed_text,
     make_blocks,
     team_config,
 )
@@ -104,6 +105,7 @@ class Simulation:
         #: the compiled period is being compiled by a background process for later runs
         self.warming: warm.Warming | None = None
         self._search = [Path(p) for p in search]
+        self._asked_speed = scenario.mission.centroid.speed  # the path governor may lower it
         self._given = dict(blocks or {})
         self.block_names = block_names(scenario, self._given)
         # each robot's model; files are recorded by their absolute paths
@@ -208,6 +210,13 @@ class Simulation:
             s.fdir.initial_error_bound, x0, slots, s.noise.eta_bar, meaning, str(s.source)
         )
         config = team_config(s, model, limit, self.start_bound.value)
+        flown = mission.governed_speed(s.mission.centroid.speed, config.input_limit, limit)
+        if flown is not None:  # the path governor: commands inside the drives' applied range
+            said = governed_text(s, model.name, config.input_limit, flown)
+            self.events.add(0.0, "warning", message=said)
+            self.scenario = s = s.with_overrides(speed=flown)
+            self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
+            config = team_config(s, model, limit, self.start_bound.value)
         every = max(1, round(0.1 / dt))  # the path every 0.1 s is enough to check it
         found = checks.preflight(
             s,
@@ -660,6 +669,8 @@ class Simulation:
         summary["build_time"] = self._build
         summary["dt_d_max"] = self.team.dt_d_max_info
         summary["compile_time"] = self.compile_time
+        flown = self.scenario.mission.centroid.speed
+        summary["mission_speed"] = {"asked": self._asked_speed, "flown": flown}
         summary["onboard"] = {"path": self.team.path, "blocks": dict(self.block_names)}
         if self.warming is not None:
             summary["onboard"]["compiling_in_background"] = True

@@ -7,6 +7,7 @@ and both J x and J⁻¹ σ are computed in O(N n) without forming J.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -238,6 +239,24 @@ def _eval_path(segments, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         remaining &= ~m
         offset += seg_l
     return pos, tan
+
+
+#: the share of the robots' applied range the path governor lets the path's speed take; the
+#: rest is for the formation's corrections and the supervisor's avoidance
+GOVERNED_SHARE = 0.85
+
+
+def governed_speed(speed: float, applied: float, command: float) -> float | None:
+    """The path speed a team flies when ``speed`` [m/s], inside its drives' command range
+    ``command``, leaves them no room: the robots' commands stay within their applied range
+    ``applied`` (per axis: the command range less the compensation's headroom) only if the
+    path takes at most :data:`GOVERNED_SHARE` of it. None when ``speed`` fits, when no range
+    is known, or beyond the command range (a path no robot of the team can follow: the
+    checks refuse it)."""
+    limit = min(applied, command)
+    if not math.isfinite(limit) or speed <= GOVERNED_SHARE * limit or speed > command:
+        return None
+    return GOVERNED_SHARE * limit
 
 
 def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:

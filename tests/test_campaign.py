@@ -706,6 +706,34 @@ def test_methods_meet_the_same_draws_and_are_reported_side_by_side(tmp_path):
         spec.load(path)
 
 
+def test_the_none_method_shows_what_fault_detection_buys(tmp_path):
+    """A built-in ``decision = "none"`` (no detection, no isolation) beside the paper's FDI on
+    the same draw, a stop at 10 s: without FDI nobody is flagged, the stopped robot stays in
+    the team and the mission is not completed; with it the stop is excluded and the robots
+    left complete it. The rows carry the mission's outcome and each fault's, and the report's
+    methods table shows both. A [methods.NAME.fdir] table reaches the scenario's [fdir]."""
+    path = tmp_path / "n.toml"
+    path.write_text(
+        'name = "n"\nscenario = "paper_case"\nruns = 2\nseed = 5\n[set]\nduration = 30.0\n'
+        '[vary]\nfault_kind = ["stop"]\nfaulty_robot = [1]\nfault_time = [10.0, 10.0]\n'
+        '[methods.fdi]\n[methods.none]\ndecision = "none"\n[methods.none.fdir]\n'
+        "compensate = false\n"
+    )
+    s = spec.load(path)
+    blind = spec.scenario_for(s, spec.draw(s, 1))
+    assert blind.onboard.decision == "none" and not blind.fdir.compensate
+    out = tmp_path / "out"
+    rows = {r["method"]: r for r in runner.run(s, out, workers=1, progress=False).rows}
+    fdi, none = rows["fdi"], rows["none"]
+    assert none["false_flags"] == 0 and json.loads(none["excluded"]) == []
+    assert none["faults_missed"] == 1 and none["mission_completed"] is False
+    assert fdi["faults_excluded"] == 1 and fdi["mission_completed"] is True
+    assert fdi["final_slot_error"] < 0.05 < none["final_slot_error"]
+    report.write(list(rows.values()), out, "n")
+    text = (out / "report.md").read_text()
+    assert "| none | 1 |" in text and "missions completed" in text
+
+
 def test_a_client_server_that_gave_up_on_the_driver_says_what_to_do():
     """Ray's client server on a loaded head gives up on a driver's own server after 30 s; the
     one line said only "Initialization failure from server" (seen in CI, 2026-11-27)."""

@@ -303,18 +303,36 @@ def test_a_fourth_model_from_an_mjcf_file(tmp_path):
     assert summary["min_obstacle_clearance"] > 0.0
 
 
-def test_a_path_faster_than_the_applied_range_is_refused_before_the_run():
+def test_a_path_faster_than_the_applied_range_is_flown_slower_and_said_so():
     """The battery's diffdrives at 0.6 m/s: within the 0.7 m/s command range but beyond the
     0.59 m/s the applied input keeps after the compensation's headroom, so every command
-    stayed saturated and a healthy robot was excluded. Refused now, naming the key."""
+    stayed saturated and a healthy robot was excluded; then such runs were refused (a
+    quarter of drivable set-ups). Now the path governor flies it at 85 % of the applied
+    range, says so, and records both speeds: the commands stay inside the range (premise
+    'saturation' held) and robot 1's stop is excluded. Beyond the command range a path is
+    still refused."""
     s = scenario.load_scenario(
-        "paper_case", {"team.robot_model": "diffdrive", "mission.centroid.speed": 0.6}
+        "paper_case",
+        {
+            "team.robot_model": "diffdrive",
+            "mission.centroid.speed": 0.6,
+            "duration": 20.0,
+            "faults": [{"robot": 1, "kind": "stop", "t": 8.0}],  # the team still on its way
+        },
     )
-    with pytest.raises(ScenarioError) as info:
-        loop.simulate(s)
-    msg = str(info.value)
-    assert "mission.centroid.speed: 0.6 m/s is beyond the diffdrive robots' applied range" in msg
-    assert "±0.59 m/s" in msg
+    r = loop.simulate(s)
+    assert r.summary["mission_speed"] == {"asked": 0.6, "flown": pytest.approx(0.85 * 0.5895)}
+    assert r.scenario.mission.centroid.speed == r.summary["mission_speed"]["flown"]
+    (said,) = [w for w in r.summary["warnings"] if "mission.centroid.speed" in w]
+    assert "diffdrive robots no room in their applied range of ±0.59 m/s" in said
+    assert r.summary["premises"]["saturation"]["held"]
+    assert [e["robot"] for e in r.summary["exclusions"]] == [1]
+    assert r.summary["healthy_exclusions"] == 0
+    beyond = scenario.load_scenario(
+        "paper_case", {"team.robot_model": "diffdrive", "mission.centroid.speed": 0.8}
+    )
+    with pytest.raises(ScenarioError, match="beyond the diffdrive robots' command range"):
+        loop.simulate(beyond)
 
 
 @pytest.mark.parametrize("name", ["hexbot", "diffdrive"])

@@ -45,7 +45,10 @@ BUILTIN: dict[str, dict[str, str]] = {
         "drive": "dftc_mujoco.onboard.thresholds.drive:Drive",
         "l1": "dftc_mujoco.onboard.thresholds.l1:L1",
     },
-    "decision": {"paper": "dftc_mujoco.blocks.paper:Decision"},
+    "decision": {
+        "paper": "dftc_mujoco.blocks.paper:Decision",
+        "none": "dftc_mujoco.onboard.decision:NoDecision",  # no detection, no isolation
+    },
     "detector": {"paper": "dftc_mujoco.blocks.paper:Detector"},
 }
 

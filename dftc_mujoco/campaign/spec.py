@@ -31,9 +31,11 @@ chords = [2]
 in_degree = 2
 k = 2
 [methods.paper]                  # methods compared on the same draws: each an [onboard]
-[methods.tight]                  # table (blocks and [methods.NAME.params.BLOCK]); run i is
-thresholds = "l1"                # draw i // M with method i % M, so every method meets the
-                                 # same seeds, layouts and faults; rows carry `method`
+[methods.tight]                  # table (blocks and [methods.NAME.params.BLOCK], and
+thresholds = "l1"                # [methods.NAME.fdir] over the scenario's [fdir]); run i is
+[methods.none]                   # draw i // M with method i % M, so every method meets the
+decision = "none"                # same seeds, layouts and faults; rows carry `method`
+                                 # ("none": no detection, no isolation, to compare with)
 
 Dotted keys are drawn after every other parameter (so adding one does not
 change the other draws of a campaign), recorded in the run's parameters under
@@ -430,8 +432,12 @@ def scenario_dict(spec: Spec, p: dict[str, Any], where: str = "") -> dict[str, A
     for key in ("eta_bar", "xi_bar"):
         if key in p:
             noise[key] = p[key]
-    if "method" in p:  # the method's blocks over the scenario's own
-        _merge(d.setdefault("onboard", {}), spec.vary["methods"][p["method"]])
+    if "method" in p:  # the method's blocks over the scenario's own (its [fdir] over [fdir])
+        method = dict(spec.vary["methods"][p["method"]])
+        fdir = method.pop("fdir", None)
+        _merge(d.setdefault("onboard", {}), method)
+        if isinstance(fdir, dict):
+            _merge(d.setdefault("fdir", {}), fdir)
     dotted = {key: p[key] for key in spec.vary.get("scenario_keys", {}) if key in p}
     if dotted:
         d = scenario_mod.apply_overrides(

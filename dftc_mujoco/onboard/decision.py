@@ -434,3 +434,15 @@ def flagged_by_teammates(flag, out):  # pragma: no cover - compiled
         for k in range(flag.shape[1]):
             if flag[i, k] and i != k:
                 out[k] = True
+
+
+class NoDecision(Decision):
+    """No detection and no isolation: nobody is ever flagged, so nobody is excluded
+    (``[onboard] decision = "none"``). The rest of the DFTC runs as the paper's, fault
+    compensation included (``fdir.compensate = false`` switches it off too): the method a
+    campaign compares fault detection with, to show what it buys."""
+
+    def update(self, r_norm: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """No flag, whatever the residuals."""
+        self._raised[...] = False
+        return self._raised

@@ -188,8 +188,10 @@ class Scenario:
         seed: int | None = None,
         duration: float | None = None,
         robot_model: str | tuple[str, ...] | None = None,
+        speed: float | None = None,
     ) -> Scenario:
-        """A copy with CLI overrides applied and checked.
+        """A copy with CLI overrides applied and checked (``speed``: the centroid path's, as
+        the path governor sets it: :func:`~dftc_mujoco.mission.governed_speed`).
 
         A shorter ``duration`` drops the faults that would start after the new
         end (they cannot happen); :func:`dropped_faults` lists them. When it is
@@ -214,6 +216,10 @@ class Scenario:
                 )
         if robot_model is not None:
             changes["team"] = dataclasses.replace(self.team, robot_model=robot_model)
+        if speed is not None:
+            mission = changes.get("mission", self.mission)
+            centroid = dataclasses.replace(mission.centroid, speed=float(speed))
+            changes["mission"] = dataclasses.replace(mission, centroid=centroid)
         if not changes:
             return self
         with _trusted():
