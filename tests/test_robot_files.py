@@ -478,6 +478,119 @@ def test_calibrate_refuses_a_calibration_table_it_cannot_replace_before_measurin
     assert not proc.stdout and path.read_bytes() == before  # nothing was measured
 
 
+ROBOTS = Path(robots.__file__).resolve().parents[2] / "models" / "robots"
+# a robot file a person wrote: comments everywhere, a hand-measured lag, a comment that
+# belongs to the table after [calibration]
+HAND_WRITTEN = f"""# my disk, for the lab's bench tests
+mjcf = "{ROBOTS / "disk.xml"}"   # the built-in model
+base = "base"
+drive = "holonomic"
+
+[holonomic]
+x = "vx"  # the x servo
+y = "vy"
+
+[calibration]
+lag = 0.08  # measured on the bench
+xi_bar = 0.005
+
+# the inner loop of the motors, tuned by hand
+[motor]
+time_constant = 0.05
+"""
+FAST_CALIBRATION = ["--runs", "1", "--set", "duration=5"]
+
+
+def test_calibrate_write_replaces_calibration_keys_only_and_lists_what_it_replaces(
+    tmp_path, capsys
+):
+    """Issue 68: --write deleted every line from [calibration] to the next table (the next
+    table's comment too) and a hand-set lag vanished without a word."""
+    path = robot_file(tmp_path, HAND_WRITTEN)
+    assert calibrate.main([str(path), "--write", *FAST_CALIBRATION]) == 0
+    out = capsys.readouterr().out
+    said = out[out.index("replacing values of") :].splitlines()
+    assert said[1].strip().startswith("lag = 0.08 (# measured on the bench): removed"), out
+    assert out.index("replacing values of") < out.index("written to")
+    text = path.read_text()
+    before = HAND_WRITTEN.partition("[calibration]\n")
+    assert text.startswith(before[0] + "[calibration]\n")  # byte for byte up to the table
+    assert text.endswith("\n# the inner loop of the motors, tuned by hand\n[motor]\n"
+                         "time_constant = 0.05\n")  # fmt: skip
+    assert "lag" not in text and "measured on the bench" not in text  # listed, then removed
+    model = robots.get(str(path))
+    assert model.calibration["mismatch"] > 0 and "drift_bound" in model.calibration
+    assert model.motor_time_constant == 0.05
+
+
+def test_calibrate_keep_keeps_the_values_the_file_has(tmp_path, capsys):
+    """--keep adds the keys the file lacks and leaves the others, their comments too."""
+    from dftc_mujoco.calibrate import files
+
+    path = robot_file(tmp_path, HAND_WRITTEN)
+    new = {"lag": 0.05, "xi_bar": 0.0055, "mismatch": 0.002}
+    assert files.write(path, new, keep=True) == []
+    text = path.read_text()
+    assert "lag = 0.08  # measured on the bench\nxi_bar = 0.005\nmismatch = 0.002\n" in text
+    assert text.endswith("\n# the inner loop of the motors, tuned by hand\n[motor]\n"
+                         "time_constant = 0.05\n")  # fmt: skip
+    changes = files.write(path, new)  # without it: replaced, each change returned
+    assert [c.line() for c in changes] == [
+        "lag = 0.08 (# measured on the bench) -> 0.05",
+        "xi_bar = 0.005 -> 0.0055",
+    ]
+    assert "lag = 0.05\n" in path.read_text()  # the old value's comment went with it
+    assert calibrate.main(["disk", "--keep"]) == 2  # nothing to keep without --write
+    assert "--keep" in capsys.readouterr().err
+
+
+INCLUDED_BOX = """<mujoco model="boxbot">
+  <!-- the parts are shared with the lab's other models -->
+  <include file="parts.xml"/>
+  <custom>
+    <text name="dftc_adapter" data="holonomic"/>
+    <numeric name="dftc_xi_bar" data="0.02"/>
+  </custom>
+</mujoco>
+"""
+PARTS = """<mujoco>
+  <worldbody>
+    <body name="base" pos="0 0 0.04">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="y" type="slide" axis="0 1 0"/>
+      <geom name="hull" type="box" size="0.07 0.05 0.04" mass="1.5"/>
+      <site name="center"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <velocity name="vx" joint="x" kv="150" ctrlrange="-1 1" ctrllimited="true"/>
+    <velocity name="vy" joint="y" kv="150" ctrlrange="-1 1" ctrllimited="true"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def test_calibrate_write_edits_an_mjcf_in_place_never_resaves_it(tmp_path, capsys):
+    """Issue 68: on an MJCF with <include>, --write inlined the include and rewrote the
+    <velocity> actuators as <general> (MjSpec saved the whole model)."""
+    path = tmp_path / "boxbot.xml"
+    path.write_text(INCLUDED_BOX)
+    (tmp_path / "parts.xml").write_text(PARTS)
+    assert calibrate.main([str(path), "--write", *FAST_CALIBRATION]) == 0
+    assert "  xi_bar = 0.02 -> 0.005\n" in capsys.readouterr().out  # listed first
+    text = path.read_text()
+    assert (tmp_path / "parts.xml").read_text() == PARTS
+    assert '<include file="parts.xml"/>' in text and "<general" not in text
+    assert (
+        text.replace('data="0.005"', 'data="0.02"').replace(
+            re.search(r'\n *<numeric name="dftc_mismatch" data="[^"]+"/>', text).group(0), ""
+        )
+        == INCLUDED_BOX
+    )  # every other byte as it was
+    model = robots.get(str(path))
+    assert model.xi_bar == 0.005 and 0 < model.mismatch < 0.005
+
+
 @pytest.mark.parametrize("runs", ["0", "-3"])
 def test_calibrate_refuses_fewer_than_one_drift_run_before_measuring(capsys, runs):
     """--runs 0 and --runs -3 measured one run and said "1 fault-free runs"."""

@@ -2,20 +2,21 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
+from pathlib import Path
 
 from ..errors import EXIT_OK, EXIT_OUTPUT, ScenarioError
 from .compensation import acceleration, acceleration_report, compensation, compensation_report
 from .drift import REPLAN_WINDOW, drift
-from .files import check_writable, write
+from .files import Change, check_writable, values_of, write
 from .mismatch import detectability, measure, report
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     from .. import cli
-    from ..run import parse_overrides
     from ..sim import robots
 
     p = cli.parser(
@@ -40,7 +41,14 @@ Documentation: the project's docs/ folder (robots and calibration).
     p.add_argument(
         "--write",
         action="store_true",
-        help="store the results in the robot file's [calibration] table",
+        help="store the results in the robot file's [calibration] table (its other keys, "
+        "comments and tables stay as they are; values it replaces are listed first)",
+    )
+    p.add_argument(
+        "--keep",
+        action="store_true",
+        help="with --write: keep the values [calibration] already has (set by hand or by an "
+        "earlier calibration), add only the keys it lacks",
     )
     p.add_argument(
         "--scenario",
@@ -52,9 +60,32 @@ Documentation: the project's docs/ folder (robots and calibration).
         "--runs", type=int, default=3, help="fault-free runs of the scenario for the drift"
     )
     args = p.parse_args(argv)
+    from .. import interrupt
+
+    written: list[Path] = []  # the file, once a write of this command replaced it
+    with interrupt.catch():  # a signal stops it at once: nothing is half written (atomic)
+        try:
+            return _calibrate(args, written)
+        except interrupt.Interrupted as exc:
+            said = (
+                f"; {written[0]} holds the calibration measured so far (before the drift)"
+                if written
+                else ("; nothing written" if args.write else "")
+            )
+            print(f"interrupted by {exc.name}{said}", file=sys.stderr)
+            return exc.exit_code
+
+
+def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
+    from .. import cli
+    from ..run import parse_overrides
+    from ..sim import robots
+
     try:
         if args.runs < 1:  # it ran one run without a word
             raise ScenarioError(f"--runs: expected at least 1 fault-free run, got {args.runs}")
+        if args.keep and not args.write:
+            raise ScenarioError("--keep: keeps the file's values when writing: add --write")
         overrides = parse_overrides(args.overrides)  # bad input fails before measuring
         from ..scenario import load_scenario
 
@@ -80,8 +111,18 @@ Documentation: the project's docs/ folder (robots and calibration).
         print(f"WARNING: {line}" if warn else line)
         if not jumps[-1][1].runs_away:
             cal = dataclasses.replace(cal, accel=jumps[-1][0])
+
+        def say(changes: list[Change]) -> None:
+            print(
+                f"replacing values of {path}'s calibration (set by hand or by an earlier "
+                "calibration; --keep keeps them):"
+            )
+            for change in changes:
+                print(f"  {change.line()}")
+
         if path is not None:  # the drift runs then see the robot's new mismatch
-            write(path, cal)
+            write(path, values_of(path, cal), keep=args.keep, complete=False, say=say)
+            written.append(path)
         try:
             d = drift(args.model, args.scenario, overrides, args.runs)
         except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is
@@ -113,7 +154,7 @@ Documentation: the project's docs/ folder (robots and calibration).
                 )
         cal = dataclasses.replace(cal, drift=d)
         if path is not None:
-            write(path, cal)
+            write(path, values_of(path, cal), keep=args.keep, say=say)
             robots.load(path)  # it must still load
             print(f"written to {path}")
     except ScenarioError as exc:
