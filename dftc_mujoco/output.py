@@ -31,6 +31,7 @@ from .errors import OutputError
 
 RUN_FILES = ("summary.json", "log.npz", "scenario.toml")
 OWNER = ".owner"  # inside a private folder: "<pid> <process start time>"
+PUBLISHED = ".published"  # inside a private folder whose records are already at --out
 
 
 def os_problem(exc: OSError, what: str, where: Path | str | None = None) -> OutputError:
@@ -208,15 +209,37 @@ def run_folder(out: Path, overwrite: bool = False) -> Iterator[Path]:
     """A private work folder for a run to write into; moved to ``out`` when the block
     ends normally, removed if it raises. Refuses (OutputError) a destination that
     holds another run (unless ``overwrite``), is not a run folder, or is being
-    written by another process."""
+    written by another process. After :func:`publish` (the records moved into place
+    early), what the folder holds when the block ends joins them, each item whole."""
     out = check_destination(out, overwrite)
     with locked(out):
         work = private_folder(out)
         try:
             yield work
-            _move_into_place(work, out, overwrite)
+            if (work / PUBLISHED).exists():
+                (work / PUBLISHED).unlink()
+                (work / OWNER).unlink(missing_ok=True)
+                replace_into(work, out, sorted(p.name for p in work.iterdir()))
+            else:
+                _move_into_place(work, out, overwrite)
         finally:
             shutil.rmtree(work, ignore_errors=True)
+
+
+def publish(work: Path, out: Path, overwrite: bool) -> None:
+    """Move a run's finished records from its private folder ``work`` into place at ``out``
+    now (inside :func:`run_folder`, with its lock), and leave ``work`` as a new, empty
+    private folder for what is drawn from them (figures, video): a process killed while
+    drawing, even by SIGKILL, leaves the records at ``out``, never only in a hidden
+    folder."""
+    _move_into_place(work, out, overwrite)
+    try:
+        work.mkdir()
+        os.chmod(work, 0o777 & ~_umask())
+        (work / OWNER).write_text(f"{os.getpid()} {_started(os.getpid())}")
+        (work / PUBLISHED).write_text("")
+    except OSError as exc:
+        raise os_problem(exc, "creating a private folder") from None
 
 
 def _acquire(lock: Path, out: Path) -> None:

@@ -37,7 +37,14 @@ from .errors import (
     exit_interrupted,
 )
 from .interrupt import Interrupted, Signals
-from .output import OutputError, destination, free_space_check, os_problem, run_folder
+from .output import (
+    OutputError,
+    destination,
+    free_space_check,
+    os_problem,
+    publish,
+    run_folder,
+)
 from .render import gl
 from .report import report
 
@@ -291,7 +298,9 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 notice.close()  # before the progress bar
                 result = sim.run(progress=progress)
             verbose = args.verbose
-            return _finish(result, work, destination(out), signals, options, progress, verbose)
+            return _finish(
+                result, work, destination(out), signals, options, progress, verbose, args.overwrite
+            )
     except (ScenarioError, OutputError) as exc:
         return cli.fail(exc)
     except OSError as exc:
@@ -300,14 +309,23 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
 
 
 def _finish(
-    result, work: Path, out: Path, signals: Signals, options, progress: bool, verbose=False
+    result,
+    work: Path,
+    out: Path,
+    signals: Signals,
+    options,
+    progress: bool,
+    verbose=False,
+    overwrite=False,
 ) -> int:
-    """Write the records (and figures, video) into ``work``, print the report; the exit code.
-
-    ``out`` is where ``work`` is moved once this returns (the paths printed). A signal
-    during the figures or the video, or a full disk there, keeps the records (and the
-    figures when they were complete) and drops the rest."""
+    """Write the records into ``work`` and move them to ``out`` at once, print the report,
+    draw the figures and video into ``work`` (which joins ``out`` once this returns); the
+    exit code. A signal during the figures or the video, or a full disk there, keeps the
+    records (and the figures when they were complete) and drops the rest; SIGKILL there
+    leaves the records at ``out``."""
     write_records(result, work)
+    if signals.signum is None:  # (signals are deferred here: only recorded)
+        publish(work, out, overwrite)
     print(report(result, out, verbose))
     if signals.signum is not None:
         print(

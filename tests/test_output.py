@@ -167,8 +167,8 @@ def _wait_for(pattern: str, folder: Path, proc: subprocess.Popen, timeout: float
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
     """SIGTERM while the video renders: the records and figures land, no video and no
-    temporary file; SIGKILL: nothing lands, and the next run on that --out keeps the
-    finished records aside (``run.recovered-1``) and says so, never deletes them."""
+    temporary file; SIGKILL: the records are at --out already (moved there before the
+    drawing: issue 68), and the next process on that --out removes the unfinished drawing."""
     out = tmp_path / "run"
     proc = _video_run(out)
     _wait_for(".run.*.tmp/.video.mp4.tmp.mp4", tmp_path, proc)
@@ -187,14 +187,17 @@ def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
         assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
     else:
         assert proc.returncode == -signal.SIGKILL
-        assert not out.exists()
-        again = _run("--duration", "1", "--no-video", "--out", str(out))
-        assert again.returncode == 0, again.stderr
-        kept = tmp_path / "run.recovered-1"
-        assert f"they are kept in {kept}" in again.stderr
-        assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "run.recovered-1"]
-        assert {"log.npz", "scenario.toml", "summary.json"} <= {p.name for p in kept.iterdir()}
-        assert open_run(kept).summary["simulated_time"] > 1.0  # the killed run's, not the new
+        assert sorted(p.name for p in out.iterdir()) == ["log.npz", "scenario.toml", "summary.json"]
+        assert open_run(out).summary["simulated_time"] > 1.0
+        assert len([p for p in tmp_path.iterdir() if p.name.startswith(".run.")]) == 2
+        plot = subprocess.run(
+            [sys.executable, "-m", "dftc_mujoco.plot", str(out), "--no-video"],
+            capture_output=True,
+            text=True,
+        )
+        assert plot.returncode == 0, plot.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # lock and folder gone
+        assert (out / "figures").is_dir()
     assert not [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
 
 
