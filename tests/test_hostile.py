@@ -644,3 +644,85 @@ def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):
         f"please report the traceback above); the records (no figures) are in {out}"
     )
     assert sorted(p.name for p in out.iterdir()) == ["log.npz", "scenario.toml", "summary.json"]
+
+
+# --------------------------------------------------------------------------- issue 68
+# "Every input answered": each bad input is one error line (file, key, expected, found),
+# a legitimate but risky one runs with a warning naming the guarantee it loses.
+
+ROBOTS = Path(__file__).resolve().parent.parent / "models" / "robots"
+
+
+def _campaign(tmp_path: Path, extra: str = "", name: str = "c") -> Path:
+    spec = tmp_path / f"{name}.toml"
+    spec.write_text(
+        f'name = "{name}"\nscenario = "paper_case"\nruns = 2\nseed = 1\n'
+        f"[set]\nduration = 1.0\nfaults = []\nmission.transient = 0.5\n"
+        f'team.robot_model = "{tmp_path / "bot.robot.toml"}"\n'
+        f"{extra}"
+    )
+    return spec
+
+
+def test_a_campaign_is_not_resumed_after_its_robot_file_changed(tmp_path, capsys):
+    """The robot file (its calibration, its MJCF) was not part of a campaign's identity: a
+    resume mixed rows of two robot definitions, exit 0."""
+    robot = (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', '"bot.xml"')
+    (tmp_path / "bot.robot.toml").write_text(robot)
+    mjcf = (ROBOTS / "disk.xml").read_text()
+    (tmp_path / "bot.xml").write_text(mjcf)
+    spec = _campaign(tmp_path)
+    args = [str(spec), "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"]
+    assert campaign_cli.main([*args, "--runs", "1"]) == 0
+    rows = (tmp_path / "out" / "results.jsonl").read_text()
+    (tmp_path / "bot.robot.toml").write_text(robot.replace("xi_bar = 0.005", "xi_bar = 0.008"))
+    capsys.readouterr()
+    assert campaign_cli.main(args) == 5
+    _one_error_line(
+        capsys.readouterr().err, f"robot {tmp_path / 'bot.robot.toml'} changed", "--overwrite"
+    )
+    assert (tmp_path / "out" / "results.jsonl").read_text() == rows  # nothing mixed in
+    (tmp_path / "bot.robot.toml").write_text(robot)  # put back: it resumes
+    (tmp_path / "bot.xml").write_text(mjcf.replace('kv="200"', 'kv="150"'))
+    assert campaign_cli.main(args) == 5
+    _one_error_line(
+        capsys.readouterr().err, f"robot {tmp_path / 'bot.robot.toml'}: bot.xml changed"
+    )
+    (tmp_path / "bot.xml").write_text(mjcf)
+    assert campaign_cli.main(args) == 0
+    assert len((tmp_path / "out" / "results.jsonl").read_text().splitlines()) == 2
+
+
+def test_a_campaign_plug_in_that_changed_is_named(tmp_path, capsys):
+    from dftc_mujoco.campaign import folder
+    from dftc_mujoco.campaign import spec as spec_mod
+
+    (tmp_path / "bot.robot.toml").write_text(
+        (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', f'"{ROBOTS / "disk.xml"}"')
+    )
+    (tmp_path / "mylab_rule.py").write_text(
+        "from dftc_mujoco.blocks import paper\nclass Rule(paper.Thresholds):\n    pass\n"
+    )
+    spec = _campaign(tmp_path, '[set.onboard]\nthresholds = "mylab_rule:Rule"\n')
+    before = folder.identity(spec_mod.load(spec))["inputs"]
+    assert "plug-in mylab_rule" in before
+    (tmp_path / "mylab_rule.py").write_text((tmp_path / "mylab_rule.py").read_text() + "# v2\n")
+    after = folder.identity(spec_mod.load(spec))["inputs"]
+    assert after["plug-in mylab_rule"] != before["plug-in mylab_rule"]
+
+
+def test_vary_and_methods_setting_the_same_key_are_refused(tmp_path, capsys):
+    """[vary] "onboard.thresholds" overrode every [methods.NAME]: the report compared eq. 40
+    with itself."""
+    spec = tmp_path / "m.toml"
+    spec.write_text(
+        'name = "m"\nscenario = "paper_case"\nruns = 4\n[vary]\n'
+        '"onboard.thresholds" = ["paper", "l1"]\n[methods.paper]\n[methods.tight]\n'
+        'thresholds = "l1"\n'
+    )
+    assert campaign_cli.main([str(spec), "--out", str(tmp_path / "m")]) == EXIT_INPUT
+    _one_error_line(
+        capsys.readouterr().err,
+        f'{spec}: vary."onboard.thresholds": [methods.tight] sets onboard.thresholds too',
+    )
+    assert not (tmp_path / "m").exists()

@@ -2,16 +2,20 @@
 
 The folder's ``campaign.json`` records the campaign's *identity*: a SHA-256 of
 everything that decides what run i is, namely the spec's ``name``, ``seed``,
-``[set]`` and ``[vary]`` (as validated) and the base scenario's content (its parsed
-TOML, wherever the file lives). Running the same campaign again into the folder
-resumes it; a different spec, or the same spec over an edited base scenario, is
-refused unless ``--overwrite``, which replaces the folder as a whole.
+``[set]`` and ``[vary]`` (as validated), the base scenario's content (its parsed
+TOML, wherever the file lives) and the content of every other file the runs read
+(:mod:`.inputs`: robot files and their calibration, their MJCF with its includes and
+assets, the modules of plug-in blocks). Running the same campaign again into the folder
+resumes it; a different spec, the same spec over an edited base scenario, or over a
+robot file, MJCF or plug-in that changed since, is refused (naming it) unless
+``--overwrite``, which replaces the folder as a whole.
 
 Not part of the identity: ``runs`` and ``--runs`` (run i's parameters depend on the
 campaign seed and i alone, so a larger number extends the campaign and a smaller one
-reports on its first runs), ``description``, comments and the spec file's path. Code
-the runs import (the simulator's version, a user's blocks) is not hashed either:
-``campaign.json`` names the dftc-mujoco version that created the folder.
+reports on its first runs), ``description``, comments and the spec file's path. The
+simulator's own code is not hashed: ``campaign.json`` names the dftc-mujoco version that
+created the folder. A folder whose identity predates the inputs is resumed when the rest
+agrees, and its identity completed.
 
 A folder written before identities existed (``results.jsonl`` but no
 ``campaign.json``) is adopted when every recorded run has the parameters and
@@ -32,27 +36,57 @@ from .. import __version__
 from ..errors import OutputError
 from ..output import os_problem
 from ..record import write_text
+from .inputs import inputs
 from .spec import Spec, draw, scenario_dict
 
 IDENTITY = "campaign.json"
 CAMPAIGN_FILES = (IDENTITY, "results.jsonl", "results.parquet", "report.md")
 
 
-def identity(spec: Spec) -> dict[str, Any]:
+def identity(spec: Spec, with_inputs: bool = True) -> dict[str, Any]:
     """What decides the rows of a campaign (see the module's docstring)."""
-    return {
+    out = {
         "name": spec.name,
         "seed": spec.seed,
         "set": spec.set,
         "vary": spec.vary,
         "base": spec.base,
     }
+    if with_inputs:
+        out["inputs"] = inputs(spec)
+    return out
 
 
-def fingerprint(spec: Spec) -> str:
+def fingerprint(spec: Spec, with_inputs: bool = True) -> str:
     """SHA-256 of :func:`identity`, as canonical JSON."""
-    text = json.dumps(identity(spec), sort_keys=True, separators=(",", ":"), default=str)
+    return _hash(identity(spec, with_inputs))
+
+
+def _hash(ident: dict[str, Any]) -> str:
+    text = json.dumps(ident, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _changed_inputs(stored: dict[str, Any], mine: dict[str, Any]) -> str | None:
+    """When two identities differ in their inputs alone: which files, in words."""
+    before = stored.get("identity", {})
+    if not isinstance(before, dict) or not isinstance(before.get("inputs"), dict):
+        return None
+    rest = {k: v for k, v in before.items() if k != "inputs"}
+    if _hash(rest) != fingerprint_of_rest(mine):
+        return None
+    old, new = before["inputs"], mine["inputs"]
+    said = [
+        f"{k} {'changed' if k in old and k in new else 'is new' if k in new else 'is gone'}"
+        for k in sorted(old.keys() | new.keys())
+        if old.get(k) != new.get(k)
+    ]
+    return ", ".join(said[:4]) + (f" and {len(said) - 4} more" if len(said) > 4 else "")
+
+
+def fingerprint_of_rest(ident: dict[str, Any]) -> str:
+    """The hash of an identity without its inputs (an identity written before them)."""
+    return _hash({k: v for k, v in ident.items() if k != "inputs"})
 
 
 def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
@@ -104,24 +138,43 @@ def prepare(out: Path, spec: Spec, overwrite: bool) -> str:
     out = Path(out).absolute()
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: --out names a file, not a folder; choose a folder")
-    mine = fingerprint(spec)
+    ident = identity(spec)
+    mine = _hash(ident)
     state = "new"
     if out.is_dir() and any(out.iterdir()):
         stored = _stored(out)
         if stored is not None and stored.get("fingerprint") == mine and not overwrite:
             return "resumed"
+        before = stored.get("identity") if stored is not None else None
+        old_style = isinstance(before, dict) and "inputs" not in before
+        if (
+            stored is not None
+            and old_style
+            and stored.get("fingerprint") == fingerprint_of_rest(ident)
+            and not overwrite
+        ):
+            _write_identity(out, spec, mine, ident)  # written before inputs were hashed
+            return "resumed"
+        changed = _changed_inputs(stored, ident) if stored is not None else None
+        if stored is not None and changed and not overwrite:
+            raise OutputError(
+                f"{out}: the campaign {stored.get('name')!r} ran with other inputs: {changed} "
+                "since its rows were written (SHA-256 of the content); resuming would mix rows "
+                "of both: put the file back as it was, use --overwrite to run the campaign "
+                "again from scratch, or choose another --out"
+            )
         if stored is None and not (out / "results.jsonl").exists():
             raise OutputError(
                 f"{out}: the folder is not empty and holds no campaign; choose another --out "
                 "(it is never replaced, even with --overwrite)"
             )
         if stored is None and _matches_rows(out, spec) and not overwrite:
-            _write_identity(out, spec, mine)
+            _write_identity(out, spec, mine, ident)
             return "resumed"
         if not overwrite:
             what = (
                 f"the campaign {stored.get('name')!r} of another spec (differs in: "
-                f"{differences(stored.get('identity', {}), identity(spec))})"
+                f"{differences(stored.get('identity', {}), ident)})"
                 if stored is not None
                 else "rows of another campaign"
             )
@@ -137,7 +190,7 @@ def prepare(out: Path, spec: Spec, overwrite: bool) -> str:
         shutil.copyfile(spec.base_source, out / "base_scenario.toml")
     except OSError as exc:
         raise os_problem(exc, "creating the campaign folder") from None
-    _write_identity(out, spec, mine)
+    _write_identity(out, spec, mine, ident)
     return state
 
 
@@ -157,14 +210,14 @@ def _stored(out: Path) -> dict[str, Any] | None:
     return stored
 
 
-def _write_identity(out: Path, spec: Spec, mine: str) -> None:
+def _write_identity(out: Path, spec: Spec, mine: str, ident: dict[str, Any]) -> None:
     record = {
         "fingerprint": mine,
         "name": spec.name,
         "spec": str(Path(spec.source).absolute()),
         "base_scenario": str(Path(spec.base_source).absolute()),
         "dftc_mujoco": __version__,
-        "identity": identity(spec),
+        "identity": ident,
     }
     try:
         write_text(out / IDENTITY, json.dumps(record, indent=2, default=str) + "\n")

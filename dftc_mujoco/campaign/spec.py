@@ -121,6 +121,7 @@ def load(path: str | Path) -> Spec:
                 f"once per method), got {runs}",
             )
         vary["methods"] = dict(methods)
+        _check_methods_not_drawn(path, vary)
     top.finish()
     _check_faulty_robots(path, vary, base)
     _check_team_sizes(path, vary, base, overrides)
@@ -131,6 +132,31 @@ def load(path: str | Path) -> Spec:
     for i in range(1, min(runs, max(3, len(methods)))):  # every method's scenario is valid
         scenario_for(spec, draw(spec, i))
     return spec
+
+
+def _method_keys(table: dict[str, Any], prefix: str) -> list[str]:
+    """A ``[methods.NAME]`` table's scenario keys, dotted (``fdir`` is the scenario's)."""
+    out = []
+    for k, v in table.items():
+        key = "fdir" if prefix == "onboard" and k == "fdir" else f"{prefix}.{k}"
+        out += _method_keys(v, key) if isinstance(v, dict) else [key]
+    return out
+
+
+def _check_methods_not_drawn(path: Path, vary: dict[str, Any]) -> None:
+    """A dotted ``[vary]`` key is applied last: one that a method sets too overrides every
+    method's value, and the report compares a method with itself."""
+    for name, table in vary["methods"].items():
+        for mkey in _method_keys(table, "onboard"):
+            for vkey in vary.get("scenario_keys", {}):
+                a, b = mkey.split("."), vkey.split(".")
+                if a[: len(b)] == b[: len(a)]:  # the same key, or one holds the other
+                    raise ScenarioError(
+                        f'{path}: vary."{vkey}": [methods.{name}] sets {mkey} too; the drawn '
+                        "value would override every method's, and the report would compare "
+                        "one method with itself: expected the key in [vary] or in each "
+                        "[methods.NAME], not both"
+                    )
 
 
 def _check_faulty_robots(path: Path, vary: dict[str, Any], base: dict[str, Any]) -> None:
