@@ -726,3 +726,48 @@ def test_vary_and_methods_setting_the_same_key_are_refused(tmp_path, capsys):
         f'{spec}: vary."onboard.thresholds": [methods.tight] sets onboard.thresholds too',
     )
     assert not (tmp_path / "m").exists()
+
+
+class _NaNScores(paper.Detector):
+    """The hostile tester's detector: NaN scores from 1 s (robot 1's stop was then flagged by
+    nobody, "status: ok")."""
+
+    def judge(self, r_norm, mu, observer, x_m):
+        score, bound = super().judge(r_norm, mu, observer, x_m)
+        if self.t >= 1.0:
+            score = np.full_like(score, np.nan)
+        return score, bound
+
+
+class _NaNBounds(paper.Detector):
+    def judge(self, r_norm, mu, observer, x_m):
+        return r_norm, np.where(np.eye(len(mu), dtype=bool), mu, np.nan)
+
+
+class _Words(paper.Detector):
+    def judge(self, r_norm, mu, observer, x_m):
+        return r_norm, np.full(mu.shape, "high")
+
+
+class _OneThing(paper.Detector):
+    def judge(self, r_norm, mu, observer, x_m):
+        return r_norm
+
+
+@pytest.mark.parametrize(
+    ("block", "said"),
+    [
+        (_NaNScores, r"judge\(\)\[0\] nan as robot 1's score on robot 1 .*at t = 1\.00"),
+        (_NaNBounds, r"judge\(\)\[1\] nan as robot 1's bound on robot 2 .*at t = 0\.\d\d"),
+        (_Words, r"judge\(\)\[1\] an array of <U4, expected numbers, at t = 0\.\d\d"),
+        (_OneThing, r"judge\(\) a ndarray, expected \(scores, bounds\), at t = 0\.\d\d"),
+    ],
+)
+def test_a_detector_returning_nan_or_the_wrong_type_stops_the_run_in_one_line(block, said):
+    result = simulate(load_scenario("paper_case", {"duration": 2.0}), blocks={"detector": block()})
+    assert not result.ok
+    assert re.fullmatch(
+        rf"onboard block detector \(.*{block.__name__}\) returned from {said} s; the run "
+        "stopped there and its records are kept",
+        str(result.error),
+    ), result.error

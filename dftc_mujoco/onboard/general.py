@@ -11,8 +11,27 @@ from typing import Any
 
 import numpy as np
 
-from .block import blame_not_finite, shaped
+from .block import BadOutput, Block, blame_not_finite, shaped
 from .period import RAISED, SATURATED, SWITCHED
+
+
+def judged(
+    value: object, shape: tuple[int, ...], block: Block, method: str, mem: Any, what: str
+) -> np.ndarray:
+    """What a detection ingredient must be (a residual, a detector's scores and bounds): an
+    array of ``shape`` of real numbers, none NaN. A NaN compares false with everything: the
+    pair it stands on would never be flagged, and the run say ``status: ok``."""
+    out = shaped(value, shape, block, method)
+    if out.dtype.kind not in "fiu":
+        raise BadOutput(block, f"returned from {method} an array of {out.dtype}, expected numbers,")
+    if out.dtype.kind == "f" and np.isnan(out).any():
+        i, k = (int(mem[j]) + 1 for j in np.argwhere(np.isnan(out))[0][:2])
+        raise BadOutput(
+            block,
+            f"returned from {method} nan as robot {i}'s {what} on robot {k} (a NaN never "
+            "flags: detection of that pair would be off), expected a number,",
+        )
+    return out
 
 
 def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
@@ -53,13 +72,17 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
         u_mem = team.u[mem]
         delta_u = u_mem - u_g
     if team.rounds.now:
-        r = shaped(ob.residual(x_own), stacked, ob, "residual()")  # eq. 35
+        r = judged(ob.residual(x_own), stacked, ob, "residual()", mem, "residual")  # eq. 35
         team.r_norm = np.sqrt(np.einsum("ikd,ikd->ik", r, r))
         if cfg.fdir:  # what the detector judges by, on this period's messages (‖r‖ vs μ)
             de = team.detector
-            score, bound = de.judge(team.r_norm, team.mu, team.observer, x_own)
-            team.r_norm = shaped(score, pairs, de, "judge()[0]")
-            team.mu = shaped(bound, pairs, de, "judge()[1]")
+            judgement = de.judge(team.r_norm, team.mu, team.observer, x_own)
+            if not isinstance(judgement, tuple | list) or len(judgement) != 2:
+                got = f"{type(judgement).__name__}"
+                raise BadOutput(de, f"returned from judge() a {got}, expected (scores, bounds),")
+            score, bound = judgement
+            team.r_norm = judged(score, pairs, de, "judge()[0]", mem, "score")
+            team.mu = judged(bound, pairs, de, "judge()[1]", mem, "bound")
     else:  # between two rounds of the network only the integrals move
         r = np.zeros_like(team.x_hat)
     team.observer.update(r, u_hat_g, delta_u, u_mem)  # eqs. 19-21
