@@ -211,7 +211,7 @@ class Simulation:
         )
         config = team_config(s, model, limit, self.start_bound.value)
         flown = mission.governed_speed(s.mission.centroid.speed, config.input_limit, limit)
-        if flown is not None:  # the path governor: commands inside the drives' applied range
+        if flown is not None and s.mission.centroid.governor:  # the path governor
             text = governed_text(s, model.name, config.input_limit, flown)
             self.events.add(0.0, "warning", message=text)
             self.scenario = s = s.with_overrides(speed=flown)

@@ -26,6 +26,8 @@ class CentroidPath:
     speed: float
     corner_radius: float = 0.3
     ramp_time: float = 2.0
+    # fly a speed that leaves the drives no room more slowly (governed_speed); false: as given
+    governor: bool = True
 
 
 @dataclass(frozen=True)
@@ -242,8 +244,9 @@ def _eval_path(segments, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: the share of the robots' applied range the path governor lets the path's speed take; the
-#: rest is for the formation's corrections and the supervisor's avoidance
-GOVERNED_SHARE = 0.85
+#: rest is for the formation's corrections and the supervisor's avoidance (beyond the applied
+#: range they are saturated: slower, not a broken premise)
+GOVERNED_SHARE = 0.95
 
 
 def governed_speed(speed: float, applied: float, command: float) -> float | None:

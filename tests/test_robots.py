@@ -305,9 +305,9 @@ def test_a_fourth_model_from_an_mjcf_file(tmp_path):
 
 def test_a_path_faster_than_the_applied_range_is_flown_slower_and_said_so():
     """The battery's diffdrives at 0.6 m/s: within the 0.7 m/s command range but beyond the
-    0.59 m/s the applied input keeps after the compensation's headroom, so every command
+    0.54 m/s the applied input keeps after the compensation's headroom, so every command
     stayed saturated and a healthy robot was excluded; then such runs were refused (a
-    quarter of drivable set-ups). Now the path governor flies it at 85 % of the applied
+    quarter of drivable set-ups). Now the path governor flies it at 95 % of the applied
     range, says so, and records both speeds: the commands stay inside the range (premise
     'saturation' held) and robot 1's stop is excluded. Beyond the command range a path is
     still refused."""
@@ -321,10 +321,10 @@ def test_a_path_faster_than_the_applied_range_is_flown_slower_and_said_so():
         },
     )
     r = loop.simulate(s)
-    assert r.summary["mission_speed"] == {"asked": 0.6, "flown": pytest.approx(0.85 * 0.5895)}
+    assert r.summary["mission_speed"] == {"asked": 0.6, "flown": pytest.approx(0.95 * 0.5395)}
     assert r.scenario.mission.centroid.speed == r.summary["mission_speed"]["flown"]
     (said,) = [w for w in r.summary["warnings"] if "mission.centroid.speed" in w]
-    assert "diffdrive robots no room in their applied range of ±0.59 m/s" in said
+    assert "diffdrive robots no room in their applied range of ±0.54 m/s" in said
     assert r.summary["premises"]["saturation"]["held"]
     assert [e["robot"] for e in r.summary["exclusions"]] == [1]
     assert r.summary["healthy_exclusions"] == 0

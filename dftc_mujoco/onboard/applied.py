@@ -96,15 +96,35 @@ class DriveModel:
     """Each robot's model of its own drive: its range, acceleration and lag (N robots).
 
     ``command`` (N, 2) is what each robot last told its drive and ``v_hat`` (N, 2) the
-    velocity a first-order lag of ``lag`` [s] delivers (robots start at rest).
+    velocity a first-order lag of ``lag`` [s] delivers (robots start at rest). Until
+    ``start_time`` the input changes by at most ``start_accel`` (a ramped start: from rest,
+    the drives' lag against a jump to the first commands broke the premise 'mismatch' in
+    the first hundredths of a second), then by the drive's own ``accel``.
     """
 
-    def __init__(self, n: int, dt: float, input_limit: float, accel: float, lag: float):
+    def __init__(
+        self,
+        n: int,
+        dt: float,
+        input_limit: float,
+        accel: float,
+        lag: float,
+        start_accel: float = np.inf,
+        start_time: float = 0.0,
+    ):
         self.command = np.zeros((n, 2))
         self.v_hat = np.zeros((n, 2))
         self.input_limit = float(input_limit)
-        self.accel_step = float(accel) * dt  # the drive's Δu per period
+        self.full_step = float(accel) * dt  # the drive's Δu per period
+        # a ramped start: until start_time, at most start_accel (the first commands from rest)
+        self.start_step = min(float(start_accel), float(accel)) * dt
+        self.start_time = float(start_time)
+        self.accel_step = self.start_step if self.start_time > 0 else self.full_step
         self.lag_a, self.lag_b = lag_coefficients(lag, dt)
+
+    def at(self, t: float) -> None:
+        """The acceleration of the period at ``t``: the start's, then the drive's own."""
+        self.accel_step = self.start_step if t < self.start_time else self.full_step
 
     @property
     def lagged(self) -> bool:

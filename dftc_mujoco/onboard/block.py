@@ -57,6 +57,9 @@ class TeamConfig:
     # range less the compensation's headroom; inf keeps the nominal input (fdir.input)
     input_limit: float = np.inf
     accel: float = np.inf  # [m/s²] the drive's acceleration, applied to u (onboard/applied.py)
+    # a ramped start: until start_time [s], u changes by at most start_accel [m/s²]
+    start_accel: float = np.inf
+    start_time: float = 0.0
     # teammates avoided by the supervisor within this safe distance [m] (0: not avoided)
     teammate_safe: float = 0.0
     teammate_activation: float = 0.0

@@ -2,11 +2,12 @@
 
 Each robot decides alone, from its own measured position and the obstacles
 its sensors report, whether to switch from the global input u_g,i to the
-avoidance input of eq. 18. Only one behaviour is active at a time (eq. 8).
-Teammates are avoided the same way (issue 20): the teammates its range sensor sees
-within their activation distance are obstacles of safe distance ``mate_safe``, so
-the avoidance enters Δuᵢ like any other and the residuals stay unaffected
-(``[supervisor] avoid_teammates``; off, the paper's exact behaviour).
+avoidance input of eq. 18. Only one behaviour is active at a time (eq. 8); near several
+obstacles at once (a crowd of teammates) the avoidance meets all of their primary tasks,
+not the nearest one's alone. Teammates are avoided the same way: the teammates its range
+sensor sees within their activation distance are obstacles of safe distance
+``mate_safe``, so the avoidance enters Δuᵢ like any other and the residuals stay
+unaffected (``[supervisor] avoid_teammates``; off, the paper's exact behaviour).
 The equation is the compiled :func:`supervise`; :class:`Supervisor` is the
 block that calls it.
 """
@@ -81,28 +82,99 @@ def _grid(mates, width, work):  # pragma: no cover - compiled
     return cells, start, order
 
 
+#: the nearest obstacles (cylinders and teammates) each robot keeps at once as constraints
+NEAREST = 8
+
+
+@njit(inline="always")
+def _keep(cons, k, index, margin, h0, h1, barrier, radial):  # pragma: no cover - compiled
+    """Obstacle ``index`` as one of a robot's constraints (rows of ``cons``: index, margin,
+    r̂, barrier, r̂ᵀu_g,i), ``k`` kept so far: at most :data:`NEAREST`, the nearest (by margin;
+    the lower index on a tie, the choice of a scan in index order, cylinders first).
+    Returns how many are kept."""
+    if k < NEAREST:
+        row = k
+        k += 1
+    else:
+        row = 0
+        for q in range(1, NEAREST):  # the farthest kept (the higher index on a tie)
+            if cons[q, 1] > cons[row, 1] or (
+                cons[q, 1] == cons[row, 1] and cons[q, 0] > cons[row, 0]
+            ):
+                row = q
+        if margin > cons[row, 1] or (margin == cons[row, 1] and index > cons[row, 0]):
+            return k
+    cons[row, 0] = index
+    cons[row, 1] = margin
+    cons[row, 2] = h0
+    cons[row, 3] = h1
+    cons[row, 4] = barrier
+    cons[row, 5] = radial
+    return k
+
+
 @njit(inline="always")
 def _mate(
-    i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe, best
+    i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe, cons, k
 ):  # pragma: no cover - compiled
-    """Teammate j as robot i's obstacle (eq. 17 with it as the obstacle): the nearer of it
-    and ``best`` = (index, margin, r̂, barrier, r̂ᵀu_g,i), the lower index on a tie (the
-    choice of a scan in index order, cylinders first)."""
+    """Teammate j as robot i's obstacle (eq. 17 with it as the obstacle), kept among its
+    constraints when it is in reach and eq. 17's primary task is due (:func:`_keep`);
+    returns how many are kept."""
     e0 = x[i, 0] - mates[j, 0]
     e1 = x[i, 1] - mates[j, 1]
     d2 = e0 * e0 + e1 * e1
     if j == i or d2 >= reach:
-        return best
+        return k
     dist = np.sqrt(d2)
     h0 = e0 / max(dist, 1e-9)
     h1 = e1 / max(dist, 1e-9)
     radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]
     barrier = theta * (mate_safe - dist)
     rel = release if active[i] == n_obs + j else 0.0
-    margin = dist - mate_safe
-    if radial < barrier + rel and (margin < best[1] or (margin == best[1] and n_obs + j < best[0])):
-        return (n_obs + j, margin, h0, h1, barrier, radial)
-    return best
+    if radial < barrier + rel:
+        return _keep(cons, k, n_obs + j, dist - mate_safe, h0, h1, barrier, radial)
+    return k
+
+
+@njit(inline="always")
+def _violation(cons, k, u0, u1):  # pragma: no cover - compiled
+    """The largest amount by which velocity (u0, u1) falls short of a kept constraint
+    r̂ᵀu ≥ θ(d − ‖xᵢ − x_o‖) (0: it meets every one)."""
+    worst = 0.0
+    for q in range(k):
+        worst = max(worst, cons[q, 4] - (cons[q, 2] * u0 + cons[q, 3] * u1))
+    return worst
+
+
+@njit(inline="always")
+def _several(cons, k, g0, g1):  # pragma: no cover - compiled
+    """Eq. 17's primary task for several obstacles at once: the velocity nearest to u_g,i
+    = (g0, g1) that meets every kept constraint r̂ⱼᵀu ≥ θ(dⱼ − ‖xᵢ − xⱼ‖), each the
+    half-plane whose boundary eq. 18 puts u on for one obstacle. In the plane the nearest
+    such point is u_g,i itself, its projection on one boundary or the corner of two: all
+    are tried, the nearest feasible one kept; where none is (a robot pressed from opposite
+    sides), the one that falls least short."""
+    best0, best1 = g0, g1
+    best_v, best_d = _violation(cons, k, g0, g1), 0.0
+    for a in range(k):
+        h0, h1, b = cons[a, 2], cons[a, 3], cons[a, 4]
+        lift = b - (h0 * g0 + h1 * g1)  # ‖r̂‖ = 1: onto r̂ᵀu = b
+        c0, c1 = g0 + lift * h0, g1 + lift * h1
+        v, d = _violation(cons, k, c0, c1), lift * lift
+        if v < best_v - 1e-12 or (abs(v - best_v) <= 1e-12 and d < best_d):
+            best0, best1, best_v, best_d = c0, c1, v, d
+        for c in range(a + 1, k):
+            k0, k1, bc = cons[c, 2], cons[c, 3], cons[c, 4]
+            det = h0 * k1 - h1 * k0
+            if abs(det) < 1e-9:
+                continue
+            c0 = (b * k1 - h1 * bc) / det  # r̂ₐᵀu = bₐ and r̂꜀ᵀu = b꜀
+            c1 = (h0 * bc - b * k0) / det
+            v = _violation(cons, k, c0, c1)
+            d = (c0 - g0) ** 2 + (c1 - g1) ** 2
+            if v < best_v - 1e-12 or (abs(v - best_v) <= 1e-12 and d < best_d):
+                best0, best1, best_v, best_d = c0, c1, v, d
+    return best0, best1
 
 
 @njit(cache=True)
@@ -116,13 +188,17 @@ def supervise(
     distances (O,); ``mates`` (M, n) where robot i's range sensor sees its teammates
     (row i: itself, skipped), avoided within ``mate_act`` at safe distance
     ``mate_safe`` (0: not avoided); ``active[i]`` (updated) is the obstacle robot i
-    avoids (O + j for teammate j) or -1; ``work``: the grid's integers (:func:`grid_work`).
-    Returns True when some robot switched behaviour.
+    avoids (O + j for teammate j; the nearest when it avoids several) or -1; ``work``:
+    the grid's integers (:func:`grid_work`). Returns True when some robot switched
+    behaviour.
 
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
     r̂ᵀu_g,i < θ(d − ‖xᵢ − x_o‖), and off when r̂ᵀu_g,i exceeds that by
-    ``release``; at the switch eq. 18 and u_g,i coincide (docs/notes.md, 12).
+    ``release``; at the switch eq. 18 and u_g,i coincide (docs/notes.md, 12). With one
+    such obstacle uᵢ is eq. 18's; with several at once (a crowd of teammates) it is the
+    velocity nearest u_g,i that meets every one of their primary tasks (:func:`_several`),
+    where eq. 18 for the nearest alone would push the robot into another.
     """
     changed = False
     grid = mate_safe > 0.0 and mates.shape[0] >= GRID_FROM
@@ -130,13 +206,9 @@ def supervise(
         cells, start, order = _grid(mates, mate_act, work)
     else:  # no grid: nothing reads them
         cells, start, order = 1, work[:0], work[:0]
+    cons = np.empty((NEAREST, 6))  # one robot's constraints (index, margin, r̂, barrier, r̂ᵀu)
     for i in range(x.shape[0]):
-        best = -1
-        best_m = 1e300
-        r0 = 0.0
-        r1 = 0.0
-        bar = 0.0
-        rad = 0.0
+        k = 0
         for o in range(obs.shape[0]):
             e0 = x[i, 0] - obs[o, 0]
             e1 = x[i, 1] - obs[o, 1]
@@ -148,12 +220,11 @@ def supervise(
             radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]  # r̂ᵀ u_g,i
             barrier = theta * (safe[o] - dist)  # θ (d − ‖xᵢ − x_o‖), eq. 17
             rel = release if active[i] == o else 0.0
-            if radial < barrier + rel and dist - safe[o] < best_m:
-                best, best_m, r0, r1, bar, rad = o, dist - safe[o], h0, h1, barrier, radial
+            if radial < barrier + rel:
+                k = _keep(cons, k, o, dist - safe[o], h0, h1, barrier, radial)
         if mate_safe > 0.0:
             n_obs = obs.shape[0]
             reach = mate_act * mate_act
-            best_now = (best, best_m, r0, r1, bar, rad)
             if grid:  # only the teammates in the 3 × 3 cells around robot i can be in reach
                 cx = np.floor(x[i, 0] / mate_act)
                 cy = np.floor(x[i, 1] / mate_act)
@@ -162,23 +233,39 @@ def supervise(
                     h = _cell(cx - 1, cy + dy, cells)  # (past the last bucket: the first)
                     end = start[h + 3] if h + 3 <= cells else sorted_ + start[h + 3 - cells]
                     for q in range(start[h], end):
-                        best_now = _mate(
+                        k = _mate(
                             i, order[q if q < sorted_ else q - sorted_], x, mates, u_g, theta,
-                            release, active, n_obs, reach, mate_safe, best_now,
+                            release, active, n_obs, reach, mate_safe, cons, k,
                         )  # fmt: skip
             else:
                 for j in range(mates.shape[0]):
-                    best_now = _mate(
+                    k = _mate(
                         i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe,
-                        best_now,
+                        cons, k,
                     )  # fmt: skip
-            best, best_m, r0, r1, bar, rad = best_now
+        best = -1
+        if k > 0:  # the nearest kept names the behaviour (α of eq. 8)
+            near = 0
+            for q in range(1, k):
+                if cons[q, 1] < cons[near, 1] or (
+                    cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0]
+                ):
+                    near = q
+            best = int(cons[near, 0])
         if active[i] != best:
             changed = True
         active[i] = best
-        # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
-        du0 = (bar - rad) * r0 if best >= 0 else 0.0
-        du1 = (bar - rad) * r1 if best >= 0 else 0.0
+        if k == 1:
+            # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
+            du0 = (cons[0, 4] - cons[0, 5]) * cons[0, 2]
+            du1 = (cons[0, 4] - cons[0, 5]) * cons[0, 3]
+        elif k > 1:
+            v0, v1 = _several(cons, k, u_g[i, 0], u_g[i, 1])
+            du0 = v0 - u_g[i, 0]
+            du1 = v1 - u_g[i, 1]
+        else:
+            du0 = 0.0
+            du1 = 0.0
         delta_u[i, 0] = du0
         delta_u[i, 1] = du1
         u[i, 0] = u_g[i, 0] + du0

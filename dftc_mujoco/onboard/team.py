@@ -156,7 +156,10 @@ class Team:
         self.u_bar = np.zeros((n, 2))
         # each robot's model of its own drive (onboard/applied.py): what it commands, and the
         # velocity v̂ a first-order lag of config.lag delivers
-        self.drive = DriveModel(n, config.dt, config.input_limit, config.accel, config.lag)
+        self.drive = DriveModel(
+            n, config.dt, config.input_limit, config.accel, config.lag,
+            config.start_accel, config.start_time,
+        )  # fmt: skip
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
         self.events: list[dict[str, Any]] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
@@ -291,6 +294,7 @@ class Team:
         simulation's does): one it raises is raised after the period's compiled stages, and
         ends the period there.
         """
+        self.drive.at(t)  # the ramped start's acceleration, then the drive's own
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
             touched = held(self._untouched, touching, self._hold_periods, self._touch)
@@ -457,7 +461,7 @@ class Team:
         few, each entry with the arrays its table points into (:class:`.addresses.Tables`: a
         copied team starts without), so they live as long as the table and no id is reused.
         ⁱμ_k's own array, which a rule may hand out anew each round, is passed as it is."""
-        key = (id(self.observer.y_hat), id(self._th.coef), self._sensed)
+        key = (id(self.observer.y_hat), id(self._th.coef), self._sensed, self.drive.accel_step)
         flat = self._flat.get(key)
         if flat is None:
             if len(self._flat) >= 4:

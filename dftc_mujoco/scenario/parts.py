@@ -255,6 +255,9 @@ class Fdir:
     # a_max [m/s²] each robot holds its nominal input's change to (onboard/applied.py), or
     # "robot": the robot file's calibrated [calibration] accel (none when it has none); 0: none
     drive_accel: float | str = "robot"
+    # a ramped start: during the path's ramp from rest, each robot's input changes by at
+    # most assembly.START_ACCEL (the drives' lag against a jump breaks the premise 'mismatch')
+    start_ramp: bool = True
     # how many robots may be faulty at once, or "auto": ⌊(N − 1)/2⌋ (onboard/recovery.py)
     max_faults: int | str = "auto"
     self_exclusion: bool = False  # a robot's own flag counts towards its exclusion (eq. 43)

@@ -507,6 +507,7 @@ def _centroid(t: Table) -> CentroidPath:
         speed=c.number("speed", low=0.0),
         corner_radius=c.number("corner_radius", 0.3, low=0.0, strict_low=False),
         ramp_time=c.number("ramp_time", 2.0, low=0.0),
+        governor=c.boolean("governor", True),
     )
     c.finish()
     return path
@@ -582,6 +583,7 @@ def _fdir(t: Table) -> Fdir:
             t, "drive_accel", "robot", "an acceleration in m/s²", strict_low=False
         ),
         max_faults=_max_faults(t),
+        start_ramp=t.boolean("start_ramp", True),
         self_exclusion=t.boolean("self_exclusion", False),
         postpone_on_contact=t.boolean("postpone_on_contact", True),
         confirm_by_estimate=t.boolean("confirm_by_estimate", True),
