@@ -66,6 +66,11 @@ def memory_estimate(s: Scenario) -> dict[str, int]:
         "path": 32 * periods,  # the desired centroid at every period
         "physics": 400_000 * n + 300 * 2**20,  # MuJoCo model and data, interpreter
     }
+    if not s.network.ideal:  # each link's ring of messages in flight, a slot per period
+        from .network import timing
+
+        links = len(s.team.graph.edges)
+        parts["network"] = 2 * 8 * links * (timing(s.network, dt).latency + 2.0)
     return {k: int(min(float(v), 2.0**62)) for k, v in parts.items()}  # no overflow
 
 
@@ -99,12 +104,18 @@ def check_memory(s: Scenario, available: int | None = None) -> None:
         "team": "team.robots (every robot estimates the whole team: memory grows as N²)",
         "path": "duration",
         "physics": "team.robots",
+        "network": "network.latency (each link keeps a slot per control period of latency: "
+        "a latency in s, 20 ms is 0.02)",
     }[big]
+    if big == "network":
+        keys = "network.latency"
+        what = f"{len(s.team.graph.edges)} links, a latency of {s.network.latency:g} s"
+    else:
+        keys = "duration, team.robots, physics.log_rate"
+        what = f"{s.team.robots} robots, {s.duration:g} s at {s.physics.log_rate:g} Hz"
     raise ScenarioError(
-        f"{s.source}: duration, team.robots, physics.log_rate: this run needs about "
-        f"{total / gb:.1f} GB ({big} {parts[big] / gb:.1f} GB: {s.team.robots} robots, "
-        f"{s.duration:g} s at {s.physics.log_rate:g} Hz) and {free / gb:.1f} GB are "
-        f"available; reduce {knob}"
+        f"{s.source}: {keys}: this run needs about {total / gb:.1f} GB ({big} "
+        f"{parts[big] / gb:.1f} GB: {what}) and {free / gb:.1f} GB are available; reduce {knob}"
     )
 
 
@@ -245,6 +256,21 @@ def preflight(
         )
     cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))
     for k, f in enumerate(s.faults):
+        if f.kind == "drift":  # a bias growing at value [m/s²]: as big as a bias, at its end
+            rate = float(np.abs(f.value).max())
+            until = min(s.duration, f.end)
+            peak = rate * max(until - f.t, 0.0)
+            if peak > cap:
+                finding(
+                    f"faults[{k + 1}].value",
+                    f"a drift of {rate:g} m/s² on robot {f.robot + 1} grows to a bias of "
+                    f"{peak:g} m/s by t = {until:g} s, {peak / cap * FAULT_CAP:.0f} times the "
+                    f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator "
+                    f"offset produces that; expected at most {cap / max(until - f.t, 1e-12):.3g} "
+                    "m/s² (a drift is in m/s per second), or an end",
+                    refuse=True,
+                )
+            continue
         if f.kind != "bias":
             continue
         size = float(np.abs(f.value).max())
@@ -266,6 +292,7 @@ def preflight(
                 refuse=False,
             )
     _magnitudes(s, finding, name, command_limit, xi_bar, G)
+    _sightings(s, finding)
     _walls(s, finding, name, safe, reach, dist, path_dt)
     # the path stays on the floor
     w = np.asarray(s.mission.centroid.waypoints)
@@ -322,6 +349,20 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
             refuse=s.noise.eta_bar >= spacing,
         )
     h = s.physics.control_period
+    kc = float(s.gains.kc)
+    if kc * h >= 1.0:  # eq. 15 at period h: e⁺ = (1 − h kc) e, a sign flip from h kc > 1
+        finding(
+            "gains.kc",
+            f"kc = {kc:g} moves each robot {kc * h:.3g} times its formation error per control "
+            f"period ({h:g} s): the controller (eq. 15) "
+            + (
+                "diverges, or chatters against the command range, instead of converging"
+                if kc * h >= 2.0
+                else "overshoots every period, alternating sides of its slot"
+            )
+            + f"; expected kc < {1.0 / h:.3g} (kc·control_period < 1; the paper's is 4)",
+            refuse=kc * h >= 2.0,
+        )
     if s.fdir.enabled and s.fdir.compensate and G is not None:  # the loop closes through ū
         g = float(np.linalg.eigvalsh(np.asarray(G, float)).min())
         k = float(np.linalg.eigvalsh(np.asarray(s.gains.K, float)).max())
@@ -366,6 +407,31 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
             f"{s.duration / s.physics.timestep:.3g} physics steps of {s.team.robots} robots "
             f"(timestep = {s.physics.timestep:g} s): this run will take at least "
             f"{wall / 60:.0f} min of physics alone",
+            refuse=False,
+        )
+
+
+def _sightings(s, finding) -> None:
+    """A sighting tolerance or range of 0 switches the sighting rule off (legitimate, to
+    study the rest): a robot whose radio falls silent and that then stops is never flagged,
+    so never excluded. Warned, naming the guarantee lost."""
+    if not s.fdir.enabled:
+        return
+    lost = (
+        "a robot whose radio falls silent is no longer judged by what its teammates see: if "
+        "it then stops or drifts off, nobody flags it and it is never excluded"
+    )
+    if s.network.sighting_tolerance == 0:
+        finding(
+            "network.sighting_tolerance",
+            f'0 switches the sighting rule off: {lost} (leave it "auto", half the slots\' '
+            "spacing, or give a distance in m)",
+            refuse=False,
+        )
+    elif s.network.sighting_range == 0:
+        finding(
+            "network.sighting_range",
+            f"0 switches the sighting rule off (no robot sees another): {lost}",
             refuse=False,
         )
 

@@ -307,7 +307,8 @@ def refusals(s: Any, rule: str, where: str) -> tuple[list[str], list[str]]:
         return [], []
     h = s.physics.control_period
     tm = timing(net, h)
-    refused, warned = [], []
+    refused: list[str] = []
+    warned: list[str] = []
     if rule == "paper":
         refused.append(
             f'{where}: network: eq. 40\'s thresholds (onboard.thresholds = "paper") are a '
@@ -322,6 +323,9 @@ def refusals(s: Any, rule: str, where: str) -> tuple[list[str], list[str]]:
             "or relayed) is modelled for the ideal network only: the radios of a [network] "
             'carry the scenario\'s links; set fdir.rewire = "none" (or leave it "auto")'
         )
+    if tm.round * h > s.duration:  # and its ring of messages in flight would not fit
+        refused.append(f"{where}: {_longest_part(net, tm, h)}")
+        return refused, warned
     d = int(s.team.graph.in_degree().max()) if s.team.graph.edges else 0
     h_o = h * tm.round
     why = (
@@ -352,3 +356,22 @@ def refusals(s: Any, rule: str, where: str) -> tuple[list[str], list[str]]:
             "statistically; flags after a missed message are labelled with premise 'network'"
         )
     return refused, warned
+
+
+def _longest_part(net: Network, tm: Timing, h: float) -> str:
+    """``key: why`` for a round longer than the mission, naming the key that makes it so."""
+    said = (
+        f"the observers would step once a round of R = {tm.round} periods ({tm.round * h:g} s: "
+        f"latency {tm.latency} + ({tm.losses or 0} losses + 1) x {tm.every} periods between "
+        "messages), longer than the whole mission: no message would arrive before its end"
+    )
+    if tm.latency >= ((tm.losses or 0) + 1) * tm.every:
+        worst = net.latency_max if net.latency_max is not None else net.latency
+        key = "network.latency" + (".max" if net.latency_max is not None else "")
+        for k, (_, d) in enumerate(net.link_latency):
+            if d > worst:
+                worst, key = d, f"network.links[{k + 1}].latency"
+        return f"{key}: {worst:g} s: {said}; expected a latency in s (20 ms is 0.02)"
+    if tm.every > 1 and (tm.losses or 0) + 1 < tm.every:
+        return f"network.rate: {net.rate:g} messages/s: {said}; expected messages per second"
+    return f"network.max_consecutive_losses: {tm.losses}: {said}; expected a smaller bound"

@@ -3,13 +3,15 @@
 Writes ``summary.json``, ``log.npz``, the scenario that ran (``scenario.toml``,
 overrides applied), the paper's figures and (unless ``--no-video``)
 ``video.mp4`` to ``renders/<name>/`` (or ``--out``), and prints a short table
-of the run. ``--viewer`` also shows the run live in MuJoCo's viewer. Exit
+of the run. ``--viewer`` also shows the run live in MuJoCo's viewer, ``--web`` in a web
+browser (``web.py``). Exit
 codes: 0 success, 2 bad input (scenario file or command line), 3 the physics
 failed (the records written so far are kept and ``summary.json`` says what
 went wrong), 4 no OpenGL backend for the video, 5 an output, disk or OS problem (the
 folder holds another run without ``--overwrite``, is being written by another
 process, is not writable, or the disk is full, also while drawing the figures or the
-video: the records are then kept without them), 130 / 143 interrupted by SIGINT /
+video: the records are then kept without them; ``--web`` without MuJoCo Studio's web
+viewer or with its port taken), 130 / 143 interrupted by SIGINT /
 SIGTERM (during the simulation the records so far are kept; during the figures or
 the video, the records and what was complete).
 
@@ -20,6 +22,7 @@ simulator only after ``--gl`` has been applied.
 from __future__ import annotations
 
 import argparse
+import re
 import shutil
 import sys
 import tomllib
@@ -34,6 +37,7 @@ from .errors import (
     EXIT_OUTPUT,
     EXIT_PHYSICS,
     ScenarioError,
+    ServeError,
     exit_interrupted,
 )
 from .interrupt import Interrupted, Signals
@@ -59,6 +63,8 @@ examples:
   %(prog)s paper_case --no-video --duration 20 --seed 3
   %(prog)s paper_case --robot diffdrive --set onboard.thresholds=l1
   %(prog)s ../mine/case.toml --out results/case1 --overwrite
+  %(prog)s paper_case --web --port 8080
+      the run live in a web browser: open the address it prints
   %(prog)s --list
       the built-in scenarios, robot models and threshold rules
 
@@ -110,11 +116,19 @@ def build_parser() -> argparse.ArgumentParser:
         "would start after the new end are dropped (and listed)",
     )
     p.add_argument("--robot", metavar="MODEL", help="override team.robot_model")
-    p.add_argument(
+    live = p.add_mutually_exclusive_group()
+    live.add_argument(
         "--viewer",
         action="store_true",
         help="also show the run live in MuJoCo's viewer (needs a display)",
     )
+    live.add_argument(
+        "--web",
+        action="store_true",
+        help="also serve the run live to a web browser (MuJoCo Studio's web viewer; no "
+        "display needed): prints the address to open, steps in real time once it is opened",
+    )
+    add_port_option(p)
     add_video_options(p)
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     p.add_argument(
@@ -124,6 +138,28 @@ def build_parser() -> argparse.ArgumentParser:
         "the onboard path",
     )
     return p
+
+
+def add_port_option(p: argparse.ArgumentParser) -> None:
+    """``--port`` of ``--web``, shared by the run and plot commands."""
+    p.add_argument(
+        "--port",
+        type=port_number,
+        default=0,
+        metavar="P",
+        help="with --web: the HTTP port to serve on (default 0: the first free one from 8080)",
+    )
+
+
+def port_number(text: str) -> int:
+    """A TCP port (0 to 65535) from the command line."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number from 0 to 65535, got {text!r}")
+    return port
 
 
 def add_video_options(p: argparse.ArgumentParser) -> None:
@@ -178,6 +214,9 @@ def video_options(args: argparse.Namespace):
     return VideoOptions(width=w, height=h, fps=args.fps, quality=args.quality)
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
 def parse_overrides(items: list[str]) -> dict[str, Any]:
     """``KEY=VALUE`` pairs into dotted overrides; VALUE is TOML (a bare word is a string)."""
     out: dict[str, Any] = {}
@@ -185,13 +224,27 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise ScenarioError(f"--set {item}: expected KEY=VALUE, e.g. gains.ko=3")
+        name = key.strip()
+        if _CONTROL.search(name):
+            raise ScenarioError(f"--set {name!r}: a key has no line breaks or control characters")
         try:
-            value = tomllib.loads(f"v = {text}")["v"]
+            doc = tomllib.loads(f"v = {text}")
         except tomllib.TOMLDecodeError:
-            value = text  # a bare word: a string
+            if _CONTROL.search(text):  # "x\ny" is not one bare word
+                raise ScenarioError(
+                    f"--set {name}: {text!r} is not a TOML value, and a bare word (a string) "
+                    'has no line breaks or control characters; quote a string ("...")'
+                ) from None
+            doc = {"v": text}  # a bare word: a string
         except RecursionError:
-            raise ScenarioError(f"--set {key.strip()}: the value is nested too deep") from None
-        out[key.strip()] = value
+            raise ScenarioError(f"--set {name}: the value is nested too deep") from None
+        if set(doc) != {"v"}:  # "3\nduration = 1" set a second key in silence
+            extra = ", ".join(k for k in doc if k != "v")
+            raise ScenarioError(
+                f"--set {name}: {text!r} holds more than one value (a line break starts "
+                f"another key: {extra}); give one value per --set"
+            )
+        out[name] = doc["v"]
     return out
 
 
@@ -243,8 +296,12 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
     progress = not args.no_progress and sys.stderr.isatty()
     try:
         with signals.active():
+            if args.web:  # before anything is built: the viewer is there and the port free
+                from .web import check
+
+                check(args.port)
             options = setup_video(args, not args.no_video)
-    except (ScenarioError, gl.RenderError) as exc:
+    except (ScenarioError, gl.RenderError, ServeError) as exc:
         return cli.fail(exc)
 
     try:
@@ -286,7 +343,11 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 long = [e for e in sim.events.items if "will take at least" in e.get("message", "")]
                 for e in long:  # said now, not after the hours it announces
                     print(f"note: {e['message']}", file=sys.stderr)
-                if args.viewer:
+                if args.web:
+                    from .web import serve_live
+
+                    serve_live(sim, args.port)
+                elif args.viewer:
                     from .viewer import ViewerUnavailable, watch
 
                     try:
@@ -301,7 +362,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
             return _finish(
                 result, work, destination(out), signals, options, progress, verbose, args.overwrite
             )
-    except (ScenarioError, OutputError) as exc:
+    except (ScenarioError, OutputError, ServeError) as exc:
         return cli.fail(exc)
     except OSError as exc:
         cli.print_error(os_problem(exc, "writing the run"))

@@ -771,3 +771,67 @@ def test_a_detector_returning_nan_or_the_wrong_type_stops_the_run_in_one_line(bl
         "stopped there and its records are kept",
         str(result.error),
     ), result.error
+
+
+@pytest.mark.parametrize(
+    ("sets", "needles"),
+    [
+        # a latency on a link the graph does not have set the team's round: R = 31, not 1
+        (
+            ['onboard.thresholds="l1"', "network.links=[{link=[1,3],latency=0.3}]"],
+            ("network.links[1].link: [1, 3] is not a link of team.graph", "from 1 to 4"),
+        ),
+        (
+            ['onboard.thresholds="l1"', "network.links=[{link=[9,0],latency=0.3}]"],
+            ("network.links[1].link: [9, 0] names robot 9, which is not in the team",),
+        ),
+        # a 37 GB MemoryError traceback: the channel's ring holds a slot per period of latency
+        (
+            ['onboard.thresholds="l1"', "network.latency=1e7", "gains.ko=1e-13"],
+            ("network.latency: this run needs about", "GB (network", "20 ms is 0.02"),
+        ),
+        # 1e6 m/s² flung a disk 315 m in 0.04 s, "premises: all held"
+        (
+            ['faults=[{robot=1,kind="drift",t=0.5,value=[1e6,0]}]'],
+            ("faults[1].value: a drift of 1e+06 m/s² on robot 1 grows to a bias of",),
+        ),
+        # k and in_degree beyond N - 1 were clamped without a word
+        (['team.graph={family="knn",k=9}'], ("team.graph.k: expected at most N - 1 = 3",)),
+        (
+            ['team.graph={family="random",in_degree=9}'],
+            ("team.graph.in_degree: expected at most N - 1 = 3",),
+        ),
+        (['team.graph_family="line"'], ("team.graph_family: 'line' does not describe the edges",)),
+        # kc·h = 1e4: the controller chattered against the command range, status ok
+        (["gains.kc=1e6"], ("gains.kc: kc = 1e+06 moves each robot 1e+04 times",)),
+        # a line break in a --set value set a second key in silence
+        (["gains.ko=3\nduration=1"], ("--set gains.ko: '3\\nduration=1' holds more than one",)),
+        (["team.robot_model=disk\nx"], ("a bare word (a string) has no line breaks",)),
+    ],
+)
+def test_silent_nonsense_is_refused_in_one_line(tmp_path, capsys, sets, needles):
+    out = tmp_path / "out"
+    argv = ["paper_case", "--duration", "2", "--no-video", "--no-progress", "--out", str(out)]
+    for item in sets:
+        argv += ["--set", item]
+    assert run.main(argv) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, *needles)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("key", "said"),
+    [
+        ("sighting_tolerance", "network.sighting_tolerance: 0 switches the sighting rule off"),
+        ("sighting_range", "network.sighting_range: 0 switches the sighting rule off"),
+    ],
+)
+def test_a_sighting_rule_switched_off_runs_with_a_warning(tmp_path, key, said):
+    """network.sighting_tolerance = 0 switched the sighting rule off without a word: a
+    silent robot that stops was never excluded."""
+    result = simulate(load_scenario("paper_case", {"duration": 0.5, f"network.{key}": 0}))
+    warned = [e["message"] for e in result.events.items if e["kind"] == "warning"]
+    assert any(said in w and "never excluded" in w for w in warned), warned
+    result.save(tmp_path / "run")
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert any(said in w for w in summary["warnings"]), summary["warnings"]

@@ -21,6 +21,7 @@ from ..graph import Graph
 from ..mission import CentroidPath, Formation, Mission
 from ..paths import SCENARIOS
 from ..tomlcheck import Abort, Doc, _nested, _segments, describe, read_toml
+from .crosscheck import cross_problems
 from .parts import (
     Fault,
     Fdir,
@@ -548,6 +549,8 @@ def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario
         fields = document(doc, data)
     except Abort:
         fields = None
+    if fields is not None:
+        cross_problems(doc, fields)
     doc.raise_problems()
     assert fields is not None  # every skip follows a recorded problem
     with _trusted():
