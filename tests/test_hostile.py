@@ -835,3 +835,30 @@ def test_a_sighting_rule_switched_off_runs_with_a_warning(tmp_path, key, said):
     result.save(tmp_path / "run")
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert any(said in w for w in summary["warnings"]), summary["warnings"]
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "needles"),
+    [
+        ("drift_bound", "100.0", ("calibration.drift_bound: 100 m is beyond", "2.7 mm is 0.0027")),
+        ("lag", "1000.0", ("calibration.lag: 1000 s is beyond", "80 ms is 0.08")),
+        ("response_time", "1e6", ("calibration.response_time: 1e+06 s is beyond",)),
+        ("xi_bar", "5.0", ("calibration.xi_bar: 5 m/s is beyond", "5 mm/s is 0.005")),
+        ("saturation", "5.0", ("calibration.saturation: 5 is beyond", "a share of the commands")),
+        ("accel", "0.001", ("calibration.accel: 0.001 m/s² would take the robot 1000 s",)),
+    ],
+)
+def test_a_unit_slip_in_a_robot_files_calibration_is_refused(tmp_path, capsys, key, value, needles):
+    """A drift bound of 100 m, a lag of 1000 s, a response time of 1e6 s ran without a word
+    and switched detection or exclusion off."""
+    text = (
+        (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', f'"{ROBOTS / "disk.xml"}"')
+    )
+    text = re.sub(rf"(?m)^{key} = .*$", "", text) + f"{key} = {value}\n"
+    robot = tmp_path / "slip.robot.toml"
+    robot.write_text(text)
+    out = tmp_path / "out"
+    argv = ["paper_case", "--robot", str(robot), "--duration", "1", "--no-video", "--out", str(out)]
+    assert run.main(argv) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, str(robot), *needles)
+    assert not out.exists()

@@ -220,6 +220,7 @@ def load(path: Path) -> RobotModel:
 
 def _load_robot_file(path: Path) -> RobotModel:
     from ..tomlcheck import Doc, Table, read_toml
+    from .plausible import calibration_problem
 
     data = read_toml(path)
     doc = Doc(str(path), data)
@@ -295,6 +296,8 @@ def _load_robot_file(path: Path) -> RobotModel:
             if key in c.data:  # a G of 0 is no gain (eq. 30): the calibration writes none then
                 strict = key == "compensation_G"
                 calibration[key] = c.number(key, low=0.0, strict_low=strict)
+                if c.ok(key) and (why := calibration_problem(key, calibration[key])):
+                    c.report(key, why)
         c.used.update(CALIBRATION_KEYS)
         c.finish()
     # the optional keys, so that a misspelt one is told what it could be
@@ -363,6 +366,12 @@ def _load_legacy(path: Path) -> RobotModel:
                 f'{path}: the diffdrive adapter needs <numeric name="dftc_{key}" data="..."/>'
             )
     calibration = {k: nums[k] for k in ("xi_bar", "mismatch", "drift_bound") if k in nums}
+    from .plausible import calibration_problem
+
+    for key, value in calibration.items():  # negative: as a robot file's (one line)
+        why = calibration_problem(key, value) if value >= 0 else f"expected >= 0, got {value:g}"
+        if why:
+            raise ScenarioError(f'{path}: <numeric name="dftc_{key}">: {why}')
     robot = RobotModel(
         name=path.stem,
         path=path,
