@@ -22,6 +22,7 @@ import errno
 import os
 import re
 import shutil
+import stat
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -84,6 +85,31 @@ def _owner_alive(folder: Path) -> bool:
         return False
     now = _started(pid)
     return not (started and now and now != started)
+
+
+def special_file(folder: Path) -> str | None:
+    """The first entry of ``folder`` (not recursive) that is neither a regular file nor a
+    folder, in words ("results.jsonl is a FIFO"), or None. Opening a FIFO waits for a
+    writer forever, a device reads without end: a run or campaign folder is never opened
+    with one in it."""
+    kinds = {
+        stat.S_IFIFO: "a FIFO (named pipe)",
+        stat.S_IFCHR: "a character device",
+        stat.S_IFBLK: "a block device",
+        stat.S_IFSOCK: "a socket",
+    }
+    try:
+        entries = sorted(folder.iterdir())
+    except OSError:
+        return None
+    for entry in entries:
+        try:
+            mode = entry.stat().st_mode  # a link is judged by what it points to
+        except OSError:
+            continue  # a dangling link opens nothing
+        if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            return f"{entry.name} is {kinds.get(stat.S_IFMT(mode), 'not a regular file')}"
+    return None
 
 
 def destination(out: Path | str) -> Path:

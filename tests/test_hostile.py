@@ -862,3 +862,27 @@ def test_a_unit_slip_in_a_robot_files_calibration_is_refused(tmp_path, capsys, k
     assert run.main(argv) == EXIT_INPUT
     _one_error_line(capsys.readouterr().err, str(robot), *needles)
     assert not out.exists()
+
+
+def test_a_fifo_in_a_campaign_folder_is_refused_never_opened(tmp_path):
+    """A FIFO named results.jsonl hung the resume (open() waits for a writer), and SIGTERM
+    did not stop it."""
+    import subprocess
+    import sys
+
+    spec = _campaign(tmp_path)
+    (tmp_path / "bot.robot.toml").write_text(
+        (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', f'"{ROBOTS / "disk.xml"}"')
+    )
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / "results.jsonl")
+    proc = subprocess.run(
+        [sys.executable, "-m", "dftc_mujoco.campaign", str(spec), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 5, proc.stderr
+    _one_error_line(proc.stderr, f"{out}: results.jsonl is a FIFO (named pipe)", "--out")
+    assert stat.S_ISFIFO((out / "results.jsonl").lstat().st_mode)  # left as it was

@@ -34,7 +34,7 @@ from typing import Any
 
 from .. import __version__
 from ..errors import OutputError
-from ..output import os_problem
+from ..output import os_problem, special_file
 from ..record import write_text
 from .inputs import inputs
 from .spec import Spec, draw, scenario_dict
@@ -141,6 +141,12 @@ def prepare(out: Path, spec: Spec, overwrite: bool) -> str:
     ident = identity(spec)
     mine = _hash(ident)
     state = "new"
+    special = special_file(out) if out.is_dir() else None
+    if special is not None:  # reading it would wait forever (a FIFO) or without end
+        raise OutputError(
+            f"{out}: {special}, not a file this campaign wrote; a campaign folder holds only "
+            "regular files and folders: remove it, or choose another --out"
+        )
     if out.is_dir() and any(out.iterdir()):
         stored = _stored(out)
         if stored is not None and stored.get("fingerprint") == mine and not overwrite:
