@@ -110,6 +110,17 @@ def open_run(folder: str | Path) -> RunResult:
         raise ScenarioError(f"{files['summary.json']}: unreadable: {_one_line(exc)}") from None
     if not isinstance(summary, dict) or not isinstance(summary.get("events", []), list):
         raise ScenarioError(f"{files['summary.json']}: not a run summary (a JSON object)")
+    for k, e in enumerate(summary.get("events", [])):  # an integer was a TypeError
+        if not (
+            isinstance(e, dict)
+            and isinstance(e.get("kind"), str)
+            and isinstance(e.get("t"), int | float)
+            and not isinstance(e.get("t"), bool)
+        ):
+            raise ScenarioError(
+                f"{files['summary.json']}: events[{k + 1}]: expected an event (an object with "
+                f'a number "t" and a string "kind"), got {str(json.dumps(e))[:60]}'
+            )
     log = _read_log(files["log.npz"])
     try:
         data = tomllib.loads(files["scenario.toml"].read_text())

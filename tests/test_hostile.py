@@ -886,3 +886,29 @@ def test_a_fifo_in_a_campaign_folder_is_refused_never_opened(tmp_path):
     assert proc.returncode == 5, proc.stderr
     _one_error_line(proc.stderr, f"{out}: results.jsonl is a FIFO (named pipe)", "--out")
     assert stat.S_ISFIFO((out / "results.jsonl").lstat().st_mode)  # left as it was
+
+
+def test_a_robot_files_mjcf_that_is_a_symlink_loop_is_one_line(tmp_path, capsys):
+    """RuntimeError: Symlink loop, a traceback."""
+    (tmp_path / "a.xml").symlink_to(tmp_path / "b.xml")
+    (tmp_path / "b.xml").symlink_to(tmp_path / "a.xml")
+    robot = tmp_path / "bot.robot.toml"
+    robot.write_text('mjcf = "a.xml"\nbase = "base"\ndrive = "holonomic"\n[holonomic]\nx = "vx"\n'
+                     'y = "vy"\n')  # fmt: skip
+    for given, key in ((robot, f"{robot}: mjcf"), (tmp_path / "a.xml", "--robot")):
+        argv = ["paper_case", "--robot", str(given), "--duration", "1", "--no-video"]
+        assert run.main([*argv, "--out", str(tmp_path / "out")]) == EXIT_INPUT
+        _one_error_line(capsys.readouterr().err, f"{key}: {tmp_path / 'a.xml'} is a symbolic link")
+
+
+def test_open_run_on_a_summary_whose_events_are_not_events_is_one_line(tmp_path, capsys):
+    """open_run on events [1, 2, 3]: TypeError: 'int' object is not iterable."""
+    folder = tmp_path / "run"
+    simulate(load_scenario("paper_case", {"duration": 0.2})).save(folder)
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["events"] = [1, 2, 3]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    with pytest.raises(InputError, match=r"summary\.json: events\[1\]: expected an event"):
+        open_run(folder)
+    assert plot.main([str(folder), "--no-video"]) == EXIT_INPUT
+    _one_error_line(capsys.readouterr().err, "events[1]: expected an event", "got 1")

@@ -194,8 +194,21 @@ def resolve(name: str, where: str = "team.robot_model", base: Path | None = None
                 f"{where}: {name!r} is a folder ({c.resolve()}), expected a robot file"
                 f" NAME{ROBOT_SUFFIX} or an MJCF file"
             )
+        if c.is_symlink():
+            _resolved(c, where)  # a loop says so; a dangling link is "no such file" below
     looked = " and ".join(dict.fromkeys(str(c.parent) for c in candidates))
     raise ScenarioError(f"{where}: no such robot file {name!r} (looked in {looked})")
+
+
+def _resolved(path: Path, where: str) -> Path:
+    """``path`` with its links followed; a loop of symbolic links is one line of input."""
+    try:
+        return path.resolve(strict=False)
+    except (RuntimeError, OSError) as exc:  # RuntimeError: Python < 3.13's "Symlink loop"
+        raise ScenarioError(
+            f"{where}: {path} is a symbolic link that loops back on itself ({exc}); expected "
+            "a link to a file"
+        ) from None
 
 
 def get(name: str, where: str = "team.robot_model", base: Path | None = None) -> RobotModel:
@@ -209,7 +222,7 @@ def get(name: str, where: str = "team.robot_model", base: Path | None = None) ->
 
 def load(path: Path) -> RobotModel:
     """Read and check one robot file (``*.robot.toml``) or MJCF of the older contract."""
-    path = Path(path).resolve()
+    path = _resolved(Path(path), str(path))
     if path.name.endswith(".toml"):
         return _load_robot_file(path)
     return _load_legacy(path)
@@ -304,7 +317,7 @@ def _load_robot_file(path: Path) -> RobotModel:
     t.used.update(("keyframe", "max_speed", "mesh_density", "motor", "calibration", *DRIVE_ROLES))
     t.finish()
     doc.raise_problems()
-    mjcf = (path.parent / mjcf_name).resolve()
+    mjcf = _resolved(path.parent / mjcf_name, f"{path}: mjcf")
     if mjcf.is_dir():
         raise ScenarioError(f"{path}: mjcf: {mjcf} is a folder, expected an MJCF file in it")
     if not mjcf.is_file():
