@@ -384,6 +384,10 @@ def _finish(
     exit code. A signal during the figures or the video, or a full disk there, keeps the
     records (and the figures when they were complete) and drops the rest; SIGKILL there
     leaves the records at ``out``."""
+    if signals.signum is not None and len(result.log["t"]) <= 1:
+        # stopped before its first control period: nothing ran, no run folder (the signal
+        # ends the command: "interrupted by SIGINT before the run started: nothing was written")
+        raise interrupt.Interrupted(signals.signum)
     write_records(result, work)
     if signals.signum is None:  # (signals are deferred here: only recorded)
         publish(work, out, overwrite)

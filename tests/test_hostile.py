@@ -912,3 +912,50 @@ def test_open_run_on_a_summary_whose_events_are_not_events_is_one_line(tmp_path,
         open_run(folder)
     assert plot.main([str(folder), "--no-video"]) == EXIT_INPUT
     _one_error_line(capsys.readouterr().err, "events[1]: expected an event", "got 1")
+
+
+def _interrupt_after_first_line(argv: list[str]) -> tuple[int, str, str]:
+    """Start a command, send SIGINT as soon as it prints its first line; (code, out, err)."""
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=600)
+    return proc.returncode, first + out, err
+
+
+def test_sigint_before_the_first_period_writes_no_run_folder(tmp_path):
+    """SIGINT at t = 0 left a run folder of 0.00 s and said "the records up to t = 0.00 s"."""
+    out = tmp_path / "out"
+    code, _said, err = _interrupt_after_first_line(
+        ["dftc_mujoco.run", "paper_case", "--duration", "2", "--no-video", "--out", str(out)]
+    )
+    assert code == 130, err
+    assert "interrupted by SIGINT before the run started: nothing was written" in err, err
+    assert "Traceback" not in err and not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]  # no lock, no tmp
+
+
+def test_sigint_during_calibrate_is_one_line(tmp_path):
+    """SIGINT during calibrate: a KeyboardInterrupt traceback (exit 130)."""
+    robot = tmp_path / "bot.robot.toml"
+    robot.write_text(HAND_WRITTEN_DISK)
+    before = robot.read_bytes()
+    code, _said, err = _interrupt_after_first_line(
+        ["dftc_mujoco.calibrate", str(robot), "--write", "--runs", "1"]
+    )
+    assert code == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert err.strip().splitlines()[-1] == "interrupted by SIGINT; nothing written", err
+    assert robot.read_bytes() == before
+
+
+HAND_WRITTEN_DISK = (
+    (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', f'"{ROBOTS / "disk.xml"}"')
+)
