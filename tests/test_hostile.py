@@ -959,3 +959,22 @@ def test_sigint_during_calibrate_is_one_line(tmp_path):
 HAND_WRITTEN_DISK = (
     (ROBOTS / "disk.robot.toml").read_text().replace('"disk.xml"', f'"{ROBOTS / "disk.xml"}"')
 )
+
+
+def test_a_ball_jointed_base_is_told_what_its_joint_is(tmp_path, capsys):
+    """A ball-jointed base was told it "has no joint"."""
+    (tmp_path / "ball.xml").write_text(
+        '<mujoco model="ballbot"><worldbody><body name="base" pos="0 0 0.1">'
+        '<joint name="swivel" type="ball"/><geom type="sphere" size="0.08" mass="2"/></body>'
+        '</worldbody><actuator><motor name="vx" joint="swivel" gear="1 0 0 0 0 0"/>'
+        '<motor name="vy" joint="swivel" gear="0 1 0 0 0 0"/></actuator></mujoco>'
+    )
+    robot = tmp_path / "ball.robot.toml"
+    robot.write_text(
+        'mjcf = "ball.xml"\nbase = "base"\ndrive = "holonomic"\n[holonomic]\nx = "vx"\ny = "vy"\n'
+    )
+    argv = ["paper_case", "--robot", str(robot), "--duration", "1", "--no-video"]
+    assert run.main([*argv, "--out", str(tmp_path / "out")]) == EXIT_INPUT
+    err = capsys.readouterr().err
+    _one_error_line(err, f"{robot}: base: body 'base' moves on swivel (ball)", "free joint")
+    assert "has no joint" not in err

@@ -486,8 +486,20 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
         root = "free"
     elif types and all(t in (_SLIDE, _HINGE) for t in types):
         root = "planar"
-    else:
+    elif not types:
         fail("base", f"body {robot.base!r} has no joint: expected x/y slide joints or a free joint")
+    else:  # a ball joint (it was told it "has no joint")
+        kinds = {_FREE: "free", _SLIDE: "slide", _HINGE: "hinge"}
+        said = ", ".join(
+            f"{model.joint(j).name or f'joint {j}'} ({kinds.get(t, 'ball')})"
+            for j, t in zip(joints, types, strict=True)
+        )
+        fail(
+            "base",
+            f"body {robot.base!r} moves on {said}: a ball joint lets the base tilt and roll, "
+            "which no planar drive controls; expected x/y slide joints (and an optional yaw "
+            "hinge) or a free joint",
+        )
 
     role_key = (lambda r: f"{keys['role']}.{r}") if keys else (lambda r: f"actuator {r!r}")
     infos: dict[str, ActuatorInfo] = {}
