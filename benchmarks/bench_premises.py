@@ -1,4 +1,4 @@
-"""Cost of the run-time premise checks (issue 19): the closed loop with and without them.
+"""Cost of the run-time premise checks: the closed loop with and without them.
 
     python benchmarks/bench_premises.py [--n 4 100] [--repeat 5] [--duration 20]
 

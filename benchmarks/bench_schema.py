@@ -1,6 +1,6 @@
 """The ``[network]`` table checked three ways: the project's readers (tomlcheck), pydantic 2
-and msgspec, with the same keys and cross-key rules (issue 21: a schema library instead of
-our checker? "measure and decide"; the decision is in docs/concepts/layout.md).
+and msgspec, with the same keys and cross-key rules, to decide whether a schema library
+should replace our checker (the decision is in docs/concepts/layout.md).
 
     pip install pydantic msgspec   # neither is a dependency of the project
     python benchmarks/bench_schema.py

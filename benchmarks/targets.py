@@ -1,6 +1,6 @@
-"""Issue 21's speed targets, each measured on this machine and judged: met or not met.
+"""The speed targets, each measured on this machine and judged: met or not met.
 
-    python benchmarks/targets.py                  # the issue's sizes (1.7-3.9 min on 2 cores)
+    python benchmarks/targets.py                  # the default sizes (1.7-3.9 min on 2 cores)
     python benchmarks/targets.py --json out.json  # the figures as well, for a record
     python benchmarks/targets.py --strict         # exit 1 unless every target is met
 
@@ -26,7 +26,7 @@ team's period is Python calls), and how fast one core streams memory (what the p
 a large team's N × N state waits on): the figures to compare before two invocations'
 ratios are. paper_case's ratio read 1.84-1.86 on the machine of 2026-12-06 (a call 19-20
 ns, one core 40 GB/s) and 2.1-4.0 on slower machines (docs/performance.md).
-paper_case's records bit-identical to the code before issue 21 is a test
+paper_case's records matching the stored reference records is a test
 (``tests/test_api.py``), not a benchmark.
 """
 
@@ -44,7 +44,7 @@ import timeit
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-RATIO, RTF, SETUP_S, PEAK_MB = 2.0, 2.0, 1.5, 1.5 * 1024  # the issue's targets
+RATIO, RTF, SETUP_S, PEAK_MB = 2.0, 2.0, 1.5, 1.5 * 1024  # the targets
 
 
 def _child(*args: str) -> dict:

@@ -1,5 +1,5 @@
 """The input a robot applies (``onboard/applied.py``): its drive's range and, for a slow
-drive, its first-order lag (issue 19). The lag model is checked against the exact
+drive, its first-order lag. The lag model is checked against the exact
 response, the calibration against a slow base of this project's own, and the closed loop on
 MuJoCo physics: a slow robot's stop is isolated with no healthy robot flagged."""
 

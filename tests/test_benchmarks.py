@@ -92,7 +92,7 @@ def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
 def test_the_targets_benchmark_judges_each_target_by_its_own_figures(tmp_path):
     """``targets.py`` at small sizes: one verdict per target (a ratio for each N, real time
     with set-up, the cold set-up, the peak), each "met" exactly where its figure is within
-    the issue's bound, every replay the closed loop's exact floor, and the table printed with
+    its target's bound, every replay the closed loop's exact floor, and the table printed with
     the count of targets met, after the line of what the machine measured (the figures the
     ratios stand on)."""
     record = tmp_path / "targets.json"

@@ -533,9 +533,9 @@ def _campaign(tmp_path: Path, name: str, text: str) -> dict[int, dict]:
 
 
 def test_rows_describe_a_fault_of_the_base_scenario(tmp_path):
-    """Issue 20's seventh problem: a campaign over a scenario with its own stop fault (no
-    faulty_robot drawn) reported detected: false, 4 false alarms and a wrong isolation for a
-    run in which every teammate flagged the stopped robot and it alone was excluded."""
+    """A campaign over a scenario with its own stop fault (no faulty_robot drawn): a run in
+    which every teammate flagged the stopped robot and it alone was excluded reads detected,
+    no false alarms and no wrong isolation."""
     rows = _campaign(
         tmp_path,
         "base_fault",

@@ -1,4 +1,4 @@
-"""Hostile but fair input (issue 22, list v3): every case is one ``error:`` line naming the
+"""Hostile but fair input: every case is one ``error:`` line naming the
 file, the key, what was expected and what was found, with the right exit code and nothing
 lost, or it runs when it is legitimate. One test per family: scenario files, overrides,
 robot files, campaign specs, the command line, the Python API and process faults."""
@@ -646,9 +646,9 @@ def test_a_bug_while_drawing_keeps_the_records(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["log.npz", "scenario.toml", "summary.json"]
 
 
-# --------------------------------------------------------------------------- issue 68
-# "Every input answered": each bad input is one error line (file, key, expected, found),
-# a legitimate but risky one runs with a warning naming the guarantee it loses.
+# ------------------------------------------------------------- bad and risky inputs, answered
+# Each bad input is one error line (file, key, expected, found); a legitimate but risky one
+# runs with a warning naming the guarantee it loses.
 
 ROBOTS = Path(__file__).resolve().parent.parent / "models" / "robots"
 

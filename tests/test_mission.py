@@ -43,7 +43,7 @@ def test_centroid_path_is_smooth_and_at_speed():
 
 
 def test_mission_scale_scales_lengths_and_times_once():
-    """Issue 24: one key instead of twelve overrides. Lengths and times k times (defaults
+    """One key instead of twelve overrides. Lengths and times k times (defaults
     included), speeds unchanged; the scenario read is the scaled one and writes itself
     without the key, so that it reads back the same."""
     base = load_scenario("paper_case")

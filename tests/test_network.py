@@ -386,7 +386,7 @@ def test_a_range_limited_team_whose_links_drop_and_come_back_flags_nobody():
     assert "detection" not in kinds and "exclusion" not in kinds
     assert not r.summary["premises"]["network"]["held"]
     # the links that delivered kept the team connected over every window (the monitored
-    # premise of the "while the graph stays connected over the stated window")
+    # premise "while the graph stays connected over the stated window")
     assert r.summary["premises"]["connectivity"]["held"]
     assert r.summary["margin"] < 1.0
 

@@ -168,7 +168,7 @@ def _wait_for(pattern: str, folder: Path, proc: subprocess.Popen, timeout: float
 def test_a_signal_during_the_video_leaves_no_tmp_file(tmp_path, sig):
     """SIGTERM while the video renders: the records and figures land, no video and no
     temporary file; SIGKILL: the records are at --out already (moved there before the
-    drawing: issue 68), and the next process on that --out removes the unfinished drawing."""
+    drawing), and the next process on that --out removes the unfinished drawing."""
     out = tmp_path / "run"
     proc = _video_run(out)
     _wait_for(".run.*.tmp/.video.mp4.tmp.mp4", tmp_path, proc)

@@ -1,5 +1,5 @@
 """Premises of the threshold rules: made true by design, checked before the run, monitored
-during it (issue 19). Every test runs the real closed loop on MuJoCo physics."""
+during it. Every test runs the real closed loop on MuJoCo physics."""
 
 from __future__ import annotations
 
@@ -37,11 +37,12 @@ def shuffled(n: int, duration: float, **extra) -> dict:
 
 
 def test_a_100_robot_team_started_far_from_its_slots_flags_nobody_and_then_isolates_a_stop():
-    """The issue's 100-robot set-up (ring + chords, l1, Δt_d,max auto, starts up to 19 m from
-    the slots, first commands of tens of m/s against a 1 m/s drive): before this issue every
-    robot flagged every robot at 0.19 s and all 99 healthy robots were excluded. With the
-    applied input and the start bound derived from the scenario nobody is flagged, and a
-    stop at 25 s is isolated by every teammate and excluded alone."""
+    """A 100-robot set-up (ring + chords, l1, Δt_d,max auto, starts up to 19 m from the
+    slots, first commands of tens of m/s against a 1 m/s drive). Without the applied input
+    and the start bound every robot would flag every robot at 0.19 s and all 99 healthy
+    robots would be excluded; with the applied input and the start bound derived from the
+    scenario nobody is flagged, and a stop at 25 s is isolated by every teammate and
+    excluded alone."""
     s = load_scenario(
         "paper_case",
         shuffled(

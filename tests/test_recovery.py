@@ -1,6 +1,6 @@
 """The exclusion protocol (eqs. 42-43, ``onboard/recovery.py``): one exclusion instant per
 robot from its first flag, cancelled when nobody flags it at that instant; exclusion needs
-teammates, respects the fault hypothesis, and Δt_d,max follows the graph (issue 20)."""
+teammates, respects the fault hypothesis, and Δt_d,max follows the graph."""
 
 from __future__ import annotations
 
@@ -78,10 +78,10 @@ def test_more_robots_flagged_than_the_hypothesis_is_a_systemic_anomaly_until_all
 
 
 def test_a_100_robot_systemic_anomaly_excludes_nobody():
-    """Issue 20's first problem: 100 robots flag one another at once (here by integrating the
-    nominal input, saturated by the drives). Before, 99 healthy robots were excluded; now a
-    systemic anomaly is reported with the premises the flagged robots violated, every
-    exclusion that comes due is cancelled, and the team goes on."""
+    """100 robots flag one another at once (here by integrating the nominal input, saturated
+    by the drives): no healthy robot is excluded. A systemic anomaly is reported with the
+    premises the flagged robots violated, every exclusion that comes due is cancelled, and
+    the team goes on."""
     from tests.test_premises import shuffled
 
     r = simulate(load_scenario("paper_case", shuffled(100, 12.0, **{"fdir.input": "nominal"})))
@@ -109,9 +109,9 @@ class SelfOnly(Thresholds):
 
 
 def test_a_flag_of_a_robot_on_itself_alone_excludes_nobody():
-    """Issue 20's second problem: a robot's own flag scheduled and confirmed its exclusion. Now
-    it is reported but exclusion needs teammates; ``fdir.self_exclusion = true`` keeps eq. 43
-    read literally."""
+    """A robot's own flag on itself is reported but does not schedule its exclusion:
+    exclusion needs teammates; ``fdir.self_exclusion = true`` keeps eq. 43 read
+    literally."""
     s = load_scenario("paper_case", {"duration": 10.0, "faults": []})
     r = simulate(s, blocks={"thresholds": SelfOnly()})
     assert [(d["by"], d["robot"]) for d in r.summary["detections"]] == [(1, 1)]
@@ -128,9 +128,9 @@ def test_a_flag_of_a_robot_on_itself_alone_excludes_nobody():
 
 
 def test_dt_d_max_is_recomputed_on_the_reduced_graph_at_an_exclusion():
-    """Issue 20's third problem: Δt_d,max ("auto", eq. 46) was kept from the full graph. Now
-    each exclusion recomputes it on the reduced graph and thresholds, and a second stop is
-    excluded at the first flag + the new value."""
+    """Δt_d,max ("auto", eq. 46) is not kept from the full graph: each exclusion recomputes
+    it on the reduced graph and thresholds, and a second stop is excluded at the first
+    flag + the new value."""
     s = load_scenario(
         "paper_case",
         {

@@ -1,5 +1,5 @@
 """What a run's summary says beyond its events: estimates that agree with each other but not
-with the world are warned about (issue 24: a plug-in settled on a perfect square while the
+with the world are warned about (e.g. a plug-in settled on a perfect square while the
 real formation was 0.16 m off, and nothing said so)."""
 
 import numpy as np

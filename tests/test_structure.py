@@ -1,4 +1,4 @@
-"""The house's structure, checked from the code's own imports (issue 21): no import circles
+"""The house's structure, checked from the code's own imports: no import circles
 in the package, no module beyond the size a reader can hold."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Teammate avoidance by the supervisor (issue 20): teammates are obstacles of the null-space
+"""Teammate avoidance by the supervisor: teammates are obstacles of the null-space
 behaviour of eqs. 17-18, so crossing robots keep apart and their residuals stay unaffected."""
 
 from __future__ import annotations

@@ -463,7 +463,7 @@ def test_rules_refuse_what_they_cannot_bound():
 
 
 def test_set_up_is_fast_at_n_100():
-    """κ/λ, the l1 tables and Δt_d for a random in-degree-3 graph at N = 100 (issue 10's
+    """κ/λ, the l1 tables and Δt_d for a random in-degree-3 graph at N = 100 (the
     target is 0.5 s on an idle core; loose here for a shared CI machine)."""
     from dftc_mujoco.onboard.thresholds import decay as fdir
 
@@ -481,7 +481,7 @@ def test_set_up_is_fast_at_n_100():
 @pytest.mark.parametrize(("rule", "within"), [("block_row", 1.5), ("l1", 1.5), ("drive", 0.5)])
 def test_paper_case_keeps_its_outcome_with_the_tight_rules(rule, within):
     """MuJoCo disk robots, with the disk's calibrated drift offset (2.72 mm): robot 1's
-    stop is flagged by all four robots within 1.5 s (issue 10's target; measured 0.55-0.80 s
+    stop is flagged by all four robots within 1.5 s (the target; measured 0.55-0.80 s
     with block_row, 0.35-0.55 s with l1; eq. 40: 3.3-6.0 s), robot 2's compensated bias by
     nobody, no healthy residual above 0.8 of its threshold, and robot 1 is the only robot
     excluded."""
@@ -583,7 +583,7 @@ def test_fdir_options_are_validated():
 
 @pytest.mark.parametrize(("model", "G"), [("disk", 0.01), ("hexbot", 0.01), ("diffdrive", 0.02)])
 def test_block_row_raises_no_false_flag_on_physics_at_the_noise_bounds(model, G):
-    """Issue 10's honesty target on MuJoCo, with each robot's calibrated xi_bar and drift
+    """The honesty target on MuJoCo, with each robot's calibrated xi_bar and drift
     offset: fault-free 60 s paper_case runs at the noise bounds flag nobody and keep every
     residual below 0.8 of its threshold (the campaigns false_alarms_block_row_* run 200 such
     runs per robot: 0 false alarms, margins 0.41 / 0.41 / 0.41)."""
@@ -606,7 +606,7 @@ def test_block_row_raises_no_false_flag_on_physics_at_the_noise_bounds(model, G)
 
 
 def test_a_team_of_100_detects_and_excludes_a_stopped_robot_within_dt_d_max():
-    """Issue 10's done-when at scale, on MuJoCo: 100 disk robots in a rank (nobody drives
+    """Detection and exclusion at scale, on MuJoCo: 100 disk robots in a rank (nobody drives
     into the stopped robot: in a grid the robot behind it pushes it along and its flags come
     and go), ring + chord 2, robot 37 stops at 12 s; with l1 (block_row's exact rows stop at
     N = 64) it is flagged within Δt_d,max of its stop, excluded at t_r = first flag +

@@ -1,4 +1,4 @@
-"""``mission.scale``: one key that scales a mission's geometry and timing (issue 24).
+"""``mission.scale``: one key that scales a mission's geometry and timing.
 
 The stock missions are drawn for the 0.2 m disk. A bigger robot needs the same mission
 bigger: every length k times longer (the path, its corner radius, the formation, the start
