@@ -13,7 +13,8 @@ code   name                meaning
 3      EXIT_PHYSICS        the physics went wrong during the run (the records are kept)
 4      EXIT_RENDER         no OpenGL context, or rendering failed
 5      EXIT_OUTPUT         the output folder, the disk or the OS; a cluster that cannot be
-                           used (EXIT_CLUSTER)
+                           used (EXIT_CLUSTER); a browser view that cannot be served
+                           (EXIT_SERVE: no MuJoCo Studio web viewer, the port taken)
 130    SIGINT              interrupted (128 + the signal's number; 143 for SIGTERM)
 =====  ==================  =========================================================
 """
@@ -27,6 +28,7 @@ EXIT_PHYSICS = 3
 EXIT_RENDER = 4
 EXIT_OUTPUT = 5
 EXIT_CLUSTER = EXIT_OUTPUT  # an environment problem, like a full disk
+EXIT_SERVE = EXIT_OUTPUT  # --web: the same kind of problem
 
 
 def exit_interrupted(signum: int) -> int:
@@ -93,3 +95,10 @@ class ClusterError(DftcError):
     """Ray is missing, or the cluster cannot be reached or joined."""
 
     exit_code = EXIT_CLUSTER
+
+
+class ServeError(DftcError):
+    """``--web``: MuJoCo Studio's web viewer cannot serve the run (it is not installed, the
+    port is taken, it stopped); the message says what to do."""
+
+    exit_code = EXIT_SERVE

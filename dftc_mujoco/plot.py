@@ -1,13 +1,15 @@
 """``python -m dftc_mujoco.plot RUN_DIR``: redraw a saved run's figures (and video).
 
 Reads ``log.npz`` and ``summary.json`` (and, for ``--video``, the
-``scenario.toml`` copy the run left) without re-simulating. Everything is drawn
+``scenario.toml`` copy the run left) without re-simulating; ``--web`` replays the run in
+a web browser instead (``web.py``), until Ctrl-C (exit 0). Everything is drawn
 into a private folder beside the run and moved into the run folder only when
 complete (the figures as one folder, the video, each still), so a failure or an
 interruption leaves the previous figures and video as they were. Exit codes: 0
 success, 2 bad input (a missing, truncated or corrupt record file), 4 no OpenGL
 backend, 5 an output, disk or OS problem (the run folder is being written by
-another process, or the disk is full), 130 / 143 interrupted by SIGINT / SIGTERM.
+another process, or the disk is full; ``--web`` without MuJoCo Studio's web viewer or with
+its port taken), 130 / 143 interrupted by SIGINT / SIGTERM.
 """
 
 from __future__ import annotations
@@ -17,9 +19,17 @@ import sys
 from pathlib import Path
 
 from . import cli, interrupt, output
-from .errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, OutputError, ScenarioError
+from .errors import (
+    EXIT_INPUT,
+    EXIT_OK,
+    EXIT_OUTPUT,
+    OutputError,
+    RenderError,
+    ScenarioError,
+    ServeError,
+)
 from .render import gl
-from .run import add_video_options, setup_video
+from .run import add_port_option, add_video_options, setup_video
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,6 +43,7 @@ examples:
   %(prog)s renders/paper_case                 the paper's figures again, into figures/
   %(prog)s renders/paper_case --video         and video.mp4
   %(prog)s renders/paper_case --still 45.1    the video frame at t = 45.1 s as a PNG
+  %(prog)s renders/paper_case --web           the run replayed in a web browser
 
 Documentation: the project's docs/ folder (the command line, what a run folder holds).
 """,
@@ -54,11 +65,40 @@ Documentation: the project's docs/ folder (the command line, what a run folder h
         metavar="T",
         help="also write the video frame at time T as still_T.png (repeatable)",
     )
+    p.add_argument(
+        "--web",
+        action="store_true",
+        help="replay the run in a web browser instead of drawing (MuJoCo Studio's web viewer; "
+        "no display needed): prints the address to open; Ctrl-C stops it",
+    )
+    add_port_option(p)
     args = p.parse_args(argv)
+    if args.web and (not args.no_video or args.still):
+        p.error("--web replays the run; --video and --still draw it: one at a time")
+    if args.web:
+        return interrupt.guarded(lambda signals: _web(args, signals), "")
     return interrupt.guarded(
         lambda signals: _plot(args, signals),
         f": the figures and video in {args.run_dir} are unchanged",
     )
+
+
+def _web(args, signals: interrupt.Signals) -> int:
+    """Serve the run's replay until Ctrl-C (exit 0: that is how it ends)."""
+    from .web import check, serve_replay
+
+    try:
+        with signals.active():
+            check(args.port)
+            from .results import open_run
+
+            run = open_run(args.run_dir)
+        serve_replay(run, args.port, stop=lambda: signals.signum is not None)
+    except (ScenarioError, ServeError, RenderError) as exc:  # RenderError: an empty log
+        return cli.fail(exc)
+    if signals.signum is not None:
+        print(f"web: stopped by {interrupt.Interrupted(signals.signum).name}", file=sys.stderr)
+    return EXIT_OK
 
 
 def _plot(args, signals: interrupt.Signals) -> int:

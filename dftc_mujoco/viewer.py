@@ -28,43 +28,66 @@ class ViewerUnavailable(RuntimeError):
     """No display to open MuJoCo's viewer on (the message says what to do)."""
 
 
-def _display() -> bool:
+def has_display() -> bool:
+    """A display to open a window on (X11 or Wayland)."""
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def _marker(scn, pos, size, rgba, kind=mujoco.mjtGeom.mjGEOM_SPHERE) -> None:
-    if scn.ngeom >= scn.maxgeom:
-        return
-    mujoco.mjv_initGeom(
-        scn.geoms[scn.ngeom],
-        int(kind),
-        np.asarray(size, float),
-        np.asarray(pos, float),
-        np.eye(3).ravel(),
-        np.asarray(rgba, np.float32),
-    )
-    scn.ngeom += 1
+#: an overlay marker: (geom type, size, position, RGBA), as ``mjv_initGeom`` takes them
+Marker = tuple[int, np.ndarray, np.ndarray, np.ndarray]
+
+#: the colour of a desired slot's disc
+SLOT = (0.2, 0.4, 0.9, 0.5)
+
+
+def snapshot_states(snap) -> list[str]:
+    """Each robot's state (``display.py``) in a :class:`~dftc_mujoco.loop.Snapshot`."""
+    return [
+        robot_state(
+            bool(snap.active[i]),
+            bool(snap.flagged[i]),
+            bool(np.linalg.norm(snap.phi_hat[i]) > COMPENSATING),
+        )
+        for i in range(len(snap.x))
+    ]
+
+
+def markers(x: np.ndarray, states: list[str], x_d: np.ndarray, halo: float = 0.0) -> list[Marker]:
+    """The overlays of robots at ``x`` (N, 2) in ``states``, with desired slots ``x_d``
+    (N, 2; NaN: none): a sphere above each robot in its state's colour (and, if ``halo`` >
+    0, a disc of that radius under it: the browser, ``web.py``, cannot repaint the robot),
+    a flat disc at each slot. The passive viewer and the browser draw the same."""
+    out: list[Marker] = []
+    sphere, cylinder = int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CYLINDER)
+    for p, state in zip(x, states, strict=True):
+        if np.all(np.isfinite(p)):
+            out.append(_spec(sphere, (0.035, 0, 0), (p[0], p[1], 0.32), COLOURS[state]))
+            if halo > 0:
+                out.append(_spec(cylinder, (halo, 0.002, 0), (p[0], p[1], 0.003), COLOURS[state]))
+    for p in x_d:
+        if np.all(np.isfinite(p)):
+            out.append(_spec(cylinder, (0.03, 0.03, 0.001), (p[0], p[1], 0.002), SLOT))
+    return out
+
+
+def _spec(kind: int, size, pos, rgba) -> Marker:
+    return (kind, np.asarray(size, float), np.asarray(pos, float), np.asarray(rgba, np.float32))
+
+
+def init_geom(geom: mujoco.MjvGeom, marker: Marker) -> None:
+    """Make ``geom`` the ``marker``."""
+    kind, size, pos, rgba = marker
+    mujoco.mjv_initGeom(geom, kind, size, pos, np.eye(3).ravel(), rgba)
 
 
 def draw_overlays(scn, snap, x_d: np.ndarray) -> None:
     """State spheres and desired slots of a :class:`~dftc_mujoco.loop.Snapshot` into ``scn``."""
     scn.ngeom = 0
-    for i, p in enumerate(snap.x):
-        state = robot_state(
-            bool(snap.active[i]),
-            bool(snap.flagged[i]),
-            bool(np.linalg.norm(snap.phi_hat[i]) > COMPENSATING),
-        )
-        _marker(scn, (p[0], p[1], 0.32), (0.035, 0, 0), COLOURS[state])
-    for p in x_d:
-        if np.all(np.isfinite(p)):
-            _marker(
-                scn,
-                (p[0], p[1], 0.002),
-                (0.03, 0.03, 0.001),
-                (0.2, 0.4, 0.9, 0.5),
-                mujoco.mjtGeom.mjGEOM_CYLINDER,
-            )
+    for marker in markers(snap.x, snapshot_states(snap), x_d):
+        if scn.ngeom >= scn.maxgeom:
+            return
+        init_geom(scn.geoms[scn.ngeom], marker)
+        scn.ngeom += 1
 
 
 def watch(sim: Simulation, speed: float = 1.0, fps: float = 30.0, max_seconds: float | None = None):
@@ -73,7 +96,7 @@ def watch(sim: Simulation, speed: float = 1.0, fps: float = 30.0, max_seconds: f
 
     Raises :class:`ViewerUnavailable` without a display.
     """
-    if not _display():
+    if not has_display():
         raise ViewerUnavailable(
             "--viewer needs a display (DISPLAY is not set): run it on a desktop, over "
             "ssh -X, or under Xvfb (xvfb-run python -m dftc_mujoco.run ... --viewer)"

@@ -1,7 +1,9 @@
 """Offscreen video of a run, drawn from its records (``log.npz``, ``summary.json``).
 
-A private copy of the run's scene is re-posed from the logged positions at
-each video frame (linear interpolation between log samples) and rendered with
+A private copy of the run's scene (:class:`RecordedScene`, which is also what
+``python -m dftc_mujoco.plot RUN --web`` replays in a browser) is re-posed from the
+logged positions at each video frame (linear interpolation between log samples) and
+rendered with
 ``mujoco.Renderer`` through an orthographic top-down camera that follows the
 team. On top of the MuJoCo scene: each robot's trail, the desired centroid
 path, a ghost of the desired formation, a ring while a robot avoids an
@@ -36,7 +38,72 @@ SAFE = (0.35, 0.35, 0.4, 0.9)
 PATH = (0.15, 0.3, 0.95, 0.8)
 
 
-class FrameRenderer:
+class RecordedScene:
+    """A private copy of a run's scene, posed from its records at any time (no GL): what
+    the video draws and what ``python -m dftc_mujoco.plot RUN --web`` replays."""
+
+    def __init__(
+        self, scenario: Scenario, log: dict[str, np.ndarray], summary: dict[str, Any]
+    ) -> None:
+        self.log = log
+        self.summary = summary
+        self.t = log["t"]
+        if len(self.t) < 2:
+            raise RenderError("the log has fewer than two samples: nothing to render")
+        team = fleet.load(scenario.team.models, "team.robot_model", scenario.directory)
+        self.footprint = team.envelope.footprint_radius
+        self.scene = scene_mod.build(scenario, team if team.mixed else team.envelope)
+        self.model = self.scene.model
+        self.data = mujoco.MjData(self.model)
+        self.n = log["x"].shape[1]
+        self.hull_geoms = [scene_mod.state_geoms(self.model, b) for b in self.scene.body]
+        self.captions = captions(summary)
+        self._bias_from = _bias_start(summary, self.n)
+
+    def _index(self, t: float) -> tuple[int, float]:
+        j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2))
+        a = float(np.clip((t - self.t[j]) / (self.t[j + 1] - self.t[j]), 0.0, 1.0))
+        return j, a
+
+    def _lerp(self, name: str, j: int, a: float) -> np.ndarray:
+        v = self.log[name]
+        return (1 - a) * v[j] + a * v[j + 1]
+
+    def positions(self, t: float) -> np.ndarray:
+        """Logged robot positions interpolated at ``t``, (N, 2)."""
+        j, a = self._index(t)
+        return self._lerp("x", j, a)
+
+    def states(self, t: float) -> list[str]:
+        """Each robot's state at ``t``: healthy, compensating, flagged or excluded."""
+        j, a = self._index(t)
+        k = j + 1 if a >= 1.0 else j
+        active, flagged = self.log["active"][k], self.log["flagged"][k]
+        return [
+            robot_state(bool(active[i]), bool(flagged[i]), t >= self._bias_from[i])
+            for i in range(self.n)
+        ]
+
+    def desired(self, t: float) -> np.ndarray:
+        """Each member's desired slot (N, 2) at the log sample before ``t`` (NaN: none)."""
+        return self.log["x_d"][self._index(t)[0]]
+
+    def pose(self, t: float) -> tuple[int, float, np.ndarray]:
+        """Put the scene's robots where the log has them at ``t`` (``data.qpos``, and the
+        kinematics); the log sample before ``t``, the fraction of the way to the next and
+        the robots' positions (N, 2)."""
+        j, a = self._index(t)
+        x = self._lerp("x", j, a)
+        pose = self._lerp("pose", j, a)
+        yaw0, yaw1 = self.log["pose"][j, :, 2], self.log["pose"][j + 1, :, 2]
+        pose[:, 2] = yaw0 + a * np.angle(np.exp(1j * (yaw1 - yaw0)))  # shortest turn
+        scene_mod.place(self.scene, self.data, pose)
+        self.data.time = t
+        mujoco.mj_kinematics(self.model, self.data)
+        return j, a, x
+
+
+class FrameRenderer(RecordedScene):
     """Renders frames of a recorded run; use as a context manager (it owns a GL context)."""
 
     def __init__(
@@ -48,24 +115,13 @@ class FrameRenderer:
     ) -> None:
         options = options or VideoOptions()
         self.options = options
-        self.log = log
-        self.summary = summary
-        self.t = log["t"]
-        if len(self.t) < 2:
-            raise RenderError("the log has fewer than two samples: nothing to render")
-        team = fleet.load(scenario.team.models, "team.robot_model", scenario.directory)
-        self.footprint = team.envelope.footprint_radius
-        self.scene = scene_mod.build(scenario, team if team.mixed else team.envelope)
-        m = self.scene.model
+        super().__init__(scenario, log, summary)
+        m = self.model
         m.vis.global_.offwidth = max(m.vis.global_.offwidth, options.width)
         m.vis.global_.offheight = max(m.vis.global_.offheight, options.height)
         if options.quality:
             m.vis.quality.shadowsize = 4096
             m.vis.quality.offsamples = 4
-        self.model = m
-        self.data = mujoco.MjData(m)
-        self.n = log["x"].shape[1]
-        self.hull_geoms = [scene_mod.state_geoms(m, b) for b in self.scene.body]
         for geoms in self.hull_geoms:
             m.geom_matid[geoms] = -1  # the state colour replaces the robot's material
         try:
@@ -79,8 +135,6 @@ class FrameRenderer:
         self.camera.orthographic = 1
         self.camera.azimuth, self.camera.elevation = 90.0, -90.0
         self._track = self._camera_track()
-        self._events = _overlay_events(summary)
-        self._bias_from = _bias_start(summary, self.n)
         self._font = ImageFont.load_default()
 
     # ------------------------------------------------------------------ resources
@@ -117,15 +171,6 @@ class FrameRenderer:
         centre = np.stack([_moving(centre[:, j], w, np.mean) for j in range(2)], axis=1)
         return np.column_stack([centre, 2 * half])
 
-    def _index(self, t: float) -> tuple[int, float]:
-        j = int(np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2))
-        a = float(np.clip((t - self.t[j]) / (self.t[j + 1] - self.t[j]), 0.0, 1.0))
-        return j, a
-
-    def _lerp(self, name: str, j: int, a: float) -> np.ndarray:
-        v = self.log[name]
-        return (1 - a) * v[j] + a * v[j + 1]
-
     def view(self, t: float) -> tuple[np.ndarray, float]:
         """Camera centre (x, y) and view height [m] at time ``t``."""
         j, a = self._index(t)
@@ -140,32 +185,11 @@ class FrameRenderer:
         row = self.options.height / 2 - (xy[..., 1] - centre[1]) * scale
         return np.stack([col, row], axis=-1)
 
-    def positions(self, t: float) -> np.ndarray:
-        """Logged robot positions interpolated at ``t``, (N, 2)."""
-        j, a = self._index(t)
-        return self._lerp("x", j, a)
-
-    def states(self, t: float) -> list[str]:
-        """Each robot's state at ``t``: healthy, compensating, flagged or excluded."""
-        j, a = self._index(t)
-        k = j + 1 if a >= 1.0 else j
-        active, flagged = self.log["active"][k], self.log["flagged"][k]
-        return [
-            robot_state(bool(active[i]), bool(flagged[i]), t >= self._bias_from[i])
-            for i in range(self.n)
-        ]
-
     # ------------------------------------------------------------------ drawing
 
     def frame(self, t: float) -> np.ndarray:
         """The frame at time ``t``: (height, width, 3) uint8."""
-        j, a = self._index(t)
-        x = self._lerp("x", j, a)
-        pose = self._lerp("pose", j, a)
-        yaw0, yaw1 = self.log["pose"][j, :, 2], self.log["pose"][j + 1, :, 2]
-        pose[:, 2] = yaw0 + a * np.angle(np.exp(1j * (yaw1 - yaw0)))  # shortest turn
-        scene_mod.place(self.scene, self.data, pose)
-        mujoco.mj_kinematics(self.model, self.data)
+        j, _, x = self.pose(t)
         colours = dict(STATES)
         states = self.states(t)
         for i, st in enumerate(states):
@@ -307,7 +331,7 @@ class FrameRenderer:
             fill=(0, 0, 0),
             font=font,
         )
-        recent = [e for e in self._events if e[0] <= t + 1e-9][-4:]
+        recent = [e for e in self.captions if e[0] <= t + 1e-9][-4:]
         for k, (te, text) in enumerate(recent):
             draw.text((6, 22 + 13 * k), f"{te:6.2f} s  {text}", fill=(20, 20, 20), font=font)
         pix = self.project(x, t)
@@ -354,7 +378,7 @@ def _bias_start(summary: dict[str, Any], n: int) -> np.ndarray:
     return start
 
 
-def _overlay_events(summary: dict[str, Any]) -> list[tuple[float, str]]:
+def captions(summary: dict[str, Any]) -> list[tuple[float, str]]:
     """Fault injections, each robot's first detection, and exclusions, in time order, in the
     words of :func:`dftc_mujoco.events.describe`."""
     ev = [

@@ -19,6 +19,9 @@ own keyframe pose. What the scene adds:
   actuators hold their keyframe ``ctrl``.
 * **Options** stay the arena's (timestep, integrator from the scenario); a robot file
   whose ``<option>`` sets something else is reported (:attr:`Scene.notes`).
+
+The composed ``MjSpec`` stays with the scene (:attr:`Scene.spec`): ``sim/mjcf.py`` writes
+it as MJCF text that loads without this package (dm_control's ``Physics``).
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ class Scene:
     notes: tuple[str, ...] = field(default_factory=tuple)  # warnings about the composition
     groups: tuple[Group, ...] = ()  # the robots of each model (one group: a single model)
     ctrl_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (Σ A + H,)
+    spec: mujoco.MjSpec | None = None  # what ``model`` was compiled from (sim/mjcf.py writes it)
 
 
 PREFIX = "robot"  # every robot's names start with it (robot_prefix)
@@ -183,6 +187,7 @@ def compose(
         notes,
         tuple(groups),
         ctrl_index,
+        spec,
     )
 
 

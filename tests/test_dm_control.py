@@ -1,0 +1,56 @@
+"""The scene in dm_control: ``Physics.from_xml_string(sim.scene_xml())`` loads the scene of
+each built-in robot and, driven by the commands the simulator applied, steps to the very
+positions the simulator's own MuJoCo model reached."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+dm_mujoco = pytest.importorskip(
+    "dm_control.mujoco", reason="dm_control is not installed (the rl extra: pip install -e '.[rl]')"
+)
+
+from dftc_mujoco import Simulation, load_scenario  # noqa: E402
+from dftc_mujoco.sim.mjcf import START_KEY  # noqa: E402
+
+PERIODS = 60  # 0.6 s of paper_case: 300 MuJoCo steps of 2 ms
+
+
+@pytest.mark.parametrize("robot", ["disk", "hexbot", "diffdrive"])
+def test_physics_steps_the_scene_as_the_simulator_does(robot):
+    applied = []  # after each control period: the commands it applied and where it left
+
+    def hook(t, plant):
+        applied.append((plant.data.ctrl.copy(), plant.data.qpos.copy()))
+
+    with Simulation(load_scenario("paper_case", {"team.robot_model": robot}), hook=hook) as sim:
+        xml = sim.scene_xml()
+        substeps = sim.scenario.physics.substeps
+        start = sim.scene.qpos_init.copy()
+        assert isinstance(sim.scene.spec, mujoco.MjSpec)
+        sim.step(PERIODS)
+    physics = dm_mujoco.Physics.from_xml_string(xml)  # meshes too: the hexbot is an STL
+    assert physics.model.id2name(0, "key") == START_KEY
+    physics.reset(0)  # the keyframe: every robot where the run starts
+    np.testing.assert_array_equal(physics.data.qpos, start)
+    for ctrl, qpos in applied:
+        physics.data.ctrl[:] = ctrl
+        physics.step(substeps)
+        np.testing.assert_array_equal(physics.data.qpos, qpos)  # bit for bit
+    assert len(applied) == PERIODS
+    assert np.abs(qpos - start).max() > 0.05  # the robots moved: a test of something
+
+
+def test_the_text_loads_in_mujoco_as_the_same_model():
+    """Every number of the compiled model is the simulator's (none rounded by the writer)."""
+    with Simulation(load_scenario("paper_case", {"team.robot_model": "hexbot"})) as sim:
+        ours = sim.model
+        other = mujoco.MjModel.from_xml_string(sim.scene_xml())
+        for name in ("body_mass", "body_inertia", "body_ipos", "body_pos", "geom_size", "opt"):
+            a, b = getattr(ours, name), getattr(other, name)
+            if name == "opt":
+                assert a.timestep == b.timestep and a.integrator == b.integrator
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=name)
