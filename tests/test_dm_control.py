@@ -54,3 +54,16 @@ def test_the_text_loads_in_mujoco_as_the_same_model():
                 assert a.timestep == b.timestep and a.integrator == b.integrator
             else:
                 np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_a_team_attached_in_many_groups_loads():
+    """Past 32 robots the scene attaches them in groups, each bringing a default class of
+    the same name: the text names each once, and it loads."""
+    from dftc_mujoco.sim import robots, scene
+    from dftc_mujoco.sim.mjcf import scene_xml
+
+    positions = np.array([[0.5 * (i % 7), 0.5 * (i // 7)] for i in range(40)])
+    made = scene.compose(robots.get("disk"), positions)
+    physics = dm_mujoco.Physics.from_xml_string(scene_xml(made))
+    assert physics.model.nbody == made.model.nbody == 41
+    np.testing.assert_array_equal(physics.model.body_pos, made.model.body_pos)

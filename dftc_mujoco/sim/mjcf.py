@@ -2,7 +2,7 @@
 ``Physics.from_xml_string``, ``mujoco.MjModel.from_xml_string``, MuJoCo's own viewer).
 
 The text is MuJoCo's own writing of the scene's ``MjSpec`` (:attr:`.scene.Scene.spec`,
-``MjSpec.to_xml``) with two additions:
+``MjSpec.to_xml``) with these changes:
 
 * **Full precision where the scene computed a number.** MuJoCo's writer prints 6
   significant digits, so a number computed in Python (where each robot's frame puts it,
@@ -10,8 +10,10 @@ The text is MuJoCo's own writing of the scene's ``MjSpec`` (:attr:`.scene.Scene.
   and a model loaded from the text would step apart from the simulator's by 1e-9 m within
   a few hundred steps. Every number of a named body, geom or site, each robot's frame and
   the options is written again with all its digits (when the written value is that number
-  rounded: nothing else is touched); numbers the robots' own files give are written as
-  MuJoCo writes them.
+  rounded: nothing else is touched), and an orientation given as a z axis or two axes as
+  it was given; other numbers of the robots' own files are written as MuJoCo writes them.
+* **One name per default class**: the classes that robots attached in groups repeat are
+  numbered.
 * **The start as a keyframe** (``dftc_start``): every robot at its initial pose and its
   actuators' initial commands, the state a run starts from (``physics.reset(0)`` in
   dm_control; ``mj_resetDataKeyframe`` in MuJoCo).
@@ -72,6 +74,7 @@ def scene_xml(scene: Scene) -> str:
             holder = parent.get(node)
             if frame is not None and holder is not None and holder.tag == "frame":
                 _exact(holder, frame, "frame")
+    _unique_classes(root)
     _start_key(root, scene)
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n"
@@ -104,6 +107,21 @@ def _exact(node: ET.Element | None, obj: Any, kind: str) -> None:
         exact = value[: len(written)]
         if np.allclose(written, exact, rtol=1e-5, atol=1e-12):
             node.set(attr, " ".join(repr(float(v)) for v in exact))
+
+
+def _unique_classes(root: ET.Element) -> None:
+    """Robots attached in groups (``scene.GROUP``) bring one default class each of the same
+    name, which MJCF text may hold only once: the repeats are numbered (no element names
+    them; the robots' own classes are prefixed, so unique)."""
+    used = {n.get(a) for n in root.iter() for a in ("class", "childclass") if n.tag != "default"}
+    seen: dict[str, int] = {}
+    for node in root.iter("default"):
+        name = node.get("class")
+        if name is None or name in used:
+            continue
+        seen[name] = seen.get(name, 0) + 1
+        if seen[name] > 1:
+            node.set("class", f"{name}{seen[name]}")
 
 
 def _start_key(root: ET.Element, scene: Scene) -> None:
