@@ -73,6 +73,8 @@ Documentation: the project's docs/ folder (the command line, what a run folder h
     )
     add_port_option(p)
     args = p.parse_args(argv)
+    if args.port and not args.web:
+        p.error("--port is the port of --web: add --web, or leave --port out")
     if args.web and (not args.no_video or args.still):
         p.error("--web replays the run; --video and --still draw it: one at a time")
     if args.web:

@@ -265,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_OK
     if args.scenario is None:
         parser.error("the scenario is required (a name such as paper_case, or --list)")
+    if args.port and not args.web:
+        parser.error("--port is the port of --web: add --web, or leave --port out")
     # the records are never cut in two: the work defers signals where it must
     return interrupt.guarded(
         lambda signals: _main(args, signals), " before the run started: nothing was written"
