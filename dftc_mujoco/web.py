@@ -184,12 +184,12 @@ class WebView:
                 viewer = st.web_viewer.WebViewer(
                     config, endpoint, model=model, plugins=[panel], camera=camera
                 )
+                made["port"] = viewer.port
             except Exception as exc:
                 made["error"] = exc
                 return
             finally:
                 ready.set()
-            made["port"] = viewer.port
             st.viewer_protocol.run_viewer_loop(viewer)
 
         # the viewer prints its own box of addresses: one line of ours says the same
@@ -230,8 +230,8 @@ class WebView:
         the panel."""
         mujoco.mj_getState(model, data, self._state, self._sig)
         mujoco.mj_setState(self._model, self._data, self._state, self._sig)
-        self._handle.send_to_viewer(self._overlay(tuple(overlay), title, tuple(rows)))
         try:
+            self._handle.send_to_viewer(self._overlay(tuple(overlay), title, tuple(rows)))
             self._handle.sync()
         except Exception as exc:
             raise ServeError(f"--web: the web viewer stopped: {_line(exc)}") from None
