@@ -45,7 +45,7 @@ from .physics_step import PhysicsStep
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
-from .sim import fleet, scene
+from .sim import fleet, mjcf, scene
 from .sim.bumpers import Bumpers
 from .sim.faults import Fault
 from .sim.plant import NoiseStream, Plant
@@ -70,12 +70,13 @@ class Simulation:
             result = sim.run()        # the rest
             result.save("renders/mine")
 
-    ``model`` and ``data`` are the MuJoCo ``MjModel`` and ``MjData``.
+    ``model`` and ``data`` are the MuJoCo ``MjModel`` and ``MjData`` (``scene.spec``: its MjSpec).
     Physics trouble does not raise: the run stops, ``result.ok`` is False and
     the log up to that instant is kept.
     """
 
     faults: fleet.ActuatorFaults | fleet.MixedFaults  # the robots' actuator faults
+    scene_xml = mjcf.simulation_xml  # the scene as MJCF text (dm_control loads it)
 
     def __init__(
         self,
