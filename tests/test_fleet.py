@@ -1,4 +1,4 @@
-"""Mixed teams (issue 24): one model per robot in ``team.robot_model``, composed in one
+"""Mixed teams: one model per robot in ``team.robot_model``, composed in one
 scene with each robot's own drive and actuators; the onboard blocks take the team's
 envelope (sim/fleet.py)."""
 
@@ -11,7 +11,8 @@ from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.sim import fleet
 
 DATA = Path(__file__).parent / "data" / "robots"
-HOLO, OMNI, SLOW = (str(DATA / f"{n}.robot.toml") for n in ("holobase", "omnibase", "slowbase"))
+HOLO, SLOW = (str(DATA / f"{n}.robot.toml") for n in ("holobase", "slowbase"))
+OMNI = "omni"  # built in (models/robots/omni.robot.toml)
 #: holonomic slides, a differential drive, omni wheels and the disk
 MIXED = [HOLO, "diffdrive", OMNI, "disk"]
 
@@ -34,7 +35,7 @@ def test_the_envelope_is_the_team_s_worst_bounds():
     assert team.mixed and [m.name for m, _ in team.groups()] == [
         "holobase",
         "diffdrive",
-        "omnibase",
+        "omni",
         "disk",
     ]
     env, models = team.envelope, team.models

@@ -36,7 +36,7 @@ BIG = {
 }
 # with the robots' measured mismatch (15-20 mm/s: position servos lag) eq. 40's thresholds
 # are too wide to catch the stop in time; the block_row rule, with the calibrated drift
-# offset, is the README's recipe for such robots (issue 10)
+# offset, is the README's recipe for such robots
 TIGHT = {**BIG, "onboard.thresholds": "block_row"}
 
 MOTORBOX = """<mujoco model="motorbox">
@@ -504,8 +504,8 @@ FAST_CALIBRATION = ["--runs", "1", "--set", "duration=5"]
 def test_calibrate_write_replaces_calibration_keys_only_and_lists_what_it_replaces(
     tmp_path, capsys
 ):
-    """Issue 68: --write deleted every line from [calibration] to the next table (the next
-    table's comment too) and a hand-set lag vanished without a word."""
+    """--write keeps every line outside the values it replaces (the next table and its
+    comment included) and says which hand-set values it replaces."""
     path = robot_file(tmp_path, HAND_WRITTEN)
     assert calibrate.main([str(path), "--write", *FAST_CALIBRATION]) == 0
     out = capsys.readouterr().out
@@ -571,8 +571,8 @@ PARTS = """<mujoco>
 
 
 def test_calibrate_write_edits_an_mjcf_in_place_never_resaves_it(tmp_path, capsys):
-    """Issue 68: on an MJCF with <include>, --write inlined the include and rewrote the
-    <velocity> actuators as <general> (MjSpec saved the whole model)."""
+    """On an MJCF with <include>, --write edits the values in place: the include stays an
+    include and <velocity> actuators stay <velocity> (the model is never re-saved)."""
     path = tmp_path / "boxbot.xml"
     path.write_text(INCLUDED_BOX)
     (tmp_path / "parts.xml").write_text(PARTS)
@@ -743,7 +743,7 @@ def _outcome(r):
 
 
 def test_a_published_style_holonomic_base_gives_the_paper_outcome(tmp_path):
-    """Done-when of issue 11, with the project's own model of a position-servo base."""
+    """The paper's outcome with the project's own model of a position-servo base."""
     out = tmp_path / "run"
     args = [
         "paper_case",
@@ -800,8 +800,8 @@ def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
 
 
 def test_a_diffdrive_whose_wheels_do_not_share_an_axle_is_refused(tmp_path):
-    """Issue 24: two wheels whose axes are 60° apart (an omni-wheel base) were accepted as a
-    differential drive, whose kinematics they do not follow; now refused in one line."""
+    """Two wheels whose axes are 60° apart (an omni-wheel base) do not follow a differential
+    drive's kinematics: refused in one line."""
     folder = tmp_path / "mobilearm"
     shutil.copytree(MOBILEARM.parent / "mobilearm", folder)
     xml = folder / "mobilearm.xml"
@@ -821,7 +821,7 @@ def test_a_diffdrive_whose_wheels_do_not_share_an_axle_is_refused(tmp_path):
     assert robots.get(str(robot_file)).drive == "diffdrive"
 
 
-OMNIBASE = DATA / "omnibase.robot.toml"
+OMNIBASE = ROBOTS / "omni.robot.toml"
 
 
 def _legs(robot: robots.RobotModel, seconds: float) -> tuple[dict[float, np.ndarray], float]:
@@ -858,7 +858,7 @@ def _paper_outcome(robot_file: Path, rule: str, within: float) -> None:
 
 
 def test_an_omni_base_is_read_from_its_wheels():
-    """Issue 24: drive = "omni" classifies each wheel from the compiled model: its position
+    """drive = "omni" classifies each wheel from the compiled model: its position
     from the base, the direction a positive turn rolls the base (axle × z), its radius (the
     rollers' envelope)."""
     r = robots.get(str(OMNIBASE))
@@ -915,7 +915,7 @@ def test_the_paper_case_on_omni_wheels():
     _paper_outcome(OMNIBASE, "block_row", within=2.5)
 
 
-MECANUM = DATA / "mecanumbase.robot.toml"
+MECANUM = ROBOTS / "mecanum.robot.toml"
 
 
 def test_mecanum_wheels_are_read_with_their_rollers_and_drive_the_base_sideways():
@@ -954,7 +954,7 @@ def test_the_paper_case_on_mecanum_wheels():
     _paper_outcome(MECANUM, "l1", within=1.0)
 
 
-SWERVE = DATA / "swervebase.robot.toml"
+SWERVE = ROBOTS / "swerve.robot.toml"
 
 
 def test_swerve_modules_are_read_from_the_model_and_steer_where_they_are_told():

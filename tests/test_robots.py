@@ -36,11 +36,11 @@ BOX_ROBOT = """<mujoco model="boxbot">
 
 
 def test_registry_lists_models_and_explains_unknown_names():
-    assert robots.available() == ["diffdrive", "disk", "hexbot"]
+    names = ["diffdrive", "disk", "hexbot", "mecanum", "omni", "swerve"]
+    assert robots.available() == names
     with pytest.raises(
         ScenarioError,
-        match=r"unknown robot model 'tank' \(available: "
-        r"diffdrive, disk, hexbot",
+        match=r"unknown robot model 'tank' \(available: " + ", ".join(names),
     ):
         robots.get("tank")
 
@@ -373,7 +373,7 @@ def test_the_team_s_start_state_and_roots_are_a_walk_robot_by_robot():
     from dftc_mujoco.sim import fleet, tree
 
     data = Path(__file__).parent / "data" / "robots"
-    team = [str(data / "holobase.robot.toml"), "diffdrive", str(data / "omnibase.robot.toml")]
+    team = [str(data / "holobase.robot.toml"), "diffdrive", "omni"]
     s = load_scenario("paper_case", {"team.robot_model": [*team, "disk"]})
     s, models = fleet.for_scenario(s)
     sc = scene.build(s, models)
