@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -273,7 +274,11 @@ class Simulation:
             self.settle_time if np.isfinite(self.settle_time) else None
         )
         self.bumpers = Bumpers(self.scene, self.plant.data)  # each robot's touch sensor
-        self.monitor = self._monitor(x0)
+        self.monitor = premises.Monitor.for_team(
+            self.team, self.block_names["thresholds"], self.command_limit, self.start_bound,
+            self.bumpers.owner, self.scene.body, x0, self.data.xpos[self.scene.body, 2],
+            self.events,
+        )  # fmt: skip
         # the medium between the radios (None: the ideal network, which needs no model)
         self.channel: network.Channel | None = None
         if not s.network.ideal:
@@ -327,29 +332,6 @@ class Simulation:
             self.warming = warm.start(self.scenario, self._search)
         return compiled
 
-    def _monitor(self, x0: np.ndarray) -> premises.Monitor:
-        """The premises of the run's threshold rule, watched against the truth."""
-        sc, th, cfg = self.scene, self.team.thresholds, self.team.config
-        drive = self.block_names["thresholds"] == "drive"
-        phi_bar = float(getattr(th, "phi_bar", 0.0)) if drive else 0.0
-        drift = float(getattr(th, "drift", cfg.drift_bound))
-        return premises.Monitor(
-            n=self.n,
-            dt=self.dt,
-            eta_bar=cfg.eta_bar,
-            xi_bar=cfg.xi_bar,
-            drift_bound=drift,
-            phi_bar=phi_bar,
-            command_limit=self.command_limit,
-            start=self.start_bound,
-            geom_robot=self.bumpers.owner,
-            body=sc.body,
-            x0=x0,
-            z0=self.data.xpos[sc.body, 2],
-            events=self.events,
-            memory=lambda: premises.memory(cfg.graph, cfg.ko),  # the start's graph
-        )
-
     @property
     def t(self) -> float:
         """Time of the next control period [s]."""
@@ -367,7 +349,7 @@ class Simulation:
             or self.left is not None
         )
 
-    def drive(self, robot: int, velocity: np.ndarray | None) -> None:
+    def drive(self, robot: int, velocity: np.ndarray | Sequence[float] | None) -> None:
         """Command robot ``robot`` (0-based) from outside the team from the next period on:
         its drive is told ``velocity`` (planar, m/s) instead of the team's ū (the plant's
         disturbance ξ still adds to it); None gives it back to the team. Its onboard blocks
@@ -406,27 +388,40 @@ class Simulation:
             self._advance(self.steps + 1, progress)
         return self.result()
 
-    def snapshot(self) -> Snapshot:
-        """The state after the last control period (copies)."""
-        out = self.team.outputs()
+    def advance(self, periods: int = 1) -> None:
+        """Advance ``periods`` control periods like :meth:`step`, without copying the state
+        into a snapshot (an environment reads what it needs: :attr:`positions`,
+        :attr:`measurements`, ``team``, :meth:`new_events`)."""
+        self._open("advance()")
+        if self.done:
+            raise RuntimeError("the run is over (duration reached or stopped); call reset()")
+        self._advance(min(self.k + int(periods), self.steps + 1), None)
+
+    @property
+    def finished(self) -> bool:
+        """The run reached its duration."""
+        return self.k > self.steps
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(N, 2) the robots' true positions after the last period (read only)."""
+        return _read_only(self._x)
+
+    @property
+    def measurements(self) -> np.ndarray:
+        """(N, 2) each robot's own measured position after the last period (read only)."""
+        return _read_only(self._x_m)
+
+    def new_events(self) -> list[dict[str, Any]]:
+        """The events since the last call (or snapshot), robots numbered from 1."""
         ev = self.events.items[self._seen :]
         self._seen = len(self.events.items)
-        return Snapshot(
-            t=(self.k - 1) * self.dt,
-            x=self._x.copy(),
-            x_m=self._x_m.copy(),
-            x_hat=out["x_hat"].copy(),
-            u=out["u"].copy(),
-            u_bar=out["u_bar"].copy(),
-            phi_hat=out["phi_hat"].copy(),
-            residual=out["residual"].copy(),
-            threshold=out["threshold"].copy(),
-            flag=out["flag"].copy(),
-            flagged=out["flagged"].copy(),
-            reactive=out["reactive"].copy(),
-            active=out["active"].copy(),
-            events=[dict(e) for e in ev],
-        )
+        return [dict(e) for e in ev]
+
+    def snapshot(self) -> Snapshot:
+        """The state after the last control period (copies)."""
+        t = (self.k - 1) * self.dt
+        return Snapshot.of(t, self._x, self._x_m, self.team.outputs(), self.new_events())
 
     def _advance(self, k_end: int, progress: bool | None) -> None:
         """Control periods ``self.k`` .. ``k_end - 1``: the hot loop."""
@@ -447,13 +442,10 @@ class Simulation:
         physics.monitor = monitor if watch and channel is None else None
         cmd = physics.cmd
         k0 = self.k
-        bar = tqdm(
-            total=k_end - k0,
-            disable=not progress,
-            unit="period",
-            desc=s.name,
-            mininterval=0.5,
-            leave=False,
+        bar = (  # built only where shown: an environment's step would pay for it each period
+            tqdm(total=k_end - k0, unit="period", desc=s.name, mininterval=0.5, leave=False)
+            if progress
+            else None
         )
         wall0 = time.perf_counter()
         compiling0 = self._clock.total()
@@ -542,7 +534,7 @@ class Simulation:
                         plant.step(ctrl, nsub)
                     if hook is not None:
                         hook(plant.time, plant)
-                    if k % 100 == 0:
+                    if bar is not None and k % 100 == 0:
                         bar.update(min(100, k_end - k0 - bar.n))
                 else:
                     k = k_end
@@ -556,7 +548,8 @@ class Simulation:
             if team.events:  # an interrupt in the middle of a period
                 self._take_team_events(k * dt)
             self.k = k
-            bar.close()
+            if bar is not None:
+                bar.close()
             self._wall += self._without_compiling(wall0, compiling0)
 
     def _sensor_faults(self, t: float, x_m: np.ndarray) -> None:
@@ -697,3 +690,10 @@ def simulate(
 
 
 __all__ = ["RunResult", "Simulation", "Snapshot", "effective_xi_bar", "simulate", "team_config"]
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A view of ``a`` that cannot be written."""
+    view = a.view()
+    view.flags.writeable = False
+    return view

@@ -16,7 +16,7 @@ network the premises monitor runs here too, on that copy and before the step
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -84,7 +84,7 @@ class PhysicsStep:
         self.watched = False
         self.watch_error: BaseException | None = None
 
-    def drive(self, robot: int, velocity: np.ndarray | None) -> None:
+    def drive(self, robot: int, velocity: np.ndarray | Sequence[float] | None) -> None:
         """Robot ``robot`` (0-based) told ``velocity`` (planar, m/s) from outside the team
         from the next period on; None gives it back (:meth:`.loop.Simulation.drive`)."""
         n = len(self.driven)

@@ -335,6 +335,41 @@ class Monitor(OwnTable):
         """The arrays :func:`_check` reads by address (:data:`OWN`)."""
         return [getattr(self, name) for name in OWN]
 
+    @classmethod
+    def for_team(
+        cls,
+        team: Any,
+        rule: str,
+        command_limit: float,
+        start: StartBound,
+        geom_robot: np.ndarray,
+        body: np.ndarray,
+        x0: np.ndarray,
+        z0: np.ndarray,
+        events: Any,
+    ) -> Monitor:
+        """The premises of a run's threshold rule (its name ``rule``) for ``team``
+        (:class:`~.onboard.team.Team`), watched against the truth: its bounds read from the
+        team's configuration and thresholds block (Φ̄ for the drive rule, else ē)."""
+        th, cfg = team.thresholds, team.config
+        phi_bar = float(getattr(th, "phi_bar", 0.0)) if rule == "drive" else 0.0
+        return cls(
+            n=team.n,
+            dt=cfg.dt,
+            eta_bar=cfg.eta_bar,
+            xi_bar=cfg.xi_bar,
+            drift_bound=float(getattr(th, "drift", cfg.drift_bound)),
+            phi_bar=phi_bar,
+            command_limit=command_limit,
+            start=start,
+            geom_robot=geom_robot,
+            body=body,
+            x0=x0,
+            z0=z0,
+            events=events,
+            memory=lambda: memory(cfg.graph, cfg.ko),  # the start's graph
+        )
+
     def period(
         self,
         t: float,

@@ -35,3 +35,22 @@ class Snapshot:
     reactive: np.ndarray
     active: np.ndarray
     events: list[dict[str, Any]] = field(default_factory=list)
+
+    @classmethod
+    def of(
+        cls,
+        t: float,
+        x: np.ndarray,
+        x_m: np.ndarray,
+        outputs: dict[str, np.ndarray],
+        events: list[dict[str, Any]],
+    ) -> Snapshot:
+        """A snapshot at ``t`` of true positions ``x``, measurements ``x_m`` and the team's
+        ``outputs`` (``Team.outputs``), every array copied."""
+        copied = {k: np.array(outputs[k], copy=True) for k in _TEAM}
+        return cls(t=t, x=x.copy(), x_m=x_m.copy(), events=[dict(e) for e in events], **copied)
+
+
+#: the snapshot's fields the team's outputs give
+_TEAM = ("x_hat", "u", "u_bar", "phi_hat", "residual", "threshold", "flag", "flagged",
+         "reactive", "active")  # fmt: skip

@@ -29,9 +29,9 @@ def main() -> None:
     s = load_scenario("paper_case", {"duration": 35.0, "faults": []})
     env = make_gym(s, robot=2)
     _, info = env.reset(seed=1)
-    total, done = 0.0, False
-    while not done:
-        _, reward, done, _, info = env.step(policy(info["t"], info))
+    total, terminated, truncated = 0.0, False, False
+    while not (terminated or truncated):  # excluded by its teammates, or the time is up
+        _, reward, terminated, truncated, info = env.step(policy(info["t"], info))
         total += reward
         for e in info["events"]:
             if e["kind"] == "detection":

@@ -159,6 +159,21 @@ def _check_methods_not_drawn(path: Path, vary: dict[str, Any]) -> None:
                     )
 
 
+def episodes(base: scenario_mod.Scenario, vary: dict[str, Any] | Any) -> Spec:
+    """A spec whose draws are an environment's episodes: ``base`` (a scenario) varied by
+    ``vary`` (a campaign's ``[vary]`` table, as a dict), one draw per episode seed
+    (:func:`draw` of the spec with that seed, run 0); refused in one line as a spec is."""
+    where = f"{base.source} (the environment's vary)"
+    data = base.to_dict()
+    table = Table(where, dict(vary), "vary")
+    v = _vary(table)
+    spec = Spec(base.name, "", data, str(base.source), 1, 0, {}, v, where)
+    _check_faulty_robots(Path(where), v, data)
+    scenario_for(spec, draw(spec, 0))  # a valid scenario, or the line that says why
+    _check_choices(spec)
+    return spec
+
+
 def _check_faulty_robots(path: Path, vary: dict[str, Any], base: dict[str, Any]) -> None:
     """``vary.faulty_robot`` must name robots that exist in every team size drawn."""
     robots = vary["faulty_robot"]

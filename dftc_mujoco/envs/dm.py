@@ -2,49 +2,61 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import dm_env
 import numpy as np
 from dm_env import specs
 
-from .seat import BIG, FIELDS, Seats
+from .seat import BIG, Seats
 
 
 class DFTCDmEnv(dm_env.Environment):
-    """One robot of a DFTC team, driven by the policy (dm_env's interface): observations are
-    a dict of the robot's own view (:data:`.seat.FIELDS`), the action its planar velocity
-    command, the reward minus its distance to its slot."""
+    """One robot of a DFTC team, driven by the policy (dm_env's interface): the observation is the
+    robot's own view (``dftc_mujoco.envs.seat.FIELDS``, float32), the action its planar velocity
+    command (or a correction, ``action="correction"``), the reward minus its distance from its slot
+    in slots' spacings. An exclusion ends the episode with discount 0; the scenario's duration
+    truncates it (discount 1: the value goes on). ``seed`` starts the stream of episodes each reset
+    draws the next of; ``vary`` as in ``dftc_mujoco.envs.gym.DFTCEnv``."""
 
-    def __init__(self, scenario: Any, robot: int = 1, seed: int | None = None) -> None:
-        self.seats = Seats(scenario, [int(robot) - 1])
-        self.robot, self.seed = int(robot) - 1, seed
+    def __init__(
+        self,
+        scenario: Any = "paper_case",
+        robot: int = 1,
+        seed: int | None = None,
+        vary: Mapping[str, Any] | None = None,
+        action: str = "velocity",
+    ) -> None:
+        self.seats = Seats(scenario, [int(robot) - 1], vary, action)
+        self.robot = int(robot) - 1
+        self._rng = np.random.default_rng(seed)
         self._started = False
 
     def reset(self) -> dm_env.TimeStep:
-        """Start the run again."""
-        self.seats.reset(self.seed)
+        """Start the next episode of the stream."""
+        self.seats.reset(int(self._rng.integers(2**31 - 1)))
         self._started = True
-        return dm_env.restart(self.seats.observe(self.robot))
+        return dm_env.restart(self.seats.observe(self.robot).copy())
 
     def step(self, action: np.ndarray) -> dm_env.TimeStep:
         """One control period with the robot commanded ``action`` (a new episode after the
         last one ended)."""
-        if not self._started or self.seats.done:
+        s, i = self.seats, self.robot
+        if not self._started or s.terminated(i) or s.truncated:
             return self.reset()
-        self.seats.step({self.robot: action})
-        obs, r = self.seats.observe(self.robot), self.seats.reward(self.robot)
-        if self.seats.done:
+        s.step({i: action})
+        obs, r = s.observe(i).copy(), s.reward(i)
+        if s.terminated(i):
             return dm_env.termination(r, obs)
+        if s.truncated:
+            return dm_env.truncation(r, obs)
         return dm_env.transition(r, obs)
 
-    def observation_spec(self) -> dict[str, specs.BoundedArray]:
-        """One float32 array per entry of the robot's view."""
-        return {
-            k: specs.BoundedArray(shape, np.float32, -BIG, BIG, name=k)
-            for k, shape in self.seats.sizes(self.robot).items()
-            if k in FIELDS
-        }
+    def observation_spec(self) -> specs.BoundedArray:
+        """The robot's view, one float32 vector (``dftc_mujoco.envs.seat.FIELDS``)."""
+        size = (self.seats.size(self.robot),)
+        return specs.BoundedArray(size, np.float32, -BIG, BIG, name="observation")
 
     def action_spec(self) -> specs.BoundedArray:
         """The planar velocity command, within the drive's range."""

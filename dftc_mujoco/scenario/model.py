@@ -192,7 +192,7 @@ class Scenario:
         speed: float | None = None,
     ) -> Scenario:
         """A copy with CLI overrides applied and checked (``speed``: the centroid path's, as
-        the path governor sets it: :func:`~dftc_mujoco.mission.governed_speed`).
+        the path governor sets it: ``dftc_mujoco.mission.governed_speed``).
 
         A shorter ``duration`` drops the faults that would start after the new
         end (they cannot happen); :func:`dropped_faults` lists them. When it is
