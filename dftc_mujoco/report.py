@@ -105,6 +105,21 @@ def mission_line(s: dict[str, Any]) -> str:
     return f"mission:      NOT completed: {where}"
 
 
+def _due(s: dict[str, Any], fault: dict[str, Any]) -> str:
+    """Why a flagged fault was not excluded, when the reason is the run's end."""
+    due = [
+        e["t_r"]
+        for e in s.get("events", [])
+        if e.get("kind") == "exclusion_scheduled"
+        and e.get("robot") == fault["robot"]
+        and e["t"] >= fault["t"]
+    ]
+    end = s.get("duration")
+    if due and end is not None and due[-1] > end:
+        return f" before the run ended (its exclusion was due at {due[-1]:.2f} s)"
+    return ""
+
+
 def fault_lines(s: dict[str, Any]) -> list[str]:
     """One line per fault with its outcome."""
     out = []
@@ -118,7 +133,7 @@ def fault_lines(s: dict[str, Any]) -> list[str]:
             if kind == "excluded":
                 said += f", excluded at {f['excluded_at']:.2f} s"
             else:
-                said += ", NOT excluded"
+                said += ", NOT excluded" + _due(s, f)
         elif kind == "compensated":
             said = (
                 f"compensated on board, flagged by nobody (off its slot by "
@@ -209,6 +224,15 @@ def premises_line(result: RunResult) -> str | None:
     )
 
 
+def blocks_line(s: dict[str, Any]) -> str | None:
+    """Which onboard blocks are not the paper's (None when every block is)."""
+    custom = {k: v for k, v in s.get("onboard", {}).get("blocks", {}).items() if v != "paper"}
+    if not custom:
+        return None
+    mine = ", ".join(f"{k} = {v}" for k, v in custom.items())
+    return f"blocks:       {mine} (the paper's for the others)"
+
+
 def developer_lines(result: RunResult) -> list[str]:
     """``--verbose``: what a developer of the onboard code reads."""
     s = result.summary
@@ -238,12 +262,9 @@ def developer_lines(result: RunResult) -> list[str]:
                 f"premise {p}: {v['spans']} spans, worst {v['worst']:.4g} against {v['bound']:.4g}"
             )
     o = s.get("onboard", {})
-    custom = {k: v for k, v in o.get("blocks", {}).items() if v != "paper"}
     path = f"onboard: {o.get('path', '?')} path"
     if o.get("compiling_in_background"):
         path += " (the compiled period was being compiled in the background)"
-    if custom:
-        path += ", blocks " + ", ".join(f"{k} = {v}" for k, v in custom.items())
     lines.append(path)
     lines.append(
         f"set-up {s.get('build_time', 0.0):.2f} s, compiling {s.get('compile_time', 0.0):.2f} s"
@@ -259,7 +280,7 @@ def report(result: RunResult, out: Path, verbose: bool = False) -> str:
     lines += fault_lines(s)
     if s.get("margin") is not None or s.get("healthy_flags"):
         lines.append(false_alarm_line(s))
-    for line in (obstacle_line(s), premises_line(result)):
+    for line in (obstacle_line(s), premises_line(result), blocks_line(s)):
         if line is not None:
             lines.append(line)
     if verbose:

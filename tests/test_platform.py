@@ -60,7 +60,9 @@ def test_cli_runs_blocks_from_a_module_outside_the_package(tmp_path):
     assert b["onboard"]["blocks"]["thresholds"] == "mylab.fdi:Scaled"
     assert b["onboard"]["blocks"]["controller"] == "mylab.control:Lyapunov"
     assert b["onboard"]["path"] == "general" and a["onboard"]["path"] == "compiled"
-    assert "blocks controller = mylab.control:Lyapunov" in mine.stdout
+    assert "blocks:       controller = mylab.control:Lyapunov, thresholds = mylab.fdi:Scaled" in (
+        mine.stdout
+    )
     assert _first_flag_delay(b) < _first_flag_delay(a) - 1.0  # 1.2 s against 3.3 s
     # the saved scenario names the blocks: re-running it from elsewhere needs mylab on the path
     saved = (tmp_path / "mine" / "scenario.toml").read_text()
