@@ -224,10 +224,17 @@ def drive_accel(s: Scenario, robot: robots.RobotModel | None) -> float:
 
 def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
     """τ of the drive lag the robots model: the scenario's ``fdir.drive_lag``, or the robot
-    file's calibrated one ("robot"; 0 for a robot without one)."""
+    file's calibrated one ("robot"; 0 for a robot without one). The drive rule, whose Φ̄
+    bounds ‖φ̂‖ at every period, models the best-fitting lag where the paper's rules take
+    ẋ = u (``fast_lag``): unmodelled, the drive's response to every change of command
+    reaches φ̂ as a mismatch beyond ξ̄."""
     if s.fdir.drive_lag != "robot":
         return float(s.fdir.drive_lag)
-    return robot.lag if robot is not None else 0.0
+    if robot is None:
+        return 0.0
+    if robot.lag == 0.0 and s.onboard.thresholds == "drive":
+        return robot.fast_lag
+    return robot.lag
 
 
 def block_names(s: Scenario, given: Mapping[str, Any] | None) -> dict[str, str]:

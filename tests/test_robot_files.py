@@ -517,7 +517,8 @@ def test_calibrate_write_replaces_calibration_keys_only_and_lists_what_it_replac
     assert text.startswith(before[0] + "[calibration]\n")  # byte for byte up to the table
     assert text.endswith("\n# the inner loop of the motors, tuned by hand\n[motor]\n"
                          "time_constant = 0.05\n")  # fmt: skip
-    assert "lag" not in text and "measured on the bench" not in text  # listed, then removed
+    assert "\nlag =" not in text and "measured on the bench" not in text  # listed, removed
+    assert "\nfast_lag = " in text  # the drive rule's lag: what fits, below 50 ms
     model = robots.get(str(path))
     assert model.calibration["mismatch"] > 0 and "drift_bound" in model.calibration
     assert model.motor_time_constant == 0.05

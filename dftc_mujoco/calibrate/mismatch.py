@@ -109,6 +109,7 @@ class Calibration:
     drift: Drift | None = None  # the drift split in a mission (threshold rules)
     lag: float = 0.0  # τ of the drive lag the robot models (0: none, ẋ = u) [s]
     lag_fit: float = 0.0  # the best-fitting τ, modelled or not [s]
+    fast_lag: float = 0.0  # the best τ where the paper's rules take ẋ = u: the drive rule's [s]
     rms_command: float = 0.0  # rms ‖ẋ − u‖ over the programme [m/s]
     rms_lag: float = 0.0  # rms ‖ẋ − v̂‖ with the fitted lag [m/s]
     accel: float = math.inf  # a_max of the nominal input's change (inf: not limited) [m/s²]
@@ -128,6 +129,7 @@ class Calibration:
             "response_time": round(self.response_time, 3),
             "saturation": round(self.saturation, 4),
             **({"lag": round(self.lag, 4)} if self.lag > 0 else {}),
+            **({"fast_lag": round(self.fast_lag, 4)} if self.fast_lag > 0 else {}),
             **({"compensation_G": self.compensation_G} if self.compensation_G else {}),
             **({"accel": self.accel} if math.isfinite(self.accel) else {}),
             **(
@@ -184,7 +186,8 @@ def measure(name: str) -> Calibration:
     mismatch = np.hypot(*(velocity - prog.u).T)
     tau, rms_lag = fit_lag(prog.u, velocity, prog.startup)
     rms = float(np.sqrt(np.mean(mismatch[prog.startup :] ** 2)))
-    modelled = tau >= LAG_MIN and rms_lag < 0.5 * rms
+    fits = rms_lag < 0.5 * rms
+    modelled = tau >= LAG_MIN and fits
     if modelled:  # measure the rest against the drive model the robot will run
         mismatch = np.hypot(*(velocity - lag_response(prog.u, tau)).T)
     cal = _analyse(robot.name, prog, mismatch, clamped, limit)
@@ -192,6 +195,7 @@ def measure(name: str) -> Calibration:
         cal,
         lag=tau if modelled else 0.0,
         lag_fit=tau,
+        fast_lag=tau if rms_lag < rms and not modelled else 0.0,
         rms_command=rms,
         rms_lag=rms_lag,
     )
@@ -369,7 +373,8 @@ def report(cal: Calibration) -> str:
         )
     else:
         lines.append(
-            fit + f"; not modelled (below {LAG_MIN:g} s or not halving the mismatch): ẋ = u"
+            fit + f"; below {LAG_MIN:g} s or not halving the mismatch, the paper's rules take "
+            "ẋ = u" + ("; the drive rule models it (fast_lag)" if cal.fast_lag > 0 else "")
         )
     lines += [f"WARNING: {n}" for n in cal.notes]
     return "\n".join(lines)

@@ -108,6 +108,9 @@ def envelope(models: tuple[RobotModel, ...], where: str = "team.robot_model") ->
         cal["accel"] = accel
     if unique[0].lag:
         cal["lag"] = unique[0].lag
+    fast = [m.fast_lag for m in unique]
+    if min(fast) > 0:  # the drive rule's model: the slowest robot's, when every robot has one
+        cal["fast_lag"] = max(fast)
     speeds = [m.max_speed for m in unique if m.max_speed is not None]
     return replace(
         unique[0],

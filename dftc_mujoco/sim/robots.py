@@ -66,6 +66,7 @@ CALIBRATION_KEYS = (
     "response_time",  # time to follow a command jump; an exclusion's hold (estimate_alarm) [s]
     "drift_replan",  # ē measured within 5 s of an exclusion (the re-plan's transient) [m]
     "lag",  # first-order lag τ of the drive, modelled onboard when set (onboard/applied.py) [s]
+    "fast_lag",  # the best-fitting lag where "lag" is not set: the drive rule models it [s]
     "drift_bound",  # ē: bounded offset of the drift after the start-up (docs/thresholds.md) [m]
     "drift_startup",  # ē including the start-up [m]
     "drift_settle",  # how long the start-up lasts [s]
@@ -119,6 +120,13 @@ class RobotModel:
         """τ of the drive's first-order lag from calibration (0: the robot is taken to move at
         its command, the paper's ẋ = u)."""
         return float(self.calibration.get("lag", 0.0))
+
+    @property
+    def fast_lag(self) -> float:
+        """τ of the lag that fits the drive best where the paper's rules do not model one
+        (they take ẋ = u): the drive rule, whose Φ̄ bounds the fault estimate at every
+        period, models it [s]."""
+        return float(self.calibration.get("fast_lag", 0.0))
 
     @property
     def response_time(self) -> float:
