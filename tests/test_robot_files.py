@@ -148,8 +148,8 @@ def test_robot_file_problems_are_one_line_naming_file_and_key(tmp_path, change, 
         (
             lambda t: "max_sped = 0.8\n" + t,
             "max_sped",
-            "base, calibration, control_point, diffdrive, drive, holonomic, keyframe, "
-            "max_speed, mesh_density, mjcf, motor, name, omni, swerve",
+            "base, calibration, control_point, diffdrive, drive, holonomic, integrator, "
+            "keyframe, max_speed, mesh_density, mjcf, motor, name, omni, planar_base, swerve",
         ),
         (lambda t: t + "yaww = 'joint_th'\n", "holonomic.yaww", "x, y, yaw"),
         (lambda t: t + "[motor]\ntau = 0.1\n", "motor.tau", "time_constant"),

@@ -116,7 +116,8 @@ def test_diffdrive_moves_only_through_wheel_contact():
         return data.site_xpos[sc.site[0], 0] - start
 
     assert drive([1.2, 0.01, 0.0005]) > 0.3  # 2 s at 0.2 m/s
-    assert abs(drive([0.0, 0.0, 0.0])) < 0.01  # no friction, no motion: wheels spin in place
+    # next to no friction (none at all makes MuJoCo's contact solver unstable): no motion
+    assert abs(drive([1e-4, 0.0, 0.0])) < 0.01  # the wheels spin in place
 
 
 @pytest.mark.parametrize("offset", [0.22, 0.25, 0.28])

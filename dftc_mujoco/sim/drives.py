@@ -40,9 +40,15 @@ class Drive:
     def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
         self.robot, self.scene, self.data = robot, scene, data
         self.n = len(scene.body)
+        joints = moment = None
+        if robot.moment:  # the drive's joints under a transmission (a diffdrive's tendons)
+            first = scene.model.body_jntadr[scene.body]
+            joints = first[:, None] + np.asarray(robot.joint_offsets, dtype=int)[None, :]
+            moment = np.asarray(robot.moment, float)
         self.actuation = Actuation(
-            scene.model, data, scene.actuator, robot.driven_infos, dt, robot.motor_time_constant
-        )
+            scene.model, data, scene.actuator, robot.driven_infos, dt, robot.motor_time_constant,
+            joints, moment,
+        )  # fmt: skip
         self.held = (
             Actuation(
                 scene.model, data, scene.held, robot.held_infos, dt, robot.motor_time_constant
@@ -61,11 +67,7 @@ class Drive:
         self._clip = cap < limit  # then the drive clips the planar command
         # velocity servos that take the planar command as it is (the disk): ctrl = ū
         self._identity = (
-            self.held is None
-            and not self._clip
-            and self.actuation._velocity_only
-            and bool((self.actuation.per_velocity == 1.0).all())
-            and self.planar_joints
+            self.held is None and not self._clip and self.actuation.plain and self.planar_joints
         )
 
     def _planar_limit(self, joint_limit: float) -> float:
@@ -130,10 +132,20 @@ class DiffDrive(Drive):
 
     def __init__(self, robot: Any, scene: Any, data: mujoco.MjData, dt: float) -> None:
         p = robot.params
-        self.r, self.half = p["wheel_radius"], p["axle_width"] / 2
+        wheels = range(int(p.get("wheels", 2)))
+        # a skid steer's wheels slip as it turns: its calibrated track, else the geometric one
+        track = robot.calibration.get("track", p["axle_width"])
+        self.half = track / 2
         self.b, self.lat = p["offset"], p.get("lateral", 0.0)
         self.psi = p.get("forward_angle", 0.0)  # the forward axis in the base frame
-        self.sign = np.array([p.get("sign_left", 1.0), p.get("sign_right", 1.0)])
+        if "wheels" in p:  # each wheel: its side (−1 left, +1 right), sense and radius
+            self.side = np.array([p[f"wheel{k}_side"] for k in wheels])
+            self.sign = np.array([p[f"wheel{k}_sign"] for k in wheels])
+            self.r = np.array([p.get("wheel_radius", p[f"wheel{k}_r"]) for k in wheels])
+        else:  # the older contract's two wheels
+            self.side = np.array([-1.0, 1.0])
+            self.sign = np.array([p.get("sign_left", 1.0), p.get("sign_right", 1.0)])
+            self.r = np.full(2, p["wheel_radius"])
         self.body = scene.body
         super().__init__(robot, scene, data, dt)
 
@@ -142,7 +154,7 @@ class DiffDrive(Drive):
         # u_f + (l ∓ a) u_l / b (forward and lateral parts of u), at most
         # sqrt(1 + K²) ‖u‖ with K = (|l| + a)/|b|, and ‖u‖ <= sqrt(2) × the per-axis bound
         k = (abs(self.lat) + self.half) / abs(self.b)
-        return joint_limit * self.r / (np.sqrt(2) * np.sqrt(1.0 + k * k))
+        return joint_limit * float(self.r.min()) / (np.sqrt(2) * np.sqrt(1.0 + k * k))
 
     def _heading(self) -> tuple[np.ndarray, np.ndarray]:
         mat = self.data.xmat[self.body]  # (N, 9), row-major
@@ -165,7 +177,7 @@ class DiffDrive(Drive):
         c, s = self._cs(heading)
         w = (-s * u[:, 0] + c * u[:, 1]) / self.b
         v = c * u[:, 0] + s * u[:, 1] + self.lat * w
-        rim = np.stack([v - w * self.half, v + w * self.half], axis=1)
+        rim = v[:, None] + (w * self.half)[:, None] * self.side  # left v − ωa, right v + ωa
         return rim * (self.sign / self.r)
 
 

@@ -22,6 +22,7 @@ computed at the initial pose. Every problem is one line naming the file and the 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -34,29 +35,18 @@ from ..paths import MODELS
 from . import actuators as act
 from . import wheels
 from .actuators import ActuatorInfo
+from .robot_file import DRIVE_ROLES, ROBOT_SUFFIX, read, resolved
 from .tree import (
     _footprint,
+    _surface_points,
     attached_actuators,
     qpos_addresses,
     subtree,
 )
 
 ROBOTS = MODELS / "robots"
-ROBOT_SUFFIX = ".robot.toml"
 CONTROL_SITE = "dftc_control_point"  # the site added (in memory) at the control point
-# the actuators each drive names (omni: a list ``wheels``, roles wheel0, wheel1, ...)
-DRIVE_ROLES: dict[str, tuple[str, ...]] = {
-    "holonomic": ("x", "y"),
-    "diffdrive": ("left", "right"),
-    "omni": (),
-    "swerve": (),
-}
-HELD_ROLES: dict[str, tuple[str, ...]] = {
-    "holonomic": ("yaw",),
-    "diffdrive": (),
-    "omni": (),
-    "swerve": (),
-}
+Fail = Callable[[str, str], NoReturn]  # reports a problem with a key of the robot file
 LEGACY_ACTUATORS = {"holonomic": ("vx", "vy"), "diffdrive": ("wheel_l", "wheel_r")}
 CALIBRATION_KEYS = (
     "xi_bar",  # recommended ξ̄ [m/s]
@@ -73,6 +63,8 @@ CALIBRATION_KEYS = (
     "saturation",  # fraction of the programme's commands the actuators clamped
     "compensation_G",  # the smallest G (x I) whose compensation loop does not ring
     "accel",  # a_max the robot holds its nominal input's change to (onboard/applied.py) [m/s²]
+    "timestep",  # the largest physics step at which its drive does not run away [s]
+    "track",  # a skid steer's effective axle width: its wheels slip when it turns [m]
 )
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -109,6 +101,14 @@ class RobotModel:
     held_infos: tuple[ActuatorInfo, ...] = ()
     root: str = ""  # "planar" (slide joints) or "free" (a free joint)
     footprint_radius: float = 0.0  # horizontal reach of the colliding geoms from the point
+    planar_base: bool = False  # a fixed-base model given x, y, yaw joints (planar_base.py)
+    integrator: str = "implicitfast"  # what its model needs of the scene (robot_file.py)
+    # the drive's joints when they are not each actuator's own (a diffdrive's wheels under
+    # tendons): offsets from the base's first joint (J,), and the transmission (A, J)
+    joint_offsets: tuple[int, ...] = ()
+    moment: tuple[tuple[float, ...], ...] = ()
+    floor_offset: float = 0.0  # height of its lowest floor contact at its MJCF pose [m]
+    notes: tuple[str, ...] = ()  # what the inspection found that a run should say
 
     @property
     def drift_bound(self) -> float:
@@ -135,6 +135,11 @@ class RobotModel:
         return float(self.calibration.get("response_time", 0.0))
 
     @property
+    def timestep(self) -> float:
+        """The largest physics step its drive needs (calibrated; inf: any step)."""
+        return float(self.calibration.get("timestep", 0.0)) or math.inf
+
+    @property
     def accel(self) -> float:
         """a_max from calibration: the fastest change of its nominal input the robot's drive
         follows without running its compensation loop away (inf: not limited)."""
@@ -144,7 +149,7 @@ class RobotModel:
         """A fresh MjSpec of the robot's MJCF with, in memory only: file paths made absolute,
         a site at the control point, no keyframes (the initial pose is applied by the
         scene), and the mesh inertia for mesh robots."""
-        spec = _read_spec(self.mjcf, self.path, "mjcf")
+        spec = _robot_spec(self)
         base = spec.body(self.base)
         base.add_site(name=CONTROL_SITE, pos=[*self.control_point, 0.0], group=5)
         for key in list(spec.keys):
@@ -203,20 +208,9 @@ def resolve(name: str, where: str = "team.robot_model", base: Path | None = None
                 f" NAME{ROBOT_SUFFIX} or an MJCF file"
             )
         if c.is_symlink():
-            _resolved(c, where)  # a loop says so; a dangling link is "no such file" below
+            resolved(c, where)  # a loop says so; a dangling link is "no such file" below
     looked = " and ".join(dict.fromkeys(str(c.parent) for c in candidates))
     raise ScenarioError(f"{where}: no such robot file {name!r} (looked in {looked})")
-
-
-def _resolved(path: Path, where: str) -> Path:
-    """``path`` with its links followed; a loop of symbolic links is one line of input."""
-    try:
-        return path.resolve(strict=False)
-    except (RuntimeError, OSError) as exc:  # RuntimeError: Python < 3.13's "Symlink loop"
-        raise ScenarioError(
-            f"{where}: {path} is a symbolic link that loops back on itself ({exc}); expected "
-            "a link to a file"
-        ) from None
 
 
 def get(name: str, where: str = "team.robot_model", base: Path | None = None) -> RobotModel:
@@ -230,124 +224,11 @@ def get(name: str, where: str = "team.robot_model", base: Path | None = None) ->
 
 def load(path: Path) -> RobotModel:
     """Read and check one robot file (``*.robot.toml``) or MJCF of the older contract."""
-    path = _resolved(Path(path), str(path))
+    path = resolved(Path(path), str(path))
     if path.name.endswith(".toml"):
-        return _load_robot_file(path)
+        robot = RobotModel(**read(path, CALIBRATION_KEYS))
+        return _inspect(robot, keys={"base": "base", "keyframe": "keyframe", "role": robot.drive})
     return _load_legacy(path)
-
-
-# --------------------------------------------------------------------------- robot files
-
-
-def _load_robot_file(path: Path) -> RobotModel:
-    from ..tomlcheck import Doc, Table, read_toml
-    from .plausible import calibration_problem
-
-    data = read_toml(path)
-    doc = Doc(str(path), data)
-    t = Table(str(path), data, "", doc)
-    mjcf_name = t.string("mjcf")
-    base = t.string("base")
-    cp = t.array("control_point", (2,), default=[0.0, 0.0])
-    drive = t.string("drive", choices=tuple(DRIVE_ROLES))
-    keyframe = t.string("keyframe", default=None) if "keyframe" in data else None
-    max_speed = t.number("max_speed", low=0.0) if "max_speed" in data else None
-    name = t.string("name", path.name.removesuffix(ROBOT_SUFFIX).removesuffix(".toml"))
-    if "name" in data and isinstance(data["name"], str) and not name.strip():
-        t.report("name", "expected a name to show in events and captions, got an empty one")
-    params: dict[str, float] = {}
-    if "mesh_density" in data:
-        params["mesh_density"] = t.number("mesh_density", low=0.0)
-    roles: dict[str, str] = {}
-    held: dict[str, str] = {}
-    if not t.ok("drive"):
-        t.used.update(DRIVE_ROLES)  # which table belongs here depends on the drive
-    for kind in DRIVE_ROLES if t.ok("drive") else ():
-        if kind not in data:
-            continue
-        sub = t.table(kind)
-        if kind != drive:
-            t.report(kind, f"this table goes with drive = {kind!r}, but drive = {drive!r}")
-            continue
-        for role in DRIVE_ROLES[kind]:
-            roles[role] = sub.string(role)
-        if kind == "swerve":  # modules = [["steer0", "drive0"], ...]: each module's pair
-            listed = sub.raw("modules")
-            pairs = isinstance(listed, list) and all(
-                isinstance(m, list) and len(m) == 2 and all(isinstance(a, str) for a in m)
-                for m in listed
-            )
-            if not pairs:
-                sub.report(
-                    "modules", f"expected a list of [steer, drive] actuator names, got {listed!r}"
-                )
-            elif len(listed) < 2:
-                sub.report("modules", f"expected two or more modules, got {len(listed)}")
-            else:
-                for k, (steer, drive_name) in enumerate(listed):
-                    roles.update({f"steer{k}": steer, f"drive{k}": drive_name})
-        if kind == "omni":  # wheels = ["w0", "w1", "w2", ...]: the wheels' actuators
-            listed = sub.raw("wheels")
-            if not isinstance(listed, list) or not all(isinstance(w, str) for w in listed):
-                sub.report("wheels", f"expected a list of actuator names, got {listed!r}")
-            elif len(listed) < 3:
-                sub.report("wheels", f"expected three or more wheels, got {len(listed)}")
-            else:
-                roles.update({f"wheel{k}": w for k, w in enumerate(listed)})
-        for role in HELD_ROLES[kind]:
-            if role in sub.data:
-                held[role] = sub.string(role)
-        geometry = ("wheel_radius", "axle_width") if kind == "diffdrive" else ()
-        for key in geometry:
-            if key in sub.data:
-                params[key] = sub.number(key, low=0.0)
-        sub.used.update((*HELD_ROLES[kind], *geometry))  # optional: known when misspelt
-        sub.finish()
-    if t.ok("drive") and drive not in data:
-        t.report(drive, f"missing table [{drive}] naming the actuators to drive")
-    motor_tau = act.MOTOR_TIME_CONSTANT
-    if "motor" in data:
-        m = t.table("motor")
-        motor_tau = m.number("time_constant", act.MOTOR_TIME_CONSTANT, low=0.0)
-        m.finish()
-    calibration: dict[str, float] = {}
-    if "calibration" in data:
-        c = t.table("calibration")
-        for key in CALIBRATION_KEYS:
-            if key in c.data:  # a G of 0 is no gain (eq. 30): the calibration writes none then
-                strict = key == "compensation_G"
-                calibration[key] = c.number(key, low=0.0, strict_low=strict)
-                if c.ok(key) and (why := calibration_problem(key, calibration[key])):
-                    c.report(key, why)
-        c.used.update(CALIBRATION_KEYS)
-        c.finish()
-    # the optional keys, so that a misspelt one is told what it could be
-    t.used.update(("keyframe", "max_speed", "mesh_density", "motor", "calibration", *DRIVE_ROLES))
-    t.finish()
-    doc.raise_problems()
-    mjcf = _resolved(path.parent / mjcf_name, f"{path}: mjcf")
-    if mjcf.is_dir():
-        raise ScenarioError(f"{path}: mjcf: {mjcf} is a folder, expected an MJCF file in it")
-    if not mjcf.is_file():
-        raise ScenarioError(f"{path}: mjcf: no such file {mjcf}")
-    robot = RobotModel(
-        name=name,
-        path=path,
-        mjcf=mjcf,
-        base=base,
-        control_point=(float(cp[0]), float(cp[1])),
-        drive=drive,
-        actuators=roles,
-        held=held,
-        xi_bar=calibration.get("xi_bar", 0.005),
-        mismatch=calibration.get("mismatch", 0.0),
-        params=params,
-        calibration=calibration,
-        keyframe=keyframe,
-        max_speed=max_speed,
-        motor_time_constant=motor_tau,
-    )
-    return _inspect(robot, keys={"base": "base", "keyframe": "keyframe", "role": drive})
 
 
 # --------------------------------------------------------------------------- older contract
@@ -443,6 +324,24 @@ def _first_line(exc: BaseException) -> str:
     return "; ".join(text) if text else type(exc).__name__
 
 
+def _robot_spec(robot: RobotModel, key: str | None = "mjcf") -> mujoco.MjSpec:
+    """The robot's MJCF as an MjSpec (:func:`_read_spec`), with a planar base added to a
+    fixed-base model that asks for one (``planar_base``)."""
+    spec = _read_spec(robot.mjcf, robot.path, key)
+    if robot.planar_base and spec.body(robot.base) is not None:
+        from . import planar_base
+
+        base = spec.body(robot.base)
+        if base.joints or base.freejoint:
+            said = ", ".join(j.name or "unnamed" for j in base.joints) or "a free joint"
+            raise ScenarioError(
+                f"{robot.path}: planar_base: body {robot.base!r} already moves on {said}; "
+                "planar_base gives a fixed-base model its x, y and yaw joints: remove the key"
+            )
+        planar_base.add(spec, robot.base)
+    return spec
+
+
 def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
     """Compile the robot alone and read what the simulator needs, checking as it goes.
 
@@ -453,14 +352,75 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
     def fail(key: str, message: str) -> NoReturn:
         raise ScenarioError(f"{path}: {key}: {message}" if keys else f"{path}: {message}")
 
-    spec = _read_spec(robot.mjcf, path, "mjcf" if keys else None)
+    robot, model, data, options = _compiled(robot, keys, fail)
+    body = model.body(robot.base).id
+    root = _root(model, body, robot, fail)
+    role_key = (lambda r: f"{keys['role']}.{r}") if keys else (lambda r: f"actuator {r!r}")
+    full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, full)
+    params = dict(robot.params)
+    notes: list[str] = []
+    if robot.drive == "diffdrive" and root == "free":
+        from .transmission import diffdrive_wheels
+
+        chosen, joints, sides, moment = diffdrive_wheels(model, data, body, robot, fail, role_key)
+        names = [model.actuator(a).name for a in chosen]
+        if moment is None:  # one actuator a wheel: the roles as the file names them
+            roles = dict(zip(robot.actuators, names, strict=True))
+        else:
+            roles = {f"wheel{k}": n for k, n in enumerate(names)}
+        first = int(model.body_jntadr[body])
+        offsets = tuple(j - first for j in joints) if moment is not None else ()
+        matrix = () if moment is None else tuple(tuple(float(c) for c in r) for r in moment)
+        given = [role_key(r) for r in robot.actuators]  # the key that names each wheel
+        keyed = given if moment is None else [given[0]] * len(joints)
+        robot = replace(robot, actuators=roles, joint_offsets=offsets, moment=matrix)
+        infos = _infos(model, full, robot, fail, role_key, keys)
+        params.update(wheels.diffdrive(model, data, body, joints, sides, robot, fail, keyed, keys))
+        driven_joints = set(joints)
+    else:
+        infos = _infos(model, full, robot, fail, role_key, keys)
+        params.update(_drive_geometry(model, data, body, root, infos, robot, fail, role_key, keys))
+        driven_joints = {j for i in infos.values() for j, _ in i.moment}
+    if root == "free":
+        from .transmission import idle_wheels
+
+        note = idle_wheels(model, data, body, driven_joints, robot.name)
+        notes += [note] if note else []
+    driven = tuple(infos[r] for r in robot.actuators)
+    held = tuple(infos[r] for r in robot.held)
+    site = model.site(CONTROL_SITE).id
+    inside = subtree(model, body)
+    footprint = _footprint(model, data, site, inside)
+    qpos = data.qpos[qpos_addresses(model, np.flatnonzero(inside[model.jnt_bodyid]))]
+    return replace(
+        robot,
+        driven_infos=driven,
+        held_infos=held,
+        root=root,
+        footprint_radius=footprint,
+        params=params,
+        options=options,
+        init_qpos=tuple(float(v) for v in qpos),
+        init_ctrl=tuple(float(v) for v in data.ctrl[attached_actuators(model, body)]),
+        init_point=(float(data.site_xpos[site][0]), float(data.site_xpos[site][1])),
+        floor_offset=_lowest(model, data, inside) if root == "free" else 0.0,
+        notes=tuple(notes),
+    )
+
+
+def _compiled(
+    robot: RobotModel, keys: dict[str, str] | None, fail: Fail
+) -> tuple[RobotModel, mujoco.MjModel, mujoco.MjData, tuple[tuple[str, str], ...]]:
+    """The robot's model compiled alone at its initial pose (keyframe, a free base at its
+    MJCF pose as the scene puts it), after checking its base body and keyframe."""
+    spec = _robot_spec(robot, "mjcf" if keys else None)
     base = spec.body(robot.base)
     if base is None:
         names = [b.name for b in spec.bodies if b.name and b.name != "world"]
         fail("base", f"no body {robot.base!r} in {robot.mjcf.name} (bodies: {_listing(names)})")
     if base.parent is None or base.parent.name != "world":
         fail("base", f"body {robot.base!r} must be a child of <worldbody> (it is attached as is)")
-    mesh: dict[str, Any] = {}
     if "mesh_density" in robot.params:
         mesh = _mesh_properties(spec, robot, robot.params["mesh_density"])
         robot = replace(
@@ -486,30 +446,50 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
                 f"(keyframes: {_listing(keys_found)})",
             )
         mujoco.mj_resetDataKeyframe(model, data, k)
+        body = model.body(robot.base).id
+        free = [j for j in range(model.body_jntadr[body], model.body_jntadr[body] +
+                model.body_jntnum[body]) if model.jnt_type[j] == _FREE]  # fmt: skip
+        for j in free:  # the scene ignores a keyframe's root pose: so does the inspection
+            adr = int(model.jnt_qposadr[j])
+            data.qpos[adr : adr + 7] = model.qpos0[adr : adr + 7]
     mujoco.mj_forward(model, data)
-    body = model.body(robot.base).id
+    return robot, model, data, options
+
+
+def _root(model: mujoco.MjModel, body: int, robot: RobotModel, fail: Fail) -> str:
+    """How the base moves: "free" (a free joint) or "planar" (slide joints, a yaw hinge)."""
     joints = list(range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]))
     types = [int(model.jnt_type[j]) for j in joints]
     if _FREE in types:
-        root = "free"
-    elif types and all(t in (_SLIDE, _HINGE) for t in types):
-        root = "planar"
-    elif not types:
-        fail("base", f"body {robot.base!r} has no joint: expected x/y slide joints or a free joint")
-    else:  # a ball joint (it was told it "has no joint")
-        kinds = {_FREE: "free", _SLIDE: "slide", _HINGE: "hinge"}
-        said = ", ".join(
-            f"{model.joint(j).name or f'joint {j}'} ({kinds.get(t, 'ball')})"
-            for j, t in zip(joints, types, strict=True)
-        )
+        return "free"
+    if types and all(t in (_SLIDE, _HINGE) for t in types):
+        return "planar"
+    if not types:
         fail(
             "base",
-            f"body {robot.base!r} moves on {said}: a ball joint lets the base tilt and roll, "
-            "which no planar drive controls; expected x/y slide joints (and an optional yaw "
-            "hinge) or a free joint",
+            f"body {robot.base!r} has no joint: a fixed-base model; give it a planar base "
+            "(planar_base = true in the robot file: x/y slide joints and a yaw hinge, driven "
+            "as drive = 'holonomic'), or name a body on x/y slide joints or a free joint",
         )
+    kinds = {_FREE: "free", _SLIDE: "slide", _HINGE: "hinge"}  # a ball joint
+    said = ", ".join(
+        f"{model.joint(j).name or f'joint {j}'} ({kinds.get(t, 'ball')})"
+        for j, t in zip(joints, types, strict=True)
+    )
+    fail(
+        "base",
+        f"body {robot.base!r} moves on {said}: a ball joint lets the base tilt and roll, "
+        "which no planar drive controls; expected x/y slide joints (and an optional yaw "
+        "hinge) or a free joint",
+    )
 
-    role_key = (lambda r: f"{keys['role']}.{r}") if keys else (lambda r: f"actuator {r!r}")
+
+def _infos(
+    model: mujoco.MjModel, full: np.ndarray, robot: RobotModel, fail: Fail, role_key: Any,
+    keys: dict[str, str] | None,
+) -> dict[str, ActuatorInfo]:  # fmt: skip
+    """What each named actuator is (:func:`.actuators.classify`), with the inertia its
+    length sees (a torque motor's loop gain)."""
     infos: dict[str, ActuatorInfo] = {}
     for role, name in {**robot.actuators, **robot.held}.items():
         a = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
@@ -528,77 +508,77 @@ def _inspect(robot: RobotModel, keys: dict[str, str] | None) -> RobotModel:
         info = act.classify(model, a)
         if isinstance(info, str):
             fail(role_key(role), f"actuator {name!r} {info}")
-        j = int(model.actuator_trnid[a, 0])
-        dof = int(model.jnt_dofadr[j])
-        infos[role] = replace(info, inertia=_joint_inertia(model, data, dof))
-    params = dict(robot.params)
-    if robot.drive == "holonomic":
-        if root != "planar":
+        if info.tendon and not robot.moment:
             fail(
-                "drive",
-                f"a holonomic drive needs x/y slide joints on {robot.base!r}; it has a "
-                "free joint (a wheeled base on a free joint is drive = 'diffdrive')",
+                role_key(role),
+                f"actuator {name!r} pulls tendon {info.tendon!r}: only a diffdrive's wheels "
+                "may be driven through tendons (name its wheels, or their actuators)",
             )
-        for role, axis in (("x", 0), ("y", 1)):
-            info = infos[role]
-            j = info.joint_id
-            if info.joint_type != "slide" or model.jnt_bodyid[j] != body:
-                fail(
-                    role_key(role),
-                    f"actuator {info.name!r} must drive a slide joint of "
-                    f"{robot.base!r} (it drives {info.joint!r})",
-                )
-            world_axis = data.xaxis[j]
-            if abs(world_axis[axis]) < 0.999:
-                fail(
-                    role_key(role),
-                    f"joint {info.joint!r} slides along "
-                    f"{np.round(world_axis, 3).tolist()}; expected the world {'xy'[axis]} axis",
-                )
-            params[f"sign_{'xy'[axis]}"] = float(np.sign(world_axis[axis]))
-        if "yaw" in infos:
-            info = infos["yaw"]
-            j = info.joint_id
-            if info.joint_type != "hinge" or abs(data.xaxis[j][2]) < 0.999:
-                fail(
-                    role_key("yaw"),
-                    f"actuator {info.name!r} must drive a vertical hinge of {robot.base!r}",
-                )
-    else:
+        dofs = [int(model.jnt_dofadr[j]) for j, _ in info.moment]
+        inertia = act.seen_inertia(full, dofs, [c for _, c in info.moment])
+        infos[role] = replace(info, inertia=inertia)
+    return infos
+
+
+def _drive_geometry(
+    model: mujoco.MjModel, data: mujoco.MjData, body: int, root: str,
+    infos: dict[str, ActuatorInfo], robot: RobotModel, fail: Fail, role_key: Any,
+    keys: dict[str, str] | None,
+) -> dict[str, float]:  # fmt: skip
+    """What a holonomic, omni or swerve drive reads of the model, checked."""
+    params: dict[str, float] = {}
+    if robot.drive != "holonomic":
         if root != "free":
             fail(
                 "drive",
                 f"a {robot.drive} robot moves through its wheels: {robot.base!r} needs a "
                 "free joint",
             )
-        geometry = {"diffdrive": wheels.diffdrive, "omni": wheels.omni}.get(
-            robot.drive, wheels.swerve
+        geometry = {"omni": wheels.omni}.get(robot.drive, wheels.swerve)
+        return geometry(model, data, body, infos, robot, fail, role_key, keys)
+    if root != "planar":
+        fail(
+            "drive",
+            f"a holonomic drive needs x/y slide joints on {robot.base!r}; it has a "
+            "free joint (a wheeled base on a free joint is drive = 'diffdrive')",
         )
-        params.update(geometry(model, data, body, infos, robot, fail, role_key, keys))
-    driven = tuple(infos[r] for r in robot.actuators)
-    held = tuple(infos[r] for r in robot.held)
-    site = model.site(CONTROL_SITE).id
-    footprint = _footprint(model, data, site, subtree(model, body))
-    qpos = data.qpos[qpos_addresses(model, np.flatnonzero(subtree(model, body)[model.jnt_bodyid]))]
-    return replace(
-        robot,
-        driven_infos=driven,
-        held_infos=held,
-        root=root,
-        footprint_radius=footprint,
-        params=params,
-        options=options,
-        init_qpos=tuple(float(v) for v in qpos),
-        init_ctrl=tuple(float(v) for v in data.ctrl[attached_actuators(model, body)]),
-        init_point=(float(data.site_xpos[site][0]), float(data.site_xpos[site][1])),
-    )
+    for role, axis in (("x", 0), ("y", 1)):
+        info = infos[role]
+        j = info.joint_id
+        if info.joint_type != "slide" or model.jnt_bodyid[j] != body:
+            fail(
+                role_key(role),
+                f"actuator {info.name!r} must drive a slide joint of "
+                f"{robot.base!r} (it drives {info.joint!r})",
+            )
+        world_axis = data.xaxis[j]
+        if abs(world_axis[axis]) < 0.999:
+            fail(
+                role_key(role),
+                f"joint {info.joint!r} slides along "
+                f"{np.round(world_axis, 3).tolist()}; expected the world {'xy'[axis]} axis",
+            )
+        params[f"sign_{'xy'[axis]}"] = float(np.sign(world_axis[axis]))
+    if "yaw" in infos:
+        info = infos["yaw"]
+        j = info.joint_id
+        if info.joint_type != "hinge" or abs(data.xaxis[j][2]) < 0.999:
+            fail(
+                role_key("yaw"),
+                f"actuator {info.name!r} must drive a vertical hinge of {robot.base!r}",
+            )
+    return params
 
 
-def _joint_inertia(model: mujoco.MjModel, data: mujoco.MjData, dof: int) -> float:
-    """Diagonal of the joint-space inertia at the current pose (armature included)."""
-    full = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, full)
-    return float(full[dof, dof])
+def _lowest(model: mujoco.MjModel, data: mujoco.MjData, inside: np.ndarray) -> float:
+    """Height of the lowest point of the geoms that meet the floor (those that would touch a
+    default geom in the robot's own model, as the scene filters them) [m]."""
+    low = np.inf
+    for g in range(model.ngeom):
+        ground = (int(model.geom_contype[g]) | int(model.geom_conaffinity[g])) & 1
+        if inside[model.geom_bodyid[g]] and ground:
+            low = min(low, float(_surface_points(model, data, g)[:, 2].min()))
+    return low if np.isfinite(low) else 0.0
 
 
 def _listing(names: list[str], most: int = 12) -> str:

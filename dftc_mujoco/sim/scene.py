@@ -15,10 +15,13 @@ own keyframe pose. What the scene adds:
   bits are cleared (no robot-robot and no self contacts). The arena's bits sit above
   bit 16, clear of the robots' own.
 * **The initial state**: each robot at its keyframe (or its model's default pose),
-  moved so that its control point starts at the scenario's initial position; the
-  actuators hold their keyframe ``ctrl``.
-* **Options** stay the arena's (timestep, integrator from the scenario); a robot file
-  whose ``<option>`` sets something else is reported (:attr:`Scene.notes`).
+  moved so that its control point starts at the scenario's initial position; a base on a
+  free joint is set down on the floor (its lowest floor contact at height 0, wherever its
+  MJCF puts it); the actuators hold their keyframe ``ctrl``.
+* **Options** stay the arena's (timestep, integrator from the scenario; a robot file may
+  ask for MuJoCo's ``implicit`` integrator); a robot file whose ``<option>`` sets
+  something else is reported (:attr:`Scene.notes`), as is what the inspection of each
+  robot found (wheels its drive leaves braked).
 
 The composed ``MjSpec`` stays with the scene (:attr:`Scene.spec`): ``sim/mjcf.py`` writes
 it as MJCF text that loads without this package (dm_control's ``Physics``).
@@ -42,6 +45,8 @@ from .tree import actuator_bodies, owners, qpos_addresses, qpos_widths, ranges
 FLOOR, OBSTACLE, HULL, ROBOT = 1 << 16, 1 << 17, 1 << 18, 1 << 19
 OWN_BITS = 0xFFFF
 INTEGRATOR = "implicitfast"
+#: [m] a free base whose lowest floor contact is further than this from the floor is set on it
+FLOOR_TOLERANCE = 0.005
 
 
 @dataclass(frozen=True)
@@ -101,7 +106,10 @@ def compose(
     spec = mujoco.MjSpec.from_file(str(MODELS / "arena.xml"))
     spec.copy_during_attach = True
     spec.option.timestep = timestep
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    implicit = any(m.integrator == "implicit" for m in models)
+    spec.option.integrator = (
+        mujoco.mjtIntegrator.mjINT_IMPLICIT if implicit else mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    )
     floor = spec.geom("floor")
     floor.contype, floor.conaffinity = FLOOR, FLOOR
     kinds = {m.path: m for m in models}  # each model's spec, made once
@@ -125,7 +133,8 @@ def compose(
             setattr(group.option, name, getattr(spec.option, name))
         for i in range(g0, min(g0 + GROUP, n)):
             x, y = positions[i]
-            frame = group.worldbody.add_frame(pos=[x - shift[i, 0], y - shift[i, 1], 0.0])
+            drop = models[i].floor_offset if abs(models[i].floor_offset) > FLOOR_TOLERANCE else 0.0
+            frame = group.worldbody.add_frame(pos=[x - shift[i, 0], y - shift[i, 1], -drop])
             frame.attach_body(bases[models[i].path], robot_prefix(i).removeprefix(PREFIX), "")
         spec.attach(group, frame=spec.worldbody.add_frame(), prefix=PREFIX, suffix="")
     for k, ob in enumerate(obstacles):
@@ -170,7 +179,9 @@ def compose(
     qpos, ctrl = _initial_state(model, models, body, positions - shift)
     root, origin = _roots(model, body)
     notes = tuple(
-        line for m, rs in zip(kinds.values(), robot_specs, strict=True) for line in _notes(m, rs)
+        line
+        for m, rs in zip(kinds.values(), robot_specs, strict=True)
+        for line in (*_notes(m, rs), *m.notes)
     )
     return Scene(
         model,
@@ -319,7 +330,8 @@ def _notes(robot: RobotModel, spec: mujoco.MjSpec) -> tuple[str, ...]:
         return ()
     return (
         f"{robot.mjcf.name} sets <option {' '.join(clash)}>: the arena's options apply "
-        f"(timestep {spec.option.timestep:g} s and integrator {INTEGRATOR} from the scenario, "
+        f"(timestep {spec.option.timestep:g} s and integrator "
+        f"{option_value(spec.option, 'integrator')} from the scenario and the robot files, "
         "MuJoCo's defaults otherwise)",
     )
 

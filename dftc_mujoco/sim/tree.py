@@ -30,8 +30,8 @@ def owners(model: mujoco.MjModel, roots: np.ndarray) -> np.ndarray:
 
 
 def actuator_bodies(model: mujoco.MjModel) -> np.ndarray:
-    """(nu,) the body each actuator acts on (its joint's, site's or body's), -1 for a
-    tendon actuator."""
+    """(nu,) the body each actuator acts on (its joint's, site's or body's; a fixed tendon's
+    first joint's), -1 for a tendon of sites or geoms."""
     trn = model.actuator_trntype
     target = model.actuator_trnid[:, 0]
     out = np.full(model.nu, -1, dtype=np.int64)
@@ -41,12 +41,17 @@ def actuator_bodies(model: mujoco.MjModel) -> np.ndarray:
     out[site] = model.site_bodyid[target[site]]
     body = trn == mujoco.mjtTrn.mjTRN_BODY
     out[body] = target[body]
+    for a in np.flatnonzero(trn == mujoco.mjtTrn.mjTRN_TENDON):
+        wrap = int(model.tendon_adr[target[a]])
+        if model.tendon_num[target[a]] and model.wrap_type[wrap] == mujoco.mjtWrap.mjWRAP_JOINT:
+            out[a] = model.jnt_bodyid[model.wrap_objid[wrap]]
     return out
 
 
 def attached_actuators(model: mujoco.MjModel, body: int) -> np.ndarray:
     """The actuators that come along when body ``body`` is attached (its subtree's joints,
-    sites and bodies are their targets), in model order; tendon actuators are not."""
+    sites and bodies, or the joints of their fixed tendons, are their targets), in model
+    order."""
     on = actuator_bodies(model)
     inside = subtree(model, body)
     return np.flatnonzero((on >= 0) & inside[np.maximum(on, 0)])

@@ -26,45 +26,49 @@ AXLE_TOLERANCE_DEG = 5.0
 MIN_ROLLER_COS = 0.2
 
 
-def diffdrive(model, data, body, infos, robot, fail, role_key, keys) -> dict[str, float]:
-    """Wheel radius, axle width, the control point's offset from the axle, the forward axis
-    and each wheel's sense of rotation, in the base body's frame, from the model."""
+def diffdrive(model, data, body, joints, sides, robot, fail, keyed, keys) -> dict[str, float]:
+    """The wheels' track (the distance between the left and the right wheels' mean axle
+    points), their radius, the control point's offset from the middle of the wheels, the
+    forward axis and each wheel's sense of rotation and radius, in the base body's frame,
+    from the model. ``joints`` are the wheel joints, ``sides`` each one's (−1 left, +1 right),
+    ``keyed`` the robot-file key that names each; several a side is a skid steer."""
+    key = keyed[0]
     rot = data.xmat[body].reshape(3, 3)  # base frame -> world
     origin = data.xpos[body]
     anchors, axes, radii = [], [], []
-    for role in ("left", "right"):
-        info = infos[role]
-        j = info.joint_id
-        owner = f"a wheel: a hinge of a body inside {robot.base!r}"
-        wheel, axis = _wheel_joint(model, data, rot, info, body, fail, role_key(role), owner)
+    owner = f"a wheel: a hinge of a body inside {robot.base!r}"
+    for j, at in zip(joints, keyed, strict=True):
+        wheel, axis = _axle(model, data, rot, j, body, fail, at, owner)
         anchors.append(rot.T @ (data.xanchor[j] - origin))
         axes.append(axis)
         radii.append(_wheel_radius(model, data, wheel, data.xanchor[j], data.xaxis[j]))
-    lateral = anchors[0] - anchors[1]
+    side = np.array(sides)
+    anchor = np.array(anchors)
+    lateral = anchor[side < 0].mean(axis=0) - anchor[side > 0].mean(axis=0)
     lateral[2] = 0.0
     width = float(np.linalg.norm(lateral))
     if width < 1e-3:
-        fail(role_key("left"), "the two wheels share one position: cannot tell left from right")
-    g = lateral / width  # towards the left wheel
-    for role, axis in zip(("left", "right"), axes, strict=True):  # both turn about the axle
+        fail(key, "the left and right wheels share one position: cannot tell left from right")
+    g = lateral / width  # towards the left wheels
+    line = "the two wheels" if len(joints) == 2 else "the left and right wheels"
+    for j, axis, at in zip(joints, axes, keyed, strict=True):  # each turns about that line
         cosine = min(1.0, abs(float(axis @ g)) / float(np.linalg.norm(axis)))
         off_axle = math.degrees(math.acos(cosine))
         if off_axle > AXLE_TOLERANCE_DEG:
             fail(
-                role_key(role),
-                f"joint {infos[role].joint!r} turns about {np.round(axis, 3).tolist()} in the "
-                f"base frame, {off_axle:.0f}° from the line joining the two wheels; a "
+                at,
+                f"joint {model.joint(j).name!r} turns about {np.round(axis, 3).tolist()} in the "
+                f"base frame, {off_axle:.0f}° from the line joining {line}; a "
                 "differential drive's wheels turn about that line (wheels at an angle to it "
                 "are an omni or mecanum base, which this drive cannot steer)",
             )
     f = np.cross(g, [0.0, 0.0, 1.0])  # forward
-    mid = (anchors[0] + anchors[1]) / 2
+    mid = anchor.mean(axis=0) if len(joints) > 2 else (anchor[0] + anchor[1]) / 2
     cp = np.array([*robot.control_point, 0.0]) - mid
     offset, lateral_offset = float(cp @ f), float(cp @ g)
-    key = "control_point" if keys else "site center"
     if abs(offset) < 0.01:
         fail(
-            key,
+            "control_point" if keys else "site center",
             f"the controlled point is {offset:+.3f} m from the axle along the heading; "
             "a differential drive can steer a point only ahead of or behind its axle "
             "(|offset| >= 0.01 m)",
@@ -75,16 +79,18 @@ def diffdrive(model, data, body, infos, robot, fail, role_key, keys) -> dict[str
         "offset": robot.params.get("offset", offset),
         "lateral": lateral_offset,
         "forward_angle": float(math.atan2(f[1], f[0])),
+        "wheels": float(len(joints)),
     }
-    for role, axis in zip(("left", "right"), axes, strict=True):
-        # a positive turn about axis a rolls the wheel along a × z
-        out[f"sign_{role}"] = float(np.sign(np.cross(axis, [0.0, 0.0, 1.0]) @ f))
     if out["wheel_radius"] <= 0:
-        fail(
-            role_key("left"),
-            "the wheel has no colliding geom to take its radius from; give "
-            "[diffdrive] wheel_radius",
-        )
+        fail(key, "the wheel has no colliding geom to take its radius from; give [diffdrive] "
+             "wheel_radius")  # fmt: skip
+    for k, (axis, r) in enumerate(zip(axes, radii, strict=True)):
+        # a positive turn about axis a rolls the wheel along a × z
+        out[f"wheel{k}_sign"] = float(np.sign(np.cross(axis, [0.0, 0.0, 1.0]) @ f))
+        out[f"wheel{k}_side"] = float(sides[k])
+        out[f"wheel{k}_r"] = robot.params.get("wheel_radius", r) if r > 0 else out["wheel_radius"]
+    if len(joints) == 2:
+        out["sign_left"], out["sign_right"] = (out[f"wheel{sides.index(s)}_sign"] for s in (-1, 1))
     return out
 
 
@@ -232,15 +238,30 @@ def _wheel_joint(model, data, rot, info, parent: int, fail, key: str, owner: str
     """The body a wheel actuator turns and its axle in the base frame, after checking that
     it drives a hinge of a body inside ``parent`` (``owner`` says what it must drive) whose
     axle is horizontal."""
-    j = info.joint_id
+    wheel = int(model.jnt_bodyid[info.joint_id])
+    if (
+        info.joint_type != "hinge"
+        or info.tendon
+        or not subtree(model, parent)[wheel]
+        or (wheel == parent)
+    ):
+        fail(key, f"actuator {info.name!r} must drive {owner} (it drives {info.what})")
+    return _axle(model, data, rot, info.joint_id, parent, fail, key, owner)
+
+
+def _axle(model, data, rot, j: int, parent: int, fail, key: str, owner: str):
+    """The body joint ``j`` turns and its axle in the base frame, after checking that it is a
+    hinge of a body inside ``parent`` whose axle is horizontal."""
     wheel = int(model.jnt_bodyid[j])
-    if info.joint_type != "hinge" or not subtree(model, parent)[wheel] or wheel == parent:
-        fail(key, f"actuator {info.name!r} must drive {owner} (it drives {info.joint!r})")
+    name = model.joint(j).name or f"joint {j}"
+    hinge = model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+    if not hinge or not subtree(model, parent)[wheel] or wheel == parent:
+        fail(key, f"joint {name!r} must be {owner}")
     axis = rot.T @ data.xaxis[j]
     if abs(axis[2]) > 0.2:
         fail(
             key,
-            f"joint {info.joint!r} turns about {np.round(axis, 3).tolist()} in the base frame; "
+            f"joint {name!r} turns about {np.round(axis, 3).tolist()} in the base frame; "
             "a wheel's axle must be horizontal",
         )
     return wheel, axis
