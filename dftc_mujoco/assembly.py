@@ -9,6 +9,7 @@ hypothesis; and the six onboard blocks, the scenario's or the caller's. The loop
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,6 +52,26 @@ def effective_xi_bar(s: Scenario, robot: robots.RobotModel | None) -> float:
     if s.noise.xi_bar is not None:
         return s.noise.xi_bar
     return robot.xi_bar if robot is not None else 0.0
+
+
+#: ξ̄ of the paper's robots [m/s]: eq. 40's thresholds are drawn for a mismatch this small
+PAPER_XI_BAR = 0.005
+
+
+def threshold_rule(s: Scenario, robot: robots.RobotModel | None) -> Scenario:
+    """The scenario with ``onboard.thresholds = "auto"`` made a rule: the paper's eq. 40 where
+    the robots move within the paper's ξ̄ (0.005 m/s) on an ideal network, else
+    ``block_row`` (its row of eq. 40, which a larger ξ̄ widens less), or ``l1`` over a
+    network (eq. 40 is not derived for the observers' rounds)."""
+    if s.onboard.thresholds != "auto":
+        return s
+    if not s.network.ideal:
+        rule = "l1"
+    elif effective_xi_bar(s, robot) <= PAPER_XI_BAR * (1 + 1e-9):
+        rule = "paper"
+    else:
+        rule = "block_row"
+    return dataclasses.replace(s, onboard=dataclasses.replace(s.onboard, thresholds=rule))
 
 
 def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:

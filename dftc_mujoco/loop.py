@@ -34,6 +34,7 @@ from .assembly import (
     governed_text,
     make_blocks,
     team_config,
+    threshold_rule,
 )
 from .block_failure import block_error, setup_error
 from .detection_domain import DetectionDomain
@@ -109,9 +110,10 @@ class Simulation:
         self._search = [Path(p) for p in search]
         self._asked_speed = scenario.mission.centroid.speed  # the path governor may lower it
         self._given = dict(blocks or {})
-        self.block_names = block_names(scenario, self._given)
         # each robot's model; files are recorded by their absolute paths
         self.scenario, self.fleet = scenario, team = fleet.for_scenario(scenario)
+        self.scenario = scenario = threshold_rule(scenario, team.envelope)  # "auto": a rule
+        self.block_names = block_names(scenario, self._given)
         self.robot = team.envelope  # the team's bounds (one model: that model)
         if self.block_names["thresholds"] == "paper":  # its set-up needs κ/λ (eq. 41):
             prefetch_decay_bounds(scenario.team.graph, scenario.gains.ko)  # beside the scene

@@ -73,7 +73,8 @@ Documentation: the project's docs/ folder (user guide, command line, every scena
 
 #: the threshold rules in a few words (--list)
 RULES = {
-    "paper": "eq. 40 of the paper (the default)",
+    "auto": "the default: paper for robots within the paper's ξ̄, else block_row (l1 on a network)",
+    "paper": "eq. 40 of the paper",
     "block_row": "a tighter bound, row by row (up to 64 robots)",
     "l1": "a tight bound that scales to hundreds of robots",
     "drive": "from the fault estimator's own identity (compensation on)",
@@ -288,7 +289,7 @@ def catalogue() -> str:
         model = get(name)
         lines.append(f"  {name:<22} {model.drive} drive, {model.footprint_radius:.2f} m radius")
     lines.append("threshold rules (--set onboard.thresholds=NAME):")
-    lines += [f"  {name:<22} {RULES.get(name, '')}" for name in BUILTIN["thresholds"]]
+    lines += [f"  {name:<22} {RULES.get(name, '')}" for name in ("auto", *BUILTIN["thresholds"])]
     lines.append("and your own: a robot file (--robot path/to/bot.robot.toml) or a block")
     lines.append('("module:Class" in [onboard]); see the documentation')
     return "\n".join(lines)

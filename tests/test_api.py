@@ -128,7 +128,8 @@ def test_save_and_open_run_round_trip(tmp_path):
     back = open_run(tmp_path)
     assert isinstance(back, RunResult)
     assert back.scenario.gains.ko == 3.0 and back.scenario.duration == 8.0
-    assert back.scenario.to_dict() == s.to_dict()
+    assert back.scenario.to_dict() == result.scenario.to_dict()  # the scenario that ran:
+    assert s.onboard.thresholds == "auto" and back.scenario.onboard.thresholds == "paper"
     assert back.summary == json.loads(json.dumps(result.summary))
     assert back.events.items == result.events.items
     for name, a in result.log.items():

@@ -349,8 +349,10 @@ def test_what_a_network_makes_meaningless_is_refused_before_simulating():
     assert "gains.ko: the observers step once a round of the network, R = 11 periods" in msg
     assert "rule 'l1' needs ko * R * control_period * (max in-degree + 1) <= 1" in msg
     assert "lower ko to at most 3.03" in msg
-    msg = refused({**LOSSY})  # eq. 40, the paper's rule
+    msg = refused({**LOSSY, "onboard.thresholds": "paper"})  # eq. 40, named by the user
     assert "eq. 40's thresholds" in msg and "not derived for the observers' rounds" in msg
+    r = _run({**LOSSY}, duration=1.0)  # "auto": over a network, l1
+    assert r.summary["onboard"]["blocks"]["thresholds"] == "l1"
     r = _run({"network.loss": 0.05, "onboard.thresholds": "l1", "gains.ko": 3.0}, duration=1.0)
     warned = [e["message"] for e in r.events.items if e["kind"] == "warning"]
     assert any("losses have no bound" in w for w in warned)

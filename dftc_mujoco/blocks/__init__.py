@@ -65,7 +65,10 @@ def check_name(block: str, name: Any) -> str | None:
         return f"expected a string, got {type(name).__name__} {name!r}"
     if name in BUILTIN[block] or _IMPORT_PATH.match(name):
         return None
-    names = ", ".join(repr(n) for n in BUILTIN[block])
+    if block == "thresholds" and name == "auto":  # resolved with the robots (assembly)
+        return None
+    words = [*BUILTIN[block], *(["auto"] if block == "thresholds" else [])]
+    names = ", ".join(repr(n) for n in words)
     return f'expected a built-in name ({names}) or an import path "module:Class", got {name!r}'
 
 

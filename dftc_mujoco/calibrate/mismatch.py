@@ -310,13 +310,15 @@ def detectability(
     robot's command range (a stopped robot's command grows as the team pulls away).
     Returns (the line to print, whether it is a warning).
     """
-    from ..assembly import team_config
+    from ..assembly import team_config, threshold_rule
     from ..blocks import create
     from ..scenario import load_scenario
     from ..sim import robots
 
     s = load_scenario(scenario_name, {**(overrides or {}), "noise.xi_bar": cal.recommended_xi_bar})
-    config = team_config(s, robots.get(robot, where="MODEL"), cal.command_limit)
+    model = robots.get(robot, where="MODEL")
+    s = threshold_rule(s, model)
+    config = team_config(s, model, cal.command_limit)
     th = create("thresholds", s.onboard.thresholds, s.onboard.params.get("thresholds", {}))
     x0 = np.asarray(s.team.initial_positions)
     th.reset(config, x0, x0)

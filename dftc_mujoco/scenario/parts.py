@@ -292,8 +292,9 @@ class Onboard:
     """The onboard blocks of the paper's Fig. 1 (the ``[onboard]`` table).
 
     Each block is ``"paper"`` (the built-in implementation) or an import path
-    ``"module:Class"`` (see :mod:`dftc_mujoco.blocks`). ``params`` maps a block
-    name to the keyword arguments its class is created with
+    ``"module:Class"`` (see :mod:`dftc_mujoco.blocks`); ``thresholds`` is ``"auto"`` by
+    default, the rule whose premises the team's robots meet (``assembly.threshold_rule``).
+    ``params`` maps a block name to the keyword arguments its class is created with
     (``[onboard.params.<block>]``); both levels are read-only.
     """
 
@@ -301,7 +302,7 @@ class Onboard:
     controller: str = "paper"
     supervisor: str = "paper"
     fault_estimator: str = "paper"
-    thresholds: str = "paper"
+    thresholds: str = "auto"
     detector: str = "paper"
     decision: str = "paper"
     params: Mapping[str, Mapping[str, Any]] = field(default_factory=_ReadOnlyMap)

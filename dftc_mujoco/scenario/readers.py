@@ -630,11 +630,12 @@ def _onboard(t: Table) -> Onboard:
     assert t.doc is not None
     chosen = {}
     for block in BLOCKS:
-        name = t.raw(block, "paper")
+        default = Onboard.thresholds if block == "thresholds" else "paper"
+        name = t.raw(block, default)
         problem = check_name(block, name)
         if problem:
             t.report(block, problem)
-            name = "paper"
+            name = default
         chosen[block] = name
     params = t.doc.guard(_onboard_params, t) if "params" in t.data else {}
     t.used.add("params")
