@@ -732,6 +732,9 @@ def test_the_none_method_shows_what_fault_detection_buys(tmp_path):
     report.write(list(rows.values()), out, "n")
     text = (out / "report.md").read_text()
     assert "| none | 1 |" in text and "missions completed" in text
+    # the rule table keeps the two methods apart, though both ran eq. 40
+    assert {fdi["thresholds"], none["thresholds"]} == {"paper"}
+    assert "| fdi: paper | 1 |" in text and "| none: paper | 1 |" in text
 
 
 def test_a_client_server_that_gave_up_on_the_driver_says_what_to_do():

@@ -280,9 +280,16 @@ def _bias_limits(rows: list[dict[str, Any]]) -> tuple[float | None, float | None
     return (min(hit) if hit else None), (max(miss) if miss else None)
 
 
+def _rule(r: dict[str, Any]) -> str:
+    """A row's threshold rule, named with its method where the campaign compares methods:
+    two methods that share a rule (with and without detection, say) stay apart."""
+    rule = r.get("thresholds") or "paper"
+    return f"{r['method']}: {rule}" if "method" in r else rule
+
+
 def _rule_table(ok: list[dict[str, Any]]) -> list[str]:
     """The campaign's measures per threshold rule, when its runs used several."""
-    groups = _by([{**r, "thresholds": r.get("thresholds") or "paper"} for r in ok], "thresholds")
+    groups = _by([{**r, "thresholds": _rule(r)} for r in ok], "thresholds")
     if len(groups) <= 1:
         return []
     lines = [
@@ -307,7 +314,7 @@ def _rule_table(ok: list[dict[str, Any]]) -> list[str]:
 def _kind_table(ok: list[dict[str, Any]]) -> list[str]:
     """Detection and isolation per fault kind drawn (per rule), when a campaign drew several:
     what the FDI does with each kind of the fault zoo."""
-    rows = [{**r, "thresholds": r.get("thresholds") or "paper"} for r in ok]
+    rows = [{**r, "thresholds": _rule(r)} for r in ok]
     groups = _by(rows, "fault_kind", "thresholds")
     if len({k[0] for k in groups}) <= 1:
         return []
@@ -372,9 +379,7 @@ def _kept_table(ok: list[dict[str, Any]]) -> list[str]:
 
 def _scale_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     """Stop detection by threshold rule, team size and graph family, with the figure."""
-    stops = [r for r in ok if r["fault_kind"] == "stop"]
-    for r in stops:
-        r.setdefault("thresholds", "paper")
+    stops = [{**r, "thresholds": _rule(r)} for r in ok if r["fault_kind"] == "stop"]
     groups = _by(stops, "thresholds", "robots", "graph_family")
     if len(groups) <= 1:
         return []
@@ -426,7 +431,7 @@ def _network_table(ok: list[dict[str, Any]], figs: Path) -> list[str]:
     rows = [
         {
             **r,
-            "thresholds": r.get("thresholds") or "paper",
+            "thresholds": _rule(r),
             **{k: float(r.get(k, 0.0)) for k in NETWORK_KEYS},
         }
         for r in ok
