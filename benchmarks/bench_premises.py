@@ -1,11 +1,10 @@
-"""Cost of the run-time premise checks: the closed loop with and without them.
+"""Cost of the run-time premise checks, timed call by call inside the closed loop.
 
     python benchmarks/bench_premises.py [--n 4 100] [--repeat 5] [--duration 20]
 
-Each size runs the same scenario alternately with ``loop.MONITOR_ALLOWED`` on and off in
-one process (numba's cache warm, the first pair discarded) and prints the median wall time
-of the stepping loop (set-up excluded) and the ratio; then the checks timed call by call
-inside the loop (``Monitor.period``), which the machine's noise disturbs far less.
+Each size runs the same scenario ``--repeat`` times in one process (numba's cache warm, a
+first run discarded), ``Monitor.period`` timed at every call, and prints the median time of
+one call and its share of the loop's wall time (set-up excluded).
 """
 
 from __future__ import annotations
@@ -15,7 +14,6 @@ import statistics
 import time
 
 from dftc_mujoco import Simulation, load_scenario, premises
-from dftc_mujoco import loop as loop_mod
 
 
 def scenario(n: int, duration: float):
@@ -37,8 +35,7 @@ def scenario(n: int, duration: float):
     )
 
 
-def loop_time(s, monitor: bool) -> float:
-    loop_mod.MONITOR_ALLOWED = monitor
+def loop_time(s) -> float:
     with Simulation(s) as sim:
         t0 = time.perf_counter()
         sim.run(progress=False)
@@ -51,18 +48,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--duration", type=float, default=20.0)
     a = ap.parse_args()
-    print("| N | loop without checks [s] | with checks [s] | cost |")
-    print("|---|---|---|---|")
-    for n in a.n:
-        s = scenario(n, a.duration)
-        loop_time(s, True), loop_time(s, False)  # warm-up pair
-        off, on = [], []
-        for _ in range(a.repeat):
-            off.append(loop_time(s, False))
-            on.append(loop_time(s, True))
-        m_off, m_on = statistics.median(off), statistics.median(on)
-        print(f"| {n} | {m_off:.3f} | {m_on:.3f} | {100 * (m_on / m_off - 1):+.1f} % |")
-    print("\n| N | checks per period [us] | share of the loop |")
+    print("| N | checks per period [us] | share of the loop |")
     print("|---|---|---|")
     for n in a.n:
         per, share = per_call(scenario(n, a.duration), a.repeat)
@@ -81,12 +67,11 @@ def per_call(s, repeat: int) -> tuple[float, float]:
         spent[1] += 1
 
     premises.Monitor.period = timed
-    loop_mod.MONITOR_ALLOWED = True
     per, share = [], []
     try:
         for _ in range(repeat + 1):  # the first run warms the caches
             spent[:] = [0.0, 0]
-            total = loop_time(s, True)
+            total = loop_time(s)
             per.append(1e6 * spent[0] / spent[1])
             share.append(100 * spent[0] / total)
     finally:

@@ -43,18 +43,15 @@ from .execution import Execution
 from .onboard.block import Block
 from .onboard.team import Team
 from .onboard.thresholds import prefetch_decay_bounds
-from .physics_step import PhysicsStep
+from .physics_step import PhysicsStep, Sensed
 from .record import Events, Log, matrix_every
 from .results import RunResult, summarize
 from .scenario import Scenario
 from .sim import fleet, mjcf, scene
-from .sim.bumpers import Bumpers
 from .sim.faults import Fault
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
 from .snapshot import Snapshot
-
-MONITOR_ALLOWED = True
 
 
 class Simulation:
@@ -248,7 +245,11 @@ class Simulation:
         found.raise_refusals()
         for message in found.warnings:
             self.events.add(0.0, "warning", message=message)
-        config = replace(config, compiled=self._compiled_period(blocks))
+        ex = self.execution
+        config = replace(
+            config, compiled=self._compiled_period(blocks), threads=ex.thread_count(),
+            shared_from=ex.shared_from,
+        )  # fmt: skip
         try:
             self.team = Team(config, x_m0, self.path.position[0], blocks)
             # eq. 46's domain: faults from the rule's settle time on (docs/thresholds.md)
@@ -275,11 +276,9 @@ class Simulation:
         self.team.dt_d_max_info["settle_time"] = (
             self.settle_time if np.isfinite(self.settle_time) else None
         )
-        self.bumpers = Bumpers(self.scene, self.plant.data)  # each robot's touch sensor
         self.monitor = premises.Monitor.for_team(
             self.team, self.block_names["thresholds"], self.command_limit, self.start_bound,
-            self.bumpers.owner, self.scene.body, x0, self.data.xpos[self.scene.body, 2],
-            self.events,
+            x0, self.data.xpos[self.scene.body, 2], self.events,
         )  # fmt: skip
         # the medium between the radios (None: the ideal network, which needs no model)
         self.channel: network.Channel | None = None
@@ -297,23 +296,13 @@ class Simulation:
         self.error: SimulationError | None = None
         self.stopped: str | None = None  # why the run was stopped early (request_stop)
         self.left: str | None = None  # a robot left the arena: the mission is over
-        self._x = np.array(x0, dtype=float)  # what a snapshot before the first step shows
-        self._x_m = np.array(x_m0, dtype=float)
         self._seen = 0  # events already handed out by step()
-        # the commands and the physics step of a period (drive(): commands from outside)
+        # what a period senses, the commands and the physics step (drive(): from outside)
         self._physics = PhysicsStep(
-            self.plant,
-            self.team,
-            self.adapter,
-            self.faults,
-            self._x,
-            self.steps,
-            self.log_every,
-            s.physics.substeps,
+            plant, self.team.u_bar, self.adapter, self.faults, s.physics.substeps
         )
-        if self.team.shares:  # each period's noise computed beside the pass (NoiseStream)
-            self.noise.spread = True
-            self._physics.ahead = self.noise.ahead
+        self._x, self._x_m = self._physics.sensed.x, self._physics.sensed.x_m
+        self._x[:], self._x_m[:] = x0, x_m0  # what a snapshot before the first step shows
         self._build = self._build_time + self._without_compiling(wall0, compiling0)
         self._wall = self._build
         self._build_time = 0.0
@@ -426,32 +415,23 @@ class Simulation:
         return Snapshot.of(t, self._x, self._x_m, self.team.outputs(), self.new_events())
 
     def _advance(self, k_end: int, progress: bool | None) -> None:
-        """Control periods ``self.k`` .. ``k_end - 1``: the hot loop."""
-        s = self.scenario
-        dt, steps, nsub, log_every = self.dt, self.steps, s.physics.substeps, self.log_every
+        """Control periods ``self.k`` .. ``k_end - 1``, each in one order: sense → decide →
+        command → physics → monitor → log (the module's docstring)."""
+        dt, steps, log_every = self.dt, self.steps, self.log_every
         plant, team, faults, noise = self.plant, self.team, self.faults, self.noise
         assert plant is not None  # reset() made it; close() ends stepping
-        events, hook, monitor, bumpers = self.events, self.hook, self.monitor, self.bumpers
-        domain = self.domain
-        log = self.log
-        channel, sensors = self.channel, self.sensors
-        watch = MONITOR_ALLOWED
+        hook, monitor, log, channel = self.hook, self.monitor, self.log, self.channel
         position, velocity = self.path.position, self.path.velocity
-        last = len(position) - 1
-        x, x_m, physics = self._x, self._x_m, self._physics
-        # a large team's monitor runs beside its pass, on the ideal network (a network's
-        # checks come before it in a period)
-        physics.monitor = monitor if watch and channel is None else None
-        cmd = physics.cmd
-        k0 = self.k
+        physics = self._physics
+        seen = physics.sensed
+        x, x_m = seen.x, seen.x_m
+        k0 = k = self.k
         bar = (  # built only where shown: an environment's step would pay for it each period
-            tqdm(total=k_end - k0, unit="period", desc=s.name, mininterval=0.5, leave=False)
-            if progress
-            else None
-        )
-        wall0 = time.perf_counter()
-        compiling0 = self._clock.total()
-        k = k0
+            tqdm(total=k_end - k0, unit="period", desc=self.scenario.name, mininterval=0.5,
+                 leave=False) if progress else None
+        )  # fmt: skip
+        wall0, compiling0 = time.perf_counter(), self._clock.total()
+        failed: BaseException | None = None  # the physics step's error, raised after the period
         # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual /
         # threshold; physics trouble is caught explicitly by the plant, not by numpy warnings
         try:
@@ -460,80 +440,54 @@ class Simulation:
                     if self.stopped is not None:  # request_stop(): end before this period
                         break
                     t = k * dt
-                    onsets: Sequence[Fault] = ()  # the faults that begin this period
-                    if t >= faults.due:
-                        onsets = faults.apply(t)
-                        for f in onsets:
-                            # the speed it was told last: a stop's size at onset (eq. 46)
-                            told = float(np.hypot(*team.drive.command[f.robot]))
-                            events.add(
-                                t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6)
-                            )
-                            monitor.watched[f.robot] = False  # the fault is to be detected
-                            domain.onset(t, f.robot + 1, team.recovery.dt_d_max)
-                        for f in faults.just_ended:
-                            events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
+                    # sense: the faults that begin now, the truth, each robot's measurement
+                    onsets = self._faults_due(t) if t >= faults.due else ()
                     eta, xi = noise.next()
-                    plant.sense(eta, x, x_m)  # x and x_m = x + η (eq. 4)
-                    if t >= sensors.due:  # faults of the position sensors, on x_m (eq. 4)
+                    physics.sense(eta)
+                    if t >= self.sensors.due:  # faults of the position sensors, on x_m (eq. 4)
                         self._sensor_faults(t, x_m)
-                    j = k if k < last else last
                     if channel is not None:
                         self._radio(t, k, channel)
-                    # the estimates only where a log row or the snapshot after step() shows them
-                    team.estimates = (
-                        (k % log_every == 0 and log.row_nn >= 0) or k == steps or k == k_end - 1
-                    )
-                    # a team that shares its pass runs the physics step beside it (physics_step.py)
-                    beside = physics.set(k, xi, t, eta) if team.shares else None
-                    try:
-                        team.step(t, x_m, position[j], velocity[j], x, bumpers.read(), beside)
-                    except (SimulationError, KeyboardInterrupt):
+                    # decide: the team's period up to its commands (ⁱx̂ where a row shows it)
+                    estimates = k % log_every == 0 and log.row_nn >= 0
+                    team.estimates = estimates or k == steps or k == k_end - 1
+                    j = min(k, len(position) - 1)
+                    self._decide(t, position[j], velocity[j], seen)
+                    # the run's end, decided once: its last period, a team that fell apart,
+                    # a robot off the floor (seen at a logged period)
+                    logged = k % log_every == 0 or team.ended is not None or k == steps
+                    left = logged and physics.far > checks.ARENA_HALF
+                    last = k == steps or team.ended is not None or left
+                    try:  # command, then physics (a shared pass goes on beside them)
+                        ctrl = physics.commands(xi)
+                        failed = None if last else physics.step(ctrl)
+                    except BaseException:
+                        team.join()
                         raise
-                    except Exception as exc:  # a (plug-in) block raised: stop, keep records
-                        raise block_error(exc, t) from exc
+                    self._finish(t)
+                    # monitor: the premises against the truth sensed at the period's start
                     if channel is not None:
-                        channel.send(k, team.rounds.content, x)
-                        if team.missed and watch:  # since the last round
-                            monitor.network(t, team.missed)
-                        if team.rounds.now and watch:  # the links that delivered, jointly
-                            monitor.joint_graph(
-                                t, channel.joint_components(team.rounds.index, team.members)
-                            )
-                        seen = team.sighting
-                        if seen is not None and watch and seen.judged.any():
-                            monitor.slot(t, seen.judged, x, seen.slots, seen.tolerance)
-                    if beside is None:
-                        before, ctrl = physics.live(), None
-                    elif physics.before is None:  # it failed before the physics step
-                        raise physics.error or RuntimeError("the physics step did not run")
-                    else:  # read before the physics advanced
-                        before, ctrl = physics.before, physics.ctrl
-                    if beside is None or not physics.watched:
-                        if watch:
-                            monitor.period(t, x, eta, team.u, team.u_bar, team.phi_hat, *before[:5])
-                    elif physics.watch_error is not None:  # the monitor ran beside the pass
-                        raise physics.watch_error
+                        self._network_premises(t, k, channel)
+                    monitor.period(
+                        t, x, eta, team.u, team.u_bar, team.phi_hat, seen.height, seen.level,
+                        seen.depth,
+                    )  # fmt: skip
                     if team.events:
                         self._take_team_events(t)
                     for f in onsets:  # after the team's step: an exclusion now restarts the rule
-                        domain.after_period(
+                        self.domain.after_period(
                             t, f.robot + 1, team.settles_at, team.restarted_at,
                             team.recovery.dt_d_max,
                         )  # fmt: skip
-                    if ctrl is None:
-                        ctrl = physics.commands(xi)
-                    if k % log_every == 0 or team.ended or k == steps:  # the last period too
-                        pose = None if beside is None else before.pose  # read before physics
-                        if self._sample(t, x, cmd, position[j], pose) > checks.ARENA_HALF:
-                            self._left_arena(t, x)  # its largest |x| is beyond the floor
-                    if k == steps or team.ended or self.left:
+                    if logged:  # log: a row of the period, as sensed and decided
+                        self._sample(t, x, physics.cmd, position[j], seen.pose)
+                    if last:
+                        if left:
+                            self._left_arena(t, x)
                         k += 1
                         break
-                    if physics.error is not None:  # where its own step would have raised it
-                        raise physics.error
-                    if beside is None or not physics.stepped:
-                        plant.step(ctrl, nsub)
+                    if failed is not None:
+                        raise failed
                     if hook is not None:
                         hook(plant.time, plant)
                     if bar is not None and k % 100 == 0:
@@ -544,8 +498,9 @@ class Simulation:
             self.error = exc
             if team.events:  # what the team did before the period failed (an exclusion at t_r)
                 self._take_team_events(k * dt)
+            when = plant.time if exc is failed else k * dt  # the physics' own time, if its
             k += 1
-            events.add(plant.time, "simulation_error", message=str(exc))
+            self.events.add(when, "simulation_error", message=str(exc))
         finally:
             if team.events:  # an interrupt in the middle of a period
                 self._take_team_events(k * dt)
@@ -553,6 +508,55 @@ class Simulation:
             if bar is not None:
                 bar.close()
             self._wall += self._without_compiling(wall0, compiling0)
+
+    def _faults_due(self, t: float) -> Sequence[Fault]:
+        """The actuator faults that begin (their events, and eq. 46's domain told) and end
+        at ``t``; returns those that begin."""
+        onsets = self.faults.apply(t)
+        for f in onsets:
+            # the speed it was told last: a stop's size at onset (eq. 46)
+            told = float(np.hypot(*self.team.drive.command[f.robot]))
+            self.events.add(t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6))
+            self.monitor.watched[f.robot] = False  # the fault is to be detected
+            self.domain.onset(t, f.robot + 1, self.team.recovery.dt_d_max)
+        for f in self.faults.just_ended:
+            self.events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
+        return onsets
+
+    def _decide(self, t: float, c: np.ndarray, c_dot: np.ndarray, seen: Sensed) -> None:
+        """The team's period up to its commands (:meth:`.onboard.team.Team.start`): each
+        robot from its own measurement, the range sensors' reading of every robot and its
+        own bumper; a block's exception stops the run, its records kept."""
+        try:
+            self.team.start(t, seen.x_m, c, c_dot, seen.x, seen.touching)
+        except (SimulationError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # a (plug-in) block raised: stop, keep records
+            raise block_error(exc, t) from exc
+
+    def _finish(self, t: float) -> None:
+        """The rest of the team's period (:meth:`.onboard.team.Team.finish`): a shared pass
+        joined, the flags and switches turned into events."""
+        try:
+            self.team.finish(t)
+        except (SimulationError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            raise block_error(exc, t) from exc
+
+    def _network_premises(self, t: float, k: int, channel: network.Channel) -> None:
+        """Over a network, after the team's period: its broadcasts sent, and the premises of
+        the links (missing messages, the links that delivered, silent robots judged by sight)."""
+        team, monitor = self.team, self.monitor
+        channel.send(k, team.rounds.content, self._physics.sensed.x)
+        if team.missed:  # since the last round
+            monitor.network(t, team.missed)
+        if team.rounds.now:  # the links that delivered, jointly
+            monitor.joint_graph(t, channel.joint_components(team.rounds.index, team.members))
+        seen = team.sighting
+        if seen is not None and seen.judged.any():
+            x = self._physics.sensed.x
+            monitor.slot(t, seen.judged, x, seen.slots, seen.tolerance)
 
     def _sensor_faults(self, t: float, x_m: np.ndarray) -> None:
         """Add the sensor faults' offsets to ``x_m``; their start and end are events."""
@@ -578,7 +582,7 @@ class Simulation:
                 )
         links, rounds, offset = channel.receive(k)
         self.team.receive(links, rounds, offset)
-        if MONITOR_ALLOWED and offset.any():
+        if offset.any():
             self.monitor.network(t, int(np.count_nonzero(offset)))
 
     def _take_team_events(self, t: float) -> None:
@@ -608,26 +612,20 @@ class Simulation:
         self.events.add(t, "mission_ended", reason=self.left, robots=[i + 1])
 
     def _sample(
-        self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray, pose: np.ndarray | None
-    ) -> float:
-        """One log row: raw values only (everything else is derived after the run); ``pose``:
-        the robots' poses read before the physics advanced (None: read them now). Returns the
-        largest |x| coordinate (NaN if any is NaN)."""
+        self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray, pose: np.ndarray
+    ) -> None:
+        """One log row: raw values only (everything else is derived after the run), the
+        robots' ``pose`` as sensed at the period's start."""
         log = self.log
         row, d = log.size, log.data
-        far = log.sample(t, x, c, cmd, self.command_limit)  # v_cmd: within the drives' range
-        assert self.plant is not None
-        if pose is None:
-            self.plant.poses(out=d["pose"][row])
-        else:
-            d["pose"][row] = pose
+        log.sample(t, x, c, cmd, self.command_limit)  # v_cmd: within the drives' range
+        d["pose"][row] = pose
         self.team.write_row(d, row, self.scenario.fdir.enabled, log.row_nn)
         if self.channel is not None:
             self.channel.ages(round(t / self.dt), self._ages)
             d["link_age"][row] = self._ages
             d["link_lost"][row] = self.channel.lost
         log.size += 1
-        return far
 
     # ------------------------------------------------------------------ results
 

@@ -31,7 +31,6 @@ import numpy as np
 from numba import njit
 
 from .errors import InputError, SimulationError, raised_line
-from .onboard.addresses import OwnTable, view1, view2
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 #: the premises, in the order the tables print them, with a one-line meaning each
@@ -177,37 +176,26 @@ MEMORY_FRACTION = 0.01
 GAP = 0.1
 
 _NOISE, _MISMATCH, _SATURATION, _CONTACT, _PLANAR = range(5)
-#: the monitor's arrays :func:`_check` reads by address, in its order (never reassigned)
-OWN = ("watched", "x0", "int_u", "slow", "body", "z0", "geom_robot", "value")
-#: the monitor's numbers :func:`_check` reads from one array, in its order
-CONSTS = ("h", "eta_bar", "step", "offset", "phi_bar", "limit")
 _PER_PERIOD = ("noise", "mismatch", "saturation", "contact", "planar")
 
 
 @njit(cache=True)
 def _check(
-    x, eta, u, u_bar, phi_hat, own, consts, xpos, xmat, contact_geom, contact_dist, ncon
-):  # pragma: no cover - compiled
+    x, eta, u, u_bar, phi_hat, height, level, depth, watched, x0, int_u, slow, z0, value,
+    h, eta_bar, step, offset, phi_bar, limit,
+):  # fmt: skip  # pragma: no cover - compiled
     """One period of the premise checks, every robot at once; ``value`` (5, N) gets each
     premise's excess over its bound (> 0: violated). Returns how many entries are > 0.
 
-    The drift premise (l1, block_row): D_k = y_k − y_k(0), y_k = x_k − h Σ u_k (the applied
-    input), splits into S_k moving by at most h ξ̄ (``step``) per period towards D_k and an
-    offset E_k = D_k − S_k within ē (``offset``); with ``phi_bar`` > 0 (the drive rule) the
-    premise is ‖φ̂_k‖ ≤ Φ̄ instead. Robots not ``watched`` (excluded, or with an active
-    fault) are not judged on noise, drift and saturation.
-
-    The monitor's own arrays come by address in ``own`` (:data:`OWN`' order,
-    :mod:`.onboard.addresses`) and its numbers in ``consts`` (:data:`CONSTS`' order): 12
-    arguments instead of 24, about 0.5 µs a period less of numba's unboxing.
-    """
-    watched, x0 = view1(own, 0, np.bool_), view2(own, 1, np.float64)
-    int_u, slow = view2(own, 2, np.float64), view2(own, 3, np.float64)
-    body, z0 = view1(own, 4, np.int64), view1(own, 5, np.float64)
-    geom_robot, value = view1(own, 6, np.int64), view2(own, 7, np.float64)
-    h, eta_bar, step, offset, phi_bar, limit = (
-        consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
-    )  # fmt: skip
+    The truth of the period: positions ``x``, noise ``eta``, applied inputs ``u``, commands
+    ``u_bar``, fault estimates ``phi_hat`` (N, 2); each base's ``height``, ``level`` (the
+    z-axis component of its z-axis: cos of its tilt) and contact ``depth`` with a teammate
+    or a cylinder (0: none) (N,). The drift premise (l1, block_row): D_k = y_k − y_k(0),
+    y_k = x_k − h Σ u_k (the applied input), splits into S_k moving by at most h ξ̄
+    (``step``) per period towards D_k and an offset E_k = D_k − S_k within ē (``offset``);
+    with ``phi_bar`` > 0 (the drive rule) the premise is ‖φ̂_k‖ ≤ Φ̄ instead. Robots not
+    ``watched`` (excluded, or with an active fault) are not judged on noise, drift and
+    saturation."""
     n = x.shape[0]
     hits = 0
     for i in range(n):
@@ -234,18 +222,10 @@ def _check(
                 value[_MISMATCH, i] = max(np.sqrt(e0 * e0 + e1 * e1) - offset, 0.0)
             over = max(abs(u_bar[i, 0]), abs(u_bar[i, 1])) - limit
             value[_SATURATION, i] = max(over, 0.0)
-        up = abs(xpos[body[i], 2] - z0[i]) - HEIGHT_TOLERANCE
-        tilt = np.arccos(min(max(xmat[body[i], 8], -1.0), 1.0)) - TILT_TOLERANCE
+        value[_CONTACT, i] = depth[i]
+        up = abs(height[i] - z0[i]) - HEIGHT_TOLERANCE
+        tilt = np.arccos(min(max(level[i], -1.0), 1.0)) - TILT_TOLERANCE
         value[_PLANAR, i] = max(up, tilt, 0.0)
-    for c in range(ncon):
-        a, b = geom_robot[contact_geom[c, 0]], geom_robot[contact_geom[c, 1]]
-        if a == -1 or b == -1 or a == b or (a < 0 and b < 0):
-            continue  # the floor, the world, a robot's own parts, cylinder against cylinder
-        depth = max(-contact_dist[c], 1e-12)
-        if a >= 0:
-            value[_CONTACT, a] = max(value[_CONTACT, a], depth)
-        if b >= 0:
-            value[_CONTACT, b] = max(value[_CONTACT, b], depth)
     for p in range(5):
         for i in range(n):
             if value[p, i] > 0:
@@ -253,7 +233,7 @@ def _check(
     return hits
 
 
-class Monitor(OwnTable):
+class Monitor:
     """The premises of the run's threshold rule, checked against the truth every period.
 
     ``bounds`` names each premise's bound as the rule uses it. Each span during which a
@@ -277,8 +257,6 @@ class Monitor(OwnTable):
         phi_bar: float,
         command_limit: float,
         start: StartBound,
-        geom_robot: np.ndarray,
-        body: np.ndarray,
         x0: np.ndarray,
         z0: np.ndarray,
         events: Any,
@@ -305,18 +283,12 @@ class Monitor(OwnTable):
             "network": 0.0,
             "slot": 0.0,
         }
-        self.geom_robot = np.ascontiguousarray(geom_robot, dtype=np.int64)
-        self.body = np.ascontiguousarray(body, dtype=np.int64)
         self.x0 = np.array(x0, dtype=float)
         self.z0 = np.array(z0, dtype=float)
         self.int_u = np.zeros((n, 2))
         self.slow = np.zeros((n, 2))
         self.value = np.zeros((5, n))
         self.watched = np.ones(n, bool)
-        # what _check reads of the monitor: its arrays by address (kept alive by the monitor),
-        # its numbers in one array
-        self.build_own_table()
-        self._consts = np.array([getattr(self, name) for name in CONSTS], dtype=float)
         self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
         self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
@@ -325,15 +297,9 @@ class Monitor(OwnTable):
         self.spans: dict[tuple[str, int | None], list[float]] = {}  # -> [t0, worst, last]
         self.count = dict.fromkeys(PREMISES, 0)
         self._index = {p: k for k, p in enumerate(PREMISES)}
-        self._empty_geom = np.zeros((0, 2), dtype=np.int32)
-        self._empty_dist = np.zeros(0)
         self.worst["initial_error"] = (start.implied, start.robot + 1)
         if start.implied > start.value:
             self._violate("initial_error", start.robot, start.implied, 0.0)
-
-    def own_arrays(self) -> list[np.ndarray]:
-        """The arrays :func:`_check` reads by address (:data:`OWN`)."""
-        return [getattr(self, name) for name in OWN]
 
     @classmethod
     def for_team(
@@ -342,8 +308,6 @@ class Monitor(OwnTable):
         rule: str,
         command_limit: float,
         start: StartBound,
-        geom_robot: np.ndarray,
-        body: np.ndarray,
         x0: np.ndarray,
         z0: np.ndarray,
         events: Any,
@@ -362,8 +326,6 @@ class Monitor(OwnTable):
             phi_bar=phi_bar,
             command_limit=command_limit,
             start=start,
-            geom_robot=geom_robot,
-            body=body,
             x0=x0,
             z0=z0,
             events=events,
@@ -378,29 +340,19 @@ class Monitor(OwnTable):
         u: np.ndarray,
         u_bar: np.ndarray,
         phi_hat: np.ndarray,
-        xpos: np.ndarray,
-        xmat: np.ndarray,
-        contact_geom: np.ndarray | None,
-        contact_dist: np.ndarray | None,
-        ncon: int,
+        height: np.ndarray,
+        level: np.ndarray,
+        depth: np.ndarray,
     ) -> None:
-        """Check one control period (after the team's step, before the physics advances):
-        true positions ``x``, noise ``eta``, applied inputs ``u``, commands ``u_bar`` and
-        fault estimates ``phi_hat`` (N, 2); MuJoCo's ``xpos``, ``xmat`` and contacts."""
+        """Check one control period against the truth sensed at its start: true positions
+        ``x``, noise ``eta``, applied inputs ``u``, commands ``u_bar`` and fault estimates
+        ``phi_hat`` (N, 2); each base's ``height``, ``level`` (cos of its tilt) and contact
+        ``depth`` (N,) (:class:`~.physics_step.Sensed`)."""
         hits = _check(
-            x,
-            eta,
-            u,
-            u_bar,
-            phi_hat,
-            self.own_table,
-            self._consts,
-            xpos,
-            xmat,
-            contact_geom if ncon else self._empty_geom,
-            contact_dist if ncon else self._empty_dist,
-            ncon,
-        )
+            x, eta, u, u_bar, phi_hat, height, level, depth, self.watched, self.x0, self.int_u,
+            self.slow, self.z0, self.value, self.h, self.eta_bar, self.step, self.offset,
+            self.phi_bar, self.limit,
+        )  # fmt: skip
         if hits:
             for p, i in zip(*np.nonzero(self.value), strict=True):
                 name = _PER_PERIOD[p]
@@ -411,12 +363,11 @@ class Monitor(OwnTable):
             planar = np.flatnonzero(self.value[_PLANAR])
             if len(planar):
                 i = int(planar[0])
-                b = self.body[i]
-                tilt = np.degrees(np.arccos(np.clip(xmat[b, 8], -1.0, 1.0)))
+                tilt = np.degrees(np.arccos(np.clip(level[i], -1.0, 1.0)))
                 self.finish(t)
                 raise SimulationError(
                     f"robot {i + 1} left the plane at t = {t:.2f} s: its base is at height "
-                    f"{xpos[b, 2]:.3f} m (started at {self.z0[i]:.3f} m, tolerance "
+                    f"{height[i]:.3f} m (started at {self.z0[i]:.3f} m, tolerance "
                     f"{HEIGHT_TOLERANCE:g} m) and tilted {tilt:.0f}° (tolerance "
                     f"{np.degrees(TILT_TOLERANCE):.0f}°): the planar model of eq. 1 no longer "
                     "describes it; the run was stopped"

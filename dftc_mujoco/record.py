@@ -16,7 +16,6 @@ from numba import njit
 
 from .atomic import atomic_write, write_text
 from .events import make
-from .onboard.addresses import OwnTable, view1, view2, view3
 
 __all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
@@ -74,40 +73,29 @@ def _shape(code: str, n: int) -> tuple[int, ...]:
     return tuple(n if c == "N" else int(c) for c in code)
 
 
-#: the fields :meth:`Log.sample` writes, in the order of its compiled call's table
+#: the fields :meth:`Log.sample` writes, in the order its compiled call takes them
 SAMPLED = ("t", "x", "c_d", "v_cmd")
 
 
 @njit(cache=True)
-def _sample(table, row, t, x, c, cmd, limit):  # pragma: no cover - compiled
-    """Row ``row`` of t, x, c_d and v_cmd (:data:`SAMPLED`, by address in ``table``):
-    v_cmd is ``cmd`` within ±``limit`` (what the drives can be asked for; NaN stays NaN).
-    Returns the largest |x| coordinate, NaN if any is NaN (``np.abs(x).max()``)."""
-    f8 = np.float64
-    log_t, log_x, log_c, log_v = (
-        view1(table, 0, f8), view3(table, 1, f8), view2(table, 2, f8), view3(table, 3, f8)
-    )  # fmt: skip
+def _sample(log_t, log_x, log_c, log_v, row, t, x, c, cmd, limit):  # pragma: no cover - compiled
+    """Row ``row`` of t, x, c_d and v_cmd (:data:`SAMPLED`): v_cmd is ``cmd`` within
+    ±``limit`` (what the drives can be asked for; NaN stays NaN)."""
     log_t[row] = t
     for d in range(c.shape[0]):
         log_c[row, d] = c[d]
-    far, unknown = 0.0, False
     for i in range(x.shape[0]):
         for d in range(x.shape[1]):
             log_x[row, i, d] = x[i, d]
-            a = abs(x[i, d])
-            if a > far:
-                far = a
-            unknown |= a != a
             v = cmd[i, d]
             if v < -limit:
                 v = -limit
             if v > limit:
                 v = limit
             log_v[row, i, d] = v
-    return np.nan if unknown else far
 
 
-class Log(OwnTable):
+class Log:
     """Preallocated arrays sampled at the log rate; ``arrays()`` returns the filled part.
 
     The N × N fields (:data:`MATRIX_FIELDS`) are kept every ``matrix_every`` rows
@@ -136,21 +124,14 @@ class Log(OwnTable):
             for name, (code, dtype, fill) in LOG_FIELDS.items()
             if name not in DERIVED_FIELDS
         }
-        self.build_own_table()  # :meth:`sample`'s arrays by address (they live as long as the log)
+        d = self.data
+        self._sampled = (d["t"], d["x"], d["c_d"], d["v_cmd"])  # :data:`SAMPLED`
 
-    def own_arrays(self) -> list[np.ndarray]:
-        """The arrays :meth:`sample` writes by address (:data:`SAMPLED`)."""
-        return [self.data[name] for name in SAMPLED]
-
-    def sample(
-        self, t: float, x: np.ndarray, c: np.ndarray, cmd: np.ndarray, limit: float
-    ) -> float:
+    def sample(self, t: float, x: np.ndarray, c: np.ndarray, cmd: np.ndarray, limit: float) -> None:
         """The simulator's part of the current row (:attr:`size`): the time ``t``, the true
         positions ``x`` (N, 2), the desired centroid ``c`` and the commands ``cmd`` (N, 2)
-        within the drives' range ±``limit`` (v_cmd), in one compiled call; returns the
-        largest |x| coordinate (NaN if any is NaN), for the loop's test of the floor's edge
-        (``np.abs(x).max()`` cost a log row 2 µs more)."""
-        return float(_sample(self.own_table, self.size, t, x, c, cmd, limit))
+        within the drives' range ±``limit`` (v_cmd), in one compiled call."""
+        _sample(*self._sampled, self.size, t, x, c, cmd, limit)
 
     def add_field(self, name: str, shape: tuple[int, ...], dtype: type, fill: Any) -> None:
         """A field of this run only (the network's per-link fields), sampled every row."""

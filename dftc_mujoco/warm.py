@@ -45,9 +45,9 @@ class Warming:
 
 def folder() -> Path:
     """numba's cache folder for the compiled period (where the lock and the log live)."""
-    from .onboard.period import team_period_flat
+    from .onboard.period import team_period_call
 
-    return Path(str(team_period_flat.stats.cache_path))
+    return Path(str(team_period_call.stats.cache_path))
 
 
 def lock(where: Path) -> IO[str] | None:

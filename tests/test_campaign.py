@@ -62,17 +62,18 @@ def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, t
     assert _rows(tmp_path) == _rows(local_run)
 
 
-def test_workers_helpers_watch_for_rows_only_where_every_thread_has_a_core(monkeypatch):
-    """Resident helpers (onboard/resident.py) keep a core while they watch for rows: a
-    pool lets its workers' helpers watch only where the workers' threads fit the cores."""
+def test_workers_share_a_pass_between_threads_only_on_cores_of_their_own(monkeypatch):
+    """A pool's workers run a large team's pass in as many threads as leave each worker
+    cores of its own (the cores, capped by ``NUMBA_NUM_THREADS``): two workers on two cores,
+    one thread each."""
     cores = len(os.sched_getaffinity(0))
     loaded = spec.load(TINY)
     monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
-    assert Pool(loaded, workers=1).helpers_watch()
-    assert not Pool(loaded, workers=2).helpers_watch()  # every worker's team takes each core
+    assert Pool(loaded, workers=1).execution().threads == cores
+    assert Pool(loaded, workers=cores).execution().threads == 1
+    assert Pool(loaded, workers=cores + 1).execution().threads == 1
     monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
-    assert Pool(loaded, workers=cores).helpers_watch()
-    assert not Pool(loaded, workers=cores + 1).helpers_watch()
+    assert Pool(loaded, workers=1).execution().threads == 1
 
 
 @pytest.mark.parametrize("path", sorted((ROOT / "campaigns").glob("*.toml")), ids=lambda p: p.stem)

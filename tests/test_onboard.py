@@ -11,7 +11,6 @@ from dftc_mujoco.blocks import paper
 from dftc_mujoco.graph import Graph
 from dftc_mujoco.mission import polygon_offsets
 from dftc_mujoco.onboard import observer
-from dftc_mujoco.onboard import team as team_mod
 from dftc_mujoco.onboard.locality import deliver, demo_team, integrate
 from tests.conftest import ring_with_chords
 
@@ -208,36 +207,27 @@ def _run_side_by_side(a, b, x, v, seed):
 
 
 def test_the_period_shared_between_threads_is_the_same_computation(monkeypatch):
-    """From PARALLEL_FROM robots the compiled period's pass over the N × N state is shared
-    between threads, the caller computing the commands and running the work given beside
-    it first: the same numbers, bit for bit, as in one thread, through a detection, whatever
-    share each thread took and with the next ŷ streamed past the caches or not, and the
-    beside work runs once a period, after the commands are out."""
-    monkeypatch.setattr(team_mod, "PARALLEL_FROM", 8)
-    split, x = _team(12, obstacles=False, command_limit=1.0)
-    monkeypatch.setattr(team_mod, "PARALLEL_ALLOWED", False)
+    """From ``shared_from`` members (with more than one thread) the compiled period's pass
+    over the N × N state is shared between threads: helpers take rows while the caller sends
+    the commands (and the loop steps the physics), the caller taking the rows left when it
+    finishes. The same numbers, bit for bit, as in one thread, through a detection, whoever
+    took which rows; the commands are out when ``start`` returns."""
+    split, x = _team(12, obstacles=False, command_limit=1.0, threads=2, shared_from=8)
     one, _ = _team(12, obstacles=False, command_limit=1.0)
     assert split.shares and not one.shares
-    assert split._row.shape[0] >= 2 and one._row.shape[0] == 1
+    assert split._row.shape[0] == 2 and one._row.shape[0] == 1
     seen: list[np.ndarray] = []
-    shares = iter(range(10**6))
+    start = split.start
 
-    def beside():  # what the commands were when it ran
+    def step(t, *given):  # the commands as they are before the pass has ended
+        start(t, *given)
         seen.append(split.u_bar.copy())
-
-    real_step = split.step
-
-    def step(*a):  # the caller's share of the 12 robots moves every period, from 0 to all
-        k = next(shares)
-        split._sharing.own_rows = k % 13
-        split._stream = k % 2 == 0  # every other period as a large team's (streaming.py)
-        return real_step(*a, beside=beside)
+        return split.finish(t)
 
     monkeypatch.setattr(split, "step", step)
     _run_side_by_side(split, one, x, np.array([0.1, 0.0]), seed=3)
     assert len(seen) == 1500 and np.array_equal(seen[-1], split.u_bar)
-    spent, helpers, caller = split._sharing.timings
-    assert 0.0 < spent <= caller and helpers > 0.0
+    assert split._sharing is not None and split._sharing.chunks > 0
 
 
 def test_the_compiled_stages_of_a_shared_period_hold_no_lock_on_python():
@@ -247,8 +237,7 @@ def test_the_compiled_stages_of_a_shared_period_hold_no_lock_on_python():
     after it was handed them, the commands' time, instead of 0.04 ms)."""
     from dftc_mujoco.onboard import period
 
-    stages = (period.commands, period.team_rows, period.shared_commands, period.shared_rows)
-    for stage in stages:
+    for stage in (period.commands_call, period.rows_call):
         assert stage.targetoptions.get("nogil") is True, stage.py_func.__name__
 
 
@@ -276,15 +265,13 @@ def test_periods_that_keep_no_estimates_change_nothing_else(rounds):
     """The compiled period writes ⁱx̂ (the largest array a period writes) only where it is
     asked (:attr:`Team.estimates`: the loop asks at its log rows and the last period of
     step()), and ‖ⁱr_k‖ only there and while an exclusion is pending (its instant reads
-    them; over a network, whose rounds' norms are read until the next round, always);
-    streamed past the caches, ŷ of the next period is the same: every other output and
-    event is the same bit for bit, through a detection and an exclusion, and the estimates
-    and norms of a period that keeps them are the same too (the ideal network, and a round
-    every 3 periods, whose log rows fall between rounds)."""
+    them; over a network, whose rounds' norms are read until the next round, always):
+    every other output and event is the same bit for bit, through a detection and an
+    exclusion, and the estimates and norms of a period that keeps them are the same too (the
+    ideal network, and a round every 3 periods, whose log rows fall between rounds)."""
     net = {"networked": True, "round_periods": rounds} if rounds > 1 else {}
     every, x = _team(12, obstacles=False, command_limit=1.0, **net)
     some, _ = _team(12, obstacles=False, command_limit=1.0, **net)
-    assert not some._stream  # 12 robots: their arrays stay in the caches
     rng = np.random.default_rng(12)
     v, xs = np.array([0.1, 0.0]), x.copy()
     kept = norms = 0
@@ -292,7 +279,6 @@ def test_periods_that_keep_no_estimates_change_nothing_else(rounds):
         t = k * 0.01
         x_m = xs + rng.uniform(-1e-3, 1e-3, xs.shape)
         some.estimates = k % 7 == 0
-        some._stream = True  # as a large team's period does (streaming.py)
         every.step(t, x_m, v * t, v)
         some.step(t, x_m, v * t, v)  # its exclusion instant raises if the norms were not kept
         deliver(every), deliver(some)

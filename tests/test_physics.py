@@ -28,8 +28,7 @@ def _fault_free(**changes):
 @pytest.mark.parametrize("at_bound", [False, True])
 def test_the_noise_stream_is_the_disk_formula_whatever_its_chunk(at_bound):
     """η and ξ of each period, drawn ahead in chunks and computed in compiled loops, are the
-    whole-array numpy formula of the disk, bit for bit, and the same for any chunk size,
-    whether a chunk is computed at once or a period at a time (``spread``)."""
+    whole-array numpy formula of the disk, bit for bit, and the same for any chunk size."""
     n, periods, eta_bar, xi_bar, alpha = 37, 40, 0.001, 0.02, 0.9
 
     def plant(seed):  # what NoiseStream reads of a plant
@@ -52,16 +51,11 @@ def test_the_noise_stream_is_the_disk_formula_whatever_its_chunk(at_bound):
         norm = np.maximum(np.sqrt(state[:, 0] ** 2 + state[:, 1] ** 2), 1e-12)[:, None]
         want.append((disk(r[0], eta_bar, at_bound), xi_bar * state / norm if at_bound else state))
     for chunk in (1, 7, 512):
-        for spread in (False, True):  # computed a chunk at once, or a period at a time
-            stream = NoiseStream(plant(5), chunk)  # type: ignore[arg-type]
-            stream.peek()  # the first chunk is drawn before the loop sets spread
-            stream.spread = spread
-            for k, (eta, xi) in enumerate(want):
-                if spread and k % 3:  # computed ahead (beside the pass), or when handed out
-                    stream.ahead()
-                got = stream.next()
-                same = np.array_equal(got[0], eta) and np.array_equal(got[1], xi)
-                assert same, (chunk, spread, k)
+        stream = NoiseStream(plant(5), chunk)  # type: ignore[arg-type]
+        for k, (eta, xi) in enumerate(want):
+            got = stream.next()
+            same = np.array_equal(got[0], eta) and np.array_equal(got[1], xi)
+            assert same, (chunk, k)
 
 
 def test_fault_free_run_converges_without_obstacles():

@@ -260,8 +260,8 @@ def test_paper_case_holds_every_premise_after_its_start_up():
 
 
 def test_a_copied_monitor_checks_its_own_arrays():
-    """The monitor hands its arrays to the compiled check by address: a copy builds its own
-    table, so checking the copy leaves the original's running sums alone."""
+    """A copy of the monitor holds its own running sums: checking the copy leaves the
+    original's alone."""
     import copy
 
     s = load_scenario("paper_case", {"duration": 1.0, "faults": []})
@@ -270,9 +270,9 @@ def test_a_copied_monitor_checks_its_own_arrays():
         monitor, team = sim.monitor, sim.team
         twin = copy.deepcopy(monitor)
         before = monitor.int_u.copy()
-        live = sim._physics.live()  # MuJoCo's state as the loop hands it over
-        twin.period(0.2, sim._x, np.zeros_like(sim._x), team.u + 1.0, team.u_bar, team.phi_hat,
-                    *live[:5])  # fmt: skip
+        seen = sim._physics.sensed  # the truth as the loop sensed it
+        twin.period(0.2, seen.x, np.zeros_like(seen.x), team.u + 1.0, team.u_bar, team.phi_hat,
+                    seen.height, seen.level, seen.depth)  # fmt: skip
     assert np.array_equal(monitor.int_u, before)
     assert np.allclose(twin.int_u, before + twin.h * (team.u + 1.0))
 

@@ -25,23 +25,22 @@ import time
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from . import lifeline
 from .spec import Spec
+
+if TYPE_CHECKING:
+    from ..execution import Execution
 
 POLL = 0.2  # s between two looks at the stop request while waiting for rows
 GRACE = 3.0  # s a worker gets to end after SIGTERM before SIGKILL
 
 
-def serve(conn: Connection, spec: Spec, parent: int, watching: bool = True) -> None:
-    """A worker's life: run what the campaign sends until it sends None or goes away.
-    ``watching``: a large team's helper threads may watch for their rows between passes
-    (:mod:`..onboard.resident`); not where the workers' threads outnumber the cores."""
+def serve(conn: Connection, spec: Spec, parent: int, execution: Execution | None = None) -> None:
+    """A worker's life: run what the campaign sends until it sends None or goes away, each
+    run with ``execution`` (:meth:`Pool.execution`)."""
     lifeline.die_with_parent(parent)
-    from ..onboard import sharing
-
-    sharing.RESIDENT_ALLOWED = watching
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group
     from tqdm import tqdm
 
@@ -57,7 +56,7 @@ def serve(conn: Connection, spec: Spec, parent: int, watching: bool = True) -> N
             return
         if params is None:
             return
-        conn.send(run_one(spec, params))
+        conn.send(run_one(spec, params, execution=execution))
 
 
 @dataclass
@@ -83,7 +82,7 @@ class Pool:
         mine, theirs = ctx.Pipe(duplex=True)
         process = ctx.Process(
             target=serve,
-            args=(theirs, self.spec, os.getpid(), self.helpers_watch()),
+            args=(theirs, self.spec, os.getpid(), self.execution()),
             name="dftc-campaign-worker",
         )
         # SIGINT is blocked while the worker starts, so that a Ctrl-C in that instant
@@ -99,20 +98,19 @@ class Pool:
         self._procs.append(worker)
         return worker
 
-    def helpers_watch(self) -> bool:
-        """Whether the workers' helper threads may watch for their rows between passes
-        (resident helpers): only where every worker's threads have a core of their own.
-        Two workers on two cores, N = 400, 10 s runs: each run 10 % slower with them (loop
-        4.1-4.6 s against 3.5-4.5 s, eight of each), since a watching helper or a waiting
-        caller keeps a core another worker's thread wants."""
-        # numba's own count, as a spawned worker reads it: NUMBA_NUM_THREADS, else the cores
-        # this process may run on (its environment and affinity are the worker's)
+    def execution(self) -> Execution:
+        """How each worker's runs execute: a large team's pass shared between threads only
+        where every worker's threads have cores of their own (the cores this process may run
+        on, shared by the workers; ``NUMBA_NUM_THREADS`` caps a worker's threads as it caps
+        numba's); otherwise the workers share the cores between them, one thread each."""
+        from ..execution import Execution
+
         if hasattr(os, "sched_getaffinity"):
             cores = len(os.sched_getaffinity(0))
         else:
             cores = os.cpu_count() or 1
-        threads = int(os.environ.get("NUMBA_NUM_THREADS", "0")) or cores
-        return self.workers * threads <= cores
+        cap = int(os.environ.get("NUMBA_NUM_THREADS", "0")) or cores
+        return Execution(threads=max(1, min(cap, cores // max(self.workers, 1))))
 
     def pids(self) -> list[int]:
         """The worker processes' ids."""

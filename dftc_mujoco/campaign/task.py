@@ -19,19 +19,26 @@ from typing import TYPE_CHECKING, Any
 from .spec import Spec, scenario_for
 
 if TYPE_CHECKING:
+    from ..execution import Execution
     from ..interrupt import Signals
 
 
-def run_one(spec: Spec, params: dict[str, Any], signals: Signals | None = None) -> dict[str, Any]:
+def run_one(
+    spec: Spec,
+    params: dict[str, Any],
+    signals: Signals | None = None,
+    execution: Execution | None = None,
+) -> dict[str, Any]:
     """Simulate one run and reduce it to a row of facts; never raises (a signal caught by
-    ``signals`` stops the simulation: the row then says "interrupted")."""
+    ``signals`` stops the simulation: the row then says "interrupted"). ``execution``: how
+    its period runs (:class:`~..execution.Execution`; the default where None)."""
     from ..loop import Simulation
 
     t0 = time.perf_counter()
     row: dict[str, Any] = dict(params)
     try:
         s = scenario_for(spec, params)
-        with Simulation(s, search=spec_folders(spec)) as sim:
+        with Simulation(s, search=spec_folders(spec), execution=execution) as sim:
             with signals.stopping(sim) if signals is not None else contextlib.nullcontext():
                 result = sim.run(progress=False)
         row.update(_facts(params, result.summary, s.fdir.dt_d_max))

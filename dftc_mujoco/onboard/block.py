@@ -80,6 +80,10 @@ class TeamConfig:
     # compose the paper's blocks in one compiled period when possible (DFTC_PERIOD=general in
     # the environment: never, the blocks' own methods; dftc_mujoco.execution)
     compiled: bool = field(default_factory=_compiled_by_default)
+    # the compiled period's pass over the N × N state runs in this many threads (sharing.py)
+    # from shared_from members on (dftc_mujoco.execution)
+    threads: int = 1
+    shared_from: int = 150
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
     drift_bound: float = 0.0  # ē [m]: bounded offset of a robot's drift (from calibration)

@@ -7,9 +7,6 @@ writes them all, after an exclusion too, the rows of the robots that left filled
 or False (:func:`_team_row`: 1.4 µs a row at N = 4, where placing the arrays in Python took
 3.7, and 14 after an exclusion); a team of plug-in blocks writes its row in Python
 (:func:`placed_row`, :func:`~.team_axis.place`).
-
-The log's arrays reach the compiled call by address (:mod:`.addresses`): the table is
-built once per log and kept with the arrays it points into (:class:`~.addresses.Tables`).
 """
 
 from __future__ import annotations
@@ -19,12 +16,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .addresses import Tables, address_table, view2, view3
 from .decision import flagged_by_teammates
 from .team_axis import place
 from .thresholds.paper import factored_at
 
-#: the log's fields the team writes, in the order of the compiled call's table
+#: the log's fields the team writes, in the order the compiled call takes them
 FIELDS = ("u", "active", "x_d", "reactive", "flagged", "phi_hat", "x_hat", "residual", "threshold")
 
 
@@ -34,11 +30,12 @@ _NO_FACTORS = (np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.bool_), 0.0)
 
 @njit(cache=True)
 def _team_row(
-    table, row, row_nn, fdir, members, u, active, x_d, supervised, flag, phi_hat, x_hat, r_norm,
+    log_u, log_active, log_xd, log_reactive, log_flagged, log_phi, log_x_hat, log_res, log_th,
+    row, row_nn, fdir, members, u, active, x_d, supervised, flag, phi_hat, x_hat, r_norm,
     mu, coef, bound, finite, eta,
 ):  # fmt: skip  # pragma: no cover - compiled
-    """Row ``row`` of the log's fields (:data:`FIELDS`, by address in ``table``, each with
-    its time axis first; ``x_hat``'s as (T, N, 2N)) from the team's arrays: ``u``,
+    """Row ``row`` of the log's fields (:data:`FIELDS`, each with its time axis first) from
+    the team's arrays: ``u``,
     ``active`` and ``phi_hat`` on the original robot axis (N), the others on the members'
     (M, robots ``members``), placed on the original axis with NaN or False for the robots
     that left; the N × N fields into row ``row_nn`` unless it is -1; ``phi_hat`` and the
@@ -46,11 +43,7 @@ def _team_row(
     (0, 0) eq. 40 from the factors the period read (``coef``, ``bound``, ``finite``, ``eta``
     of :class:`~.thresholds.paper.ThresholdRecord`, the numbers ``Thresholds.mu`` writes)."""
     factored = mu.shape[0] == 0
-    f8, f4, b1 = np.float64, np.float32, np.bool_
     n, m = u.shape[0], members.shape[0]
-    log_u, log_active = view3(table, 0, f8), view2(table, 1, b1)
-    log_xd, log_reactive = view3(table, 2, f8), view2(table, 3, b1)
-    log_flagged, log_phi = view2(table, 4, b1), view3(table, 5, f8)
     whole = m == n
     for i in range(n):
         for d in range(2):
@@ -80,7 +73,7 @@ def _team_row(
                     log_flagged[row, members[b]] = True
     if row_nn < 0:
         return
-    log_xh, log_res, log_th = view3(table, 6, f4), view3(table, 7, f4), view3(table, 8, f4)
+    log_xh = log_x_hat.reshape(log_x_hat.shape[0], n, 2 * n)
     if whole:
         xh = x_hat.reshape(n, 2 * n)
         for i in range(n):
@@ -121,36 +114,27 @@ def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_n
     ones into row ``row_nn`` unless it is -1), on the original robot axis: one compiled call
     for a compiled team (:func:`_team_row`), :func:`placed_row` for a team of plug-in blocks
     (whose arrays may be of any type)."""
-    tables: Tables = team.log_tables
-    if not team.compiled:  # the members' reactive and flagged robots: a scratch kept
-        scratch = tables.get("scratch")
-        if scratch is None or scratch.shape[1] != len(team.members):
-            scratch = tables["scratch"] = np.zeros((2, len(team.members)), bool)
-        placed_row(team, log, row, fdir, row_nn, scratch)
+    if not team.compiled:
+        placed_row(team, log, row, fdir, row_nn)
         return
-    kept = tables.get(id(log))
-    if kept is None or kept[0] is not log:  # a new log: its table (kept with its arrays)
-        arrays = [log[name] for name in FIELDS]
-        arrays[6] = arrays[6].reshape(len(arrays[6]), team.n, -1)  # (T, N, 2N): a view
-        tables.clear()  # one log at a time
-        kept = tables[id(log)] = (log, arrays, address_table(arrays))
     th = team.threshold_factors if fdir and row_nn >= 0 else None
     if th is not None:  # eq. 40 written from the factors in the compiled row (1.4 µs less)
         mu, factors = th.dense, (th.coef, th.bound, th.finite, th.eta)
     else:  # (not read without thresholds)
         mu, factors = team.mu if fdir and row_nn >= 0 else team.r_norm, _NO_FACTORS
     _team_row(
-        kept[2], row, row_nn, fdir, team.members, team.u, team.active, team.x_d,
-        team.supervisor.active, team.flag, team.phi_hat, team.x_hat, team.r_norm, mu, *factors,
+        log["u"], log["active"], log["x_d"], log["reactive"], log["flagged"], log["phi_hat"],
+        log["x_hat"], log["residual"], log["threshold"],  # FIELDS
+        row, row_nn, fdir, team.members, team.u, team.active, team.x_d, team.supervisor.active,
+        team.flag, team.phi_hat, team.x_hat, team.r_norm, mu, *factors,
     )  # fmt: skip
 
 
-def placed_row(
-    team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int, scratch: np.ndarray
-) -> None:
+def placed_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
     """:func:`write_row` in Python: the members' rows placed on the original robot axis
-    (:func:`~.team_axis.place`), the others filled; ``scratch`` (2, M) bool."""
+    (:func:`~.team_axis.place`), the others filled."""
     mem = team.members
+    scratch = np.zeros((2, len(mem)), bool)
     log["u"][row] = team.u
     log["active"][row] = team.active
     place(log["x_d"][row], team.x_d, mem)

@@ -8,21 +8,25 @@ supervisor :func:`~.supervisor.supervise`; fault estimator
 :func:`~.fault_estimator.estimate_faults`; decision :func:`~.decision.decide_row`;
 thresholds :func:`~.thresholds.paper.threshold_at`), each equation written once (only the
 mission's x_d = c + offsets of eq. 14, one addition, is spelled out in both paths). It reads
-and writes the blocks' state records (each block's ``record()``) and reaches into no block.
-The stages: :func:`begin` (measurements, x_d, u_g,i), :func:`act` and :func:`deliver`
-(every robot's commands, :func:`commands`); then one pass over the team's N × N state,
-robot by robot (:func:`team_rows`: ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms, the
-next ŷ, written to a second buffer the observer swaps in since every robot reads its
-in-neighbours' current messages, and the flags); then :func:`integrate`. Once
+and writes the blocks' state records (each block's ``record()``, :data:`RECORDS`) and
+reaches into no block.
+
+The stages: :func:`begin` (measurements, x_d, u_g,i), :func:`commands` (:func:`act` and
+:func:`deliver`: every robot's commands), then one pass over the team's N × N state, robot
+by robot (:func:`team_rows`: ⁱx̂, ∫ⁱû_g, then at a round the residual, its norms, the next
+ŷ, written to a second buffer the observer swaps in since every robot reads its
+in-neighbours' current messages, and the flags), then :func:`integrate`. Once
 :func:`begin` has read each robot's own block of the state, the commands and the pass
-touch nothing of each other's: a large team runs the pass shared between threads while
-the calling thread computes the commands and advances the physics under them
-(:class:`~.sharing.Sharing`). On a network the residual and the decision run only at the
-observers' rounds (``PeriodInputs.round_now``), on the messages the links delivered
-(``ObserverRecord.links``); every period on the ideal network. :func:`team_period` runs
-the stages as one compiled call on one core (the team calls it through
-:func:`team_period_flat`). :class:`~.team.Team` uses them whenever the team runs the
-paper's blocks (any thresholds rule included: ⁱμ_k comes in as a
+touch nothing of each other's, and the pass reads nothing the physics changes: a large
+team's pass may run in helper threads while the calling thread sends the commands and
+steps the physics (:class:`~.sharing.Sharing`). On a network the residual and the decision
+run only at the observers' rounds (``PeriodInputs.round_now``), on the messages the links
+delivered (``ObserverRecord.links``); every period on the ideal network.
+
+The compiled entries (:data:`team_period_call`, and the stages one by one for a shared
+pass) take the records' fields in :data:`RECORDS`' order, written from the records'
+definitions (:func:`~.records.flat_call`). :class:`~.team.Team` uses them whenever the team
+runs the paper's blocks (any thresholds rule included: ⁱμ_k comes in as a
 :class:`~.thresholds.paper.ThresholdRecord`, eq. 40 as its factors, another rule as an
 array), and composes the blocks' Python methods otherwise (:mod:`.general`).
 """
@@ -34,7 +38,6 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .addresses import view1, view2, view3
 from .applied import DriveRecord, lag_input, limit_input
 from .controller import ControllerRecord, collective_one
 from .decision import (
@@ -56,7 +59,7 @@ from .observer import (
     residual_row,
     row_norms,
 )
-from .streaming import store_fence, stream_store
+from .records import flat_call
 from .supervisor import SupervisorRecord, Surroundings, supervise
 from .thresholds.paper import ThresholdRecord, refresh_bound
 
@@ -78,7 +81,6 @@ class PeriodInputs(NamedTuple):
     round_now: bool  # the observers step and the decision runs (every period: ideal network)
     estimates: bool  # write ⁱx̂ into the buffers (a log row or a snapshot reads them)
     norms: bool  # write ‖ⁱr_k‖ into r_norm (a log row, a snapshot or an exclusion reads them)
-    stream: bool  # store ŷ of the next period past the caches (streaming.py: a large team)
 
 
 class PeriodBuffers(NamedTuple):
@@ -113,7 +115,7 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     snapshot reads it) and ∫ ⁱû_g advanced (eqs. 15, 20); at a round of the observers
     (``round_now``) its residual ⁱr (eq. 35), the norms ‖ⁱr_k‖ into ``r_norm`` when
     ``norms`` (only a log row, a snapshot or an exclusion reads them), ⁱŷ of the next period
-    (eq. 19) into ``y_next`` (past the caches when ``stream``, :mod:`.streaming`) and, with
+    (eq. 19) into ``y_next`` and, with
     FDIR, its flags (eq. 39, :func:`~.decision.decide_row`, with the thresholds ``th`` read
     entry by entry). Where the norms are not kept, a row at rest is first tested from the
     residual itself: in the residual's own loop, each entry against its share of eq. 40's
@@ -129,7 +131,7 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
     yn, xh = ob.y_next.reshape(m, mn), out.x_hat.reshape(m, mn)
     xd, vd, kc, dt = out.x_d.reshape(-1), out.xd_dot.reshape(-1), ctl.kc, ob.dt
     ko, dt_o = ob.ko, ob.dt_o
-    write_xh, round_now, stream = inp.estimates, inp.round_now, inp.stream
+    write_xh, round_now = inp.estimates, inp.round_now
     row = out.row[b]  # robot i's residual: this thread's scratch
     count = 0
     # one-dimensional views of each robot's rows, and the round's stages written out here
@@ -162,12 +164,8 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         if inp.norms:
             row_norms(row, n, norms)
         yni = yn[i]  # ⁱŷ of the next period (eq. 19)
-        if stream:  # past the caches: the next period reads it from memory anyway
-            for a in range(mn):
-                stream_store(yni, a, advance_one(yi[a], row[a], ko, dt_o))
-        else:
-            for a in range(mn):
-                yni[a] = advance_one(yi[a], row[a], ko, dt_o)
+        for a in range(mn):
+            yni[a] = advance_one(yi[a], row[a], ko, dt_o)
         if not inp.fdir:
             continue
         if inp.norms:
@@ -180,8 +178,6 @@ def team_rows(inp, ob, ctl, th, dec, out, lo, hi, b):  # pragma: no cover - comp
         else:  # a row that may change: its norms (the skips only save work)
             row_norms(row, n, norms)
         count += decide_row(norms, th, i, dec)  # eq. 39
-    if round_now and stream:
-        store_fence()  # the streamed ŷ is whole before another thread reads it
     return count
 
 
@@ -343,9 +339,10 @@ def commands(
     return code
 
 
-@njit(cache=True)
+@njit(inline="always")
 def team_period(
     inp: PeriodInputs,
+    th: ThresholdRecord,
     ob: ObserverRecord,
     ctl: ControllerRecord,
     sup: SupervisorRecord,
@@ -353,7 +350,6 @@ def team_period(
     drive: DriveRecord,
     est: EstimatorRecord,
     alarm: AlarmRecord,
-    th: ThresholdRecord,
     dec: DecisionRecord,
     out: PeriodBuffers,
 ) -> int:  # pragma: no cover - compiled
@@ -361,11 +357,10 @@ def team_period(
     SATURATED bits. The stages: :func:`begin`, the commands (:func:`commands`:
     :func:`act`, :func:`deliver`), the pass over the N × N state (eqs. 21, 15, 20, 35, 19
     and the decision of eq. 39, :func:`team_rows`) and :func:`integrate`; a large team runs
-    the same stages with the pass shared between threads, beside the commands and the physics
-    (:meth:`.team.Team.step`). The stages are inlined here (``inline="always"``; each is still
-    a compiled function of its own where the shared pass calls it): as calls they cost 1.7 µs
-    of this function's 3.9 at N = 4 (2026-11-28, measured inside compiled code), since every
-    call passes the records' arrays with their reference counts.
+    the same stages called one by one, the pass shared between threads (:class:`~.sharing.Sharing`).
+    The stages are inlined here (``inline="always"``): as calls they cost 1.7 µs of this
+    function's 3.9 at N = 4 (measured inside compiled code), since every call passes the
+    records' arrays with their reference counts.
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
     ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
@@ -383,141 +378,38 @@ def team_period(
 
 
 @njit(inline="always")
-def unpack(table, mu, timer, numbers):  # pragma: no cover - compiled
-    """The records after :class:`PeriodInputs`, in :data:`RECORDS`' order, rebuilt from their
-    arrays' address ``table`` (:mod:`.addresses`), ``mu``, ``timer`` and ``numbers`` as
-    :func:`team_period_flat` takes them (:func:`flat_arguments` takes them apart)."""
-    f8, i8, b1 = np.float64, np.int64, np.bool_
-    networked, ko, dt, dt_o = numbers[0] != 0.0, numbers[1], numbers[2], numbers[3]
-    kc, theta, release, mate_safe, mate_act = (
-        numbers[4], numbers[5], numbers[6], numbers[7], numbers[8]
-    )  # fmt: skip
-    input_limit, accel_step, lag_a, lag_b = numbers[9], numbers[10], numbers[11], numbers[12]
-    dt_est, limit, alpha, compensate = numbers[13], numbers[14], numbers[15], numbers[16] != 0.0
-    phi_bar, alarm_limit, alarm_need, alarm_on = (
-        numbers[17], numbers[18], i8(numbers[19]), numbers[20] != 0.0
-    )  # fmt: skip
-    eta, need, exclusive = numbers[21], i8(numbers[22]), i8(numbers[23])
-    ob = ObserverRecord(
-        view3(table, 0, f8), view3(table, 1, f8), view3(table, 2, f8), view2(table, 3, f8),
-        view1(table, 4, i8), view1(table, 5, i8), view1(table, 6, f8), view2(table, 7, f8),
-        networked, ko, dt, dt_o,
-    )  # fmt: skip
-    sup = SupervisorRecord(theta, release, view1(table, 8, i8), mate_safe, mate_act)
-    seen = Surroundings(
-        view2(table, 9, f8), view1(table, 10, f8), view1(table, 11, f8), view2(table, 12, f8)
-    )
-    drive = DriveRecord(
-        input_limit, accel_step, lag_a, lag_b, view2(table, 13, f8), view2(table, 14, f8)
-    )
-    est = EstimatorRecord(
-        view2(table, 15, f8), view2(table, 16, f8), view2(table, 17, f8), view2(table, 18, f8),
-        view2(table, 19, f8), view2(table, 20, f8), dt_est, limit, alpha,
-        view1(table, 21, b1), compensate,
-    )  # fmt: skip
-    i4 = np.int32
-    alarm = AlarmRecord(
-        view1(table, 22, i4), view1(table, 23, b1), view1(table, 24, b1), phi_bar, alarm_limit,
-        alarm_need, alarm_on,
-    )  # fmt: skip
-    th = ThresholdRecord(
-        mu, view1(table, 25, f8), view1(table, 26, f8), view1(table, 27, b1),
-        view1(table, 28, f8), view1(table, 29, f8), view1(table, 30, f8), view1(table, 31, f8),
-        eta,
-    )  # fmt: skip
-    dec = DecisionRecord(
-        timer, view2(table, 32, b1), need, exclusive, view1(table, 33, i8), view2(table, 34, b1),
-        view1(table, 35, b1), view1(table, 36, b1),
-    )  # fmt: skip
-    out = PeriodBuffers(
-        view2(table, 37, f8), view2(table, 38, f8), view2(table, 39, f8), view3(table, 40, f8),
-        view2(table, 41, f8), view2(table, 42, f8), view2(table, 43, f8), view2(table, 44, f8),
-        view2(table, 45, f8), view2(table, 46, f8), view2(table, 47, f8), view1(table, 48, i8),
-        view1(table, 49, f8),
-    )  # fmt: skip
-    ctl = ControllerRecord(kc)
-    return ob, ctl, sup, seen, drive, est, alarm, th, dec, out
-
-
-@njit(cache=True)
-def team_period_flat(
-    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
-    table, mu, timer, numbers,
-):  # fmt: skip  # pragma: no cover - compiled
-    """:func:`team_period` with the records taken apart, rebuilt inside compiled code where
-    building them costs nothing: the period's inputs (:class:`PeriodInputs`) one by one; the
-    records' arrays by address in ``table`` (:mod:`.addresses`: one argument instead of 50,
-    about 3 µs a call less), in the records' order (:data:`RECORDS`), but for ``mu`` (the
-    thresholds' dense array, which a rule may hand out anew each round) and ``timer`` (int8
-    or int32, :func:`~.decision.timer_type`); then the records' 24 numbers in one float64
-    array ``numbers``, in their order (:data:`NUMBERS`: 0.3 µs a call less than 24 scalars),
-    each read back as its field's type (every bool and int is exact in a float64).
-    :meth:`.team.Team._flat_records` takes the records apart in the same order."""
-    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
-                       stream)  # fmt: skip
-    ob, ctl, sup, seen, drive, est, alarm, th, dec, out = unpack(table, mu, timer, numbers)
-    return team_period(inp, ob, ctl, sup, seen, drive, est, alarm, th, dec, out)
-
-
-#: :func:`team_rows` called, not inlined, from the shared pass's flat stages and the resident
-#: helpers' loop (:mod:`.resident`): one compiled copy of the pass (inlined in the helpers'
-#: loop, it took 44 s to compile)
-rows_call = njit(cache=True, nogil=True)(team_rows.py_func)
-
-
-@njit(cache=True)
-def shared_begin(
-    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
-    table, mu, timer, numbers,
-):  # fmt: skip  # pragma: no cover - compiled
-    """A shared period's first stage, the records taken apart as :func:`team_period_flat`
-    takes them: the bound of eq. 40 (:func:`~.thresholds.paper.refresh_bound`), then
-    :func:`begin`. From Python numba types a record argument element by element on every
-    call (5.7 µs for :func:`begin`'s five at N = 4, 1.2 µs for these arguments)."""
-    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
-                       stream)  # fmt: skip
-    ob, ctl, _, _, _, _, _, th, _, out = unpack(table, mu, timer, numbers)
-    refresh_bound(th)  # the bound of ‖ỹ*_k(t)‖ in eq. 40, until it settles
+def shared_begin(inp, th, ob, ctl, sup, seen, drive, est, alarm, dec, out):  # pragma: no cover
+    """A shared period's first stage: the bound of eq. 40 (until it settles), then
+    :func:`begin`; the pass may start once it has returned."""
+    refresh_bound(th)
     begin(inp, ob, ctl, th, out)
 
 
-@njit(cache=True, nogil=True)
-def shared_commands(
-    x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms, stream,
-    table, mu, timer, numbers,
-):  # fmt: skip  # pragma: no cover - compiled
-    """A shared period's :func:`commands` (beside the pass: no lock on Python), the records
-    taken apart as :func:`shared_begin` takes them; returns SWITCHED | SATURATED bits."""
-    inp = PeriodInputs(x_m, rows, c, c_dot, offsets, rates, fdir, round_now, estimates, norms,
-                       stream)  # fmt: skip
-    _, _, sup, seen, drive, est, alarm, _, _, out = unpack(table, mu, timer, numbers)
+@njit(inline="always")
+def shared_commands(inp, th, ob, ctl, sup, seen, drive, est, alarm, dec, out):  # pragma: no cover
+    """A shared period's :func:`commands`, beside the pass."""
     return commands(inp, sup, seen, drive, est, alarm, out)
 
 
-@njit(cache=True, nogil=True)
+@njit(inline="always")
 def shared_rows(
-    fdir, round_now, estimates, norms, stream, table, mu, timer, numbers, lo, hi, b
+    inp, th, ob, ctl, sup, seen, drive, est, alarm, dec, out, lo, hi, b
 ):  # pragma: no cover - compiled
-    """Robots ``lo`` .. ``hi - 1`` of a shared period's pass (:func:`team_rows`, scratch row
-    ``b``), the records taken apart as :func:`shared_begin` takes them; the pass reads none
-    of the period's input arrays, only its flags. Returns how many flags were raised."""
-    none2, none1, rows0 = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
-    inp = PeriodInputs(none2, rows0, none1, none1, none2, none2, fdir, round_now, estimates,
-                       norms, stream)  # fmt: skip
-    ob, ctl, _, _, _, _, _, th, dec, out = unpack(table, mu, timer, numbers)
-    return rows_call(inp, ob, ctl, th, dec, out, lo, hi, b)
+    """Robots ``lo`` .. ``hi - 1`` of a shared period's pass (:func:`team_rows`), with the
+    scratch row ``b`` of the thread that runs them."""
+    return team_rows(inp, ob, ctl, th, dec, out, lo, hi, b)
 
 
-@njit(cache=True)
-def shared_integrate(table, mu, timer, numbers):  # pragma: no cover - compiled
-    """A shared period's last stage, :func:`integrate`, after the pass."""
-    ob, _, _, _, _, _, _, _, _, out = unpack(table, mu, timer, numbers)
+@njit(inline="always")
+def shared_integrate(inp, th, ob, ctl, sup, seen, drive, est, alarm, dec, out):  # pragma: no cover
+    """A shared period's last stage, :func:`integrate`, once the pass has ended."""
     integrate(ob, out)
 
 
-#: the records :func:`team_period` takes, in order (``team_period_flat`` rebuilds them)
+#: the records every entry takes, in order (their fields, :func:`~.records.fields`)
 RECORDS = (
     PeriodInputs,
+    ThresholdRecord,  # the two records a period may change come first
     ObserverRecord,
     ControllerRecord,
     SupervisorRecord,
@@ -525,65 +417,16 @@ RECORDS = (
     DriveRecord,
     EstimatorRecord,
     AlarmRecord,
-    ThresholdRecord,
     DecisionRecord,
     PeriodBuffers,
 )
-#: the fields team_period_flat takes as arguments, not by address (see there)
-PASSED = {(ThresholdRecord, "dense"), (DecisionRecord, "timer")}
-TABLED = 50  # the records' arrays team_period_flat reads from its table
-
-
-def flat_arguments(records: tuple) -> tuple[list[np.ndarray], tuple]:
-    """The records after :class:`PeriodInputs`, in :data:`RECORDS`' order, taken apart as
-    :func:`team_period_flat` takes them: (the arrays of its table, (``mu``, ``timer``, the
-    numbers as one float64 array in :data:`NUMBERS`' order))."""
-    tabled: list[np.ndarray] = []
-    passed: dict[str, np.ndarray] = {}
-    numbers: list[float] = []
-    named: list[tuple[str, str]] = []
-    for record in records:
-        for name, value in zip(record._fields, record, strict=True):
-            if (type(record), name) in PASSED:
-                passed[name] = value
-            elif isinstance(value, np.ndarray):
-                tabled.append(value)
-            else:
-                kind = _kind(type(record).__annotations__[name])
-                if not isinstance(value, _KINDS[kind]) or (
-                    kind == "int" and isinstance(value, bool | np.bool_)
-                ):  # pragma: no cover - a block handed a number of another kind
-                    raise TypeError(f"{type(record).__name__}.{name}: a {kind}, got {value!r}")
-                numbers.append(float(value))
-                named.append((type(record).__name__, name))
-    if len(tabled) != TABLED:  # pragma: no cover - a record gained or lost an array
-        said = f"the records hold {len(tabled)} arrays to table"
-        raise TypeError(f"team_period_flat reads {TABLED} from its table, {said}")
-    if tuple(named) != NUMBERS:  # pragma: no cover - a record gained, lost or moved a number
-        raise TypeError(f"team_period_flat reads the numbers {NUMBERS}, the records hold {named}")
-    return tabled, (passed["dense"], passed["timer"], np.array(numbers, dtype=np.float64))
-
-
-#: the numbers of the records, in the order team_period_flat reads them from ``numbers``
-NUMBERS = (
-    ("ObserverRecord", "networked"), ("ObserverRecord", "ko"), ("ObserverRecord", "dt"),
-    ("ObserverRecord", "dt_o"), ("ControllerRecord", "kc"), ("SupervisorRecord", "theta"),
-    ("SupervisorRecord", "release"), ("SupervisorRecord", "mate_safe"),
-    ("SupervisorRecord", "mate_act"), ("DriveRecord", "input_limit"),
-    ("DriveRecord", "accel_step"), ("DriveRecord", "lag_a"), ("DriveRecord", "lag_b"),
-    ("EstimatorRecord", "dt"), ("EstimatorRecord", "limit"), ("EstimatorRecord", "alpha"),
-    ("EstimatorRecord", "compensate"), ("AlarmRecord", "phi_bar"), ("AlarmRecord", "limit"),
-    ("AlarmRecord", "need"), ("AlarmRecord", "on"), ("ThresholdRecord", "eta"),
-    ("DecisionRecord", "need"), ("DecisionRecord", "exclusive"),
-)  # fmt: skip
-
-
-def _kind(annotation: object) -> str:
-    """A record field's annotation as its name: "float", "int" or "bool"."""
-    if isinstance(annotation, str):
-        return annotation
-    return getattr(annotation, "__forward_arg__", getattr(annotation, "__name__", ""))
-
-
-_KINDS = {"float": float | int | np.floating | np.integer, "int": int | np.integer,
-          "bool": bool | np.bool_}  # fmt: skip
+#: :func:`team_period` as one compiled call
+team_period_call = flat_call(team_period, RECORDS, "team_period_call", __name__)
+#: the stages of a shared period, one call each (the commands and the rows hold no lock on
+#: Python: they run at once in different threads)
+begin_call = flat_call(shared_begin, RECORDS, "begin_call", __name__)
+commands_call = flat_call(shared_commands, RECORDS, "commands_call", __name__, nogil=True)
+rows_call = flat_call(
+    shared_rows, RECORDS, "rows_call", __name__, extra=("lo", "hi", "b"), nogil=True
+)
+integrate_call = flat_call(shared_integrate, RECORDS, "integrate_call", __name__)

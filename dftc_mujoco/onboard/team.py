@@ -22,14 +22,13 @@ block and keeps running on every robot, member or not.
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, cast
 
 import numpy as np
 
 from ..events import make
 from ..mission import FormationPlan, formation_offsets, replan
-from .addresses import Tables, address_table
 from .applied import DriveModel
 from .block import Block, TeamConfig, shaped
 from .controller import Controller
@@ -44,18 +43,18 @@ from .period import (
     RAISED,
     SWITCHED,
     PeriodBuffers,
-    flat_arguments,
-    shared_begin,
-    shared_commands,
-    shared_integrate,
-    shared_rows,
-    team_period_flat,
+    PeriodInputs,
+    begin_call,
+    commands_call,
+    integrate_call,
+    rows_call,
+    team_period_call,
 )
 from .radio import Radios, Rounds
+from .records import fields
 from .recovery import Recovery, admitted, split_event, worst_ratio
-from .sharing import PARALLEL_FROM, Sharing, workers
+from .sharing import Sharing
 from .sighting import Sighting
-from .streaming import streams
 from .supervisor import Supervisor, Surroundings, grid_work, obstacle_label
 from .team_axis import expand
 from .thresholds import Thresholds
@@ -83,7 +82,6 @@ _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decisio
 HOLD_AFTER_CONTACT = 0.5
 #: [s] a held robot with a lagged drive measures its own velocity over this window
 VELOCITY_WINDOW = 0.1
-PARALLEL_ALLOWED = True  # False keeps the compiled period in one thread (benchmarks, tests)
 
 
 def runs_compiled(blocks: Mapping[str, Block]) -> bool:
@@ -196,6 +194,9 @@ class Team:
         #: row or snapshot shows them: they are the largest array a period writes)
         self.estimates = True
         self._norms_kept = True  # the last period wrote r_norm (see _compiled)
+        self._code = 0  # what start() found, for finish()
+        self._pending: tuple[Any, ...] | None = None  # a shared pass under way (its fields)
+        self._given: tuple[Any, ...] = (None,) * 5  # what start() was given, for finish()
         self._mu_t = 0.0
         self.never_flags = False  # the thresholds are +inf everywhere (settle_time looks)
         self.horizon: float | None = None  # the run's duration, once settle_time has looked
@@ -233,16 +234,16 @@ class Team:
         self._u_mem = np.empty((m, 2))
         self._du = np.empty((m, 2))
         # one robot's residual per thread the compiled period's pass runs in (sharing.py)
-        threads = workers() if m >= PARALLEL_FROM and PARALLEL_ALLOWED else 1
+        cfg = self.config
+        threads = cfg.threads if self.compiled and m >= cfg.shared_from else 1
         self._sharing = Sharing(threads) if threads > 1 else None
         self._row = np.empty((threads, m * 2))
-        self._stream = streams(3 * m * m * 2 * 8)  # ŷ, ŷ⁺, ∫ⁱû_g past the cache (streaming.py)
         self._mates = np.zeros((m, 2))  # where the range sensors see the members
         # ‖ⁱr_k‖ (none before the first round of a network), then each thread's scratch row
         self._norms = np.zeros((m + threads, m))
         self._raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
-        cfg, gone = self.config, len(self.gone)
+        gone = len(self.gone)
         self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
         self._gone_p = self._obs_p[len(cfg.obstacle_position.reshape(-1, 2)) :]  # a view
         self._obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
@@ -250,23 +251,12 @@ class Team:
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
         )
         self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
-        self._flat = Tables()  # see _flat_records
-        self.log_tables = Tables()  # the log's arrays by address (.log_row.write_row)
+        self._flat: list[tuple[Any, ...]] = []  # see _fields
+        # the decision's scale is written each round (bound_squares)
         self._buffers = PeriodBuffers(
-            self.x_own,
-            self.x_d,
-            self.xd_dot,
-            self.x_hat,
-            self._u_g,
-            self._u_mem,
-            self._du,
-            self._row,
-            self._norms,
-            self.u,
-            self.u_bar,
-            grid_work(m),
-            np.full(m * 2, np.nan),  # the decision's scale, written each round (bound_squares)
-        )
+            self.x_own, self.x_d, self.xd_dot, self.x_hat, self._u_g, self._u_mem, self._du,
+            self._row, self._norms, self.u, self.u_bar, grid_work(m), np.full(m * 2, np.nan),
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ one period
 
@@ -278,22 +268,32 @@ class Team:
         c_dot: np.ndarray,
         sensed_bodies: np.ndarray | None = None,
         touching: np.ndarray | None = None,
-        beside: Callable[[], None] | None = None,
     ) -> int:
-        """One control period for every robot; returns RAISED | SWITCHED bits.
+        """One control period for every robot (:meth:`start`, then :meth:`finish`); returns
+        RAISED | SWITCHED | SATURATED bits.
 
         ``x_m`` (N, 2): each robot's own noisy position; ``c``, ``c_dot``: the
         desired centroid and its velocity (σ₁,d, σ̇₁,d); ``sensed_bodies``
         (N, 2): where each robot's range sensor sees every robot (robots that were
         excluded become obstacles; teammates are avoided when ``teammate_safe`` > 0;
         None: no sensor reading); ``touching`` (N,): each robot's bumper (None: no bumpers).
-        ``beside``: work to run once the period's commands (``u``, ``u_bar``) are out, before
-        the period ends: in this thread while helper threads run the pass over the N × N
-        state, where the team shares its pass (:attr:`shares`; the simulation's physics
-        step), else right after the period's arithmetic. It should keep its own errors (the
-        simulation's does): one it raises is raised after the period's compiled stages, and
-        ends the period there.
         """
+        self.start(t, x_m, c, c_dot, sensed_bodies, touching)
+        return self.finish(t)
+
+    def start(
+        self,
+        t: float,
+        x_m: np.ndarray,
+        c: np.ndarray,
+        c_dot: np.ndarray,
+        sensed_bodies: np.ndarray | None = None,
+        touching: np.ndarray | None = None,
+    ) -> None:
+        """The period up to its commands: once it returns, ``u`` and ``u_bar`` are this
+        period's. A team that shares its pass (:attr:`shares`) has handed the pass over the
+        N × N state to helper threads, which run it while the caller sends the commands and
+        steps the physics; :meth:`finish` ends the period (the arguments: :meth:`step`)."""
         self.drive.at(t)  # the ramped start's acceleration, then the drive's own
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
@@ -342,13 +342,30 @@ class Team:
             if not mu.min() >= 0:  # a negative or NaN entry flags everybody or nobody
                 refuse_bad_entry(mu, self.members, self.thresholds)
         if self.compiled:
-            code = self._compiled(x_m, c, c_dot, offsets, rates, beside)
+            self._code = self._compiled(x_m, c, c_dot, offsets, rates)
         else:
-            code = general_period(self, x_m, c, c_dot, offsets, rates)
-            if beside is not None:
-                beside()
+            self._code = general_period(self, x_m, c, c_dot, offsets, rates)
         if self.alarm.on and not self.compiled:  # the compiled period runs it after ū
             self.alarm.step(self.estimator.phi_hat, self.u_bar)
+        self._given = (c, c_dot, offsets, rates, sensed_bodies)
+
+    def join(self) -> None:
+        """End a shared pass that :meth:`start` handed to the helper threads, and nothing
+        else of the period (for a caller stopped before :meth:`finish`)."""
+        if self._pending is not None:
+            self._joined(self._pending)
+
+    def finish(self, t: float) -> int:
+        """The rest of the period begun by :meth:`start` at ``t``: a shared pass ended and
+        integrated, ŷ of the next period swapped in, the messages broadcast, the flags and
+        behaviour switches turned into events; returns RAISED | SWITCHED | SATURATED bits."""
+        code, pending = self._code, self._pending
+        if pending is not None:
+            code |= self._joined(pending)
+        if self.compiled and self.rounds.now:
+            self.observer.advance()  # ŷ of the next period (eq. 19)
+        c, c_dot, offsets, rates, sensed_bodies = self._given
+        radios = self.radios
         if radios is not None and self.rounds.now:
             self.observer.broadcast(self.rounds.stepped())
         if self.sighting is not None and sensed_bodies is not None:
@@ -399,13 +416,15 @@ class Team:
 
     @property
     def shares(self) -> bool:
-        """The period's pass runs shared between threads, and beside the work given to
-        :meth:`step` (a compiled team of :data:`~.sharing.PARALLEL_FROM` members or more)."""
-        return self.compiled and self._sharing is not None
+        """The period's pass runs shared between threads, beside the commands and the
+        physics (a compiled team of ``config.shared_from`` members or more, with
+        ``config.threads`` > 1: :class:`~.execution.Execution`)."""
+        return self._sharing is not None
 
-    def _compiled(self, x_m, c, c_dot, offsets, rates, beside) -> int:
-        """The period as compiled stages over the blocks' state records (:mod:`.period`)."""
-        # the period's inputs (PeriodInputs); an ended team's last row shows its estimates
+    def _compiled(self, x_m, c, c_dot, offsets, rates) -> int:
+        """The period as compiled stages over the blocks' state records (:mod:`.period`): one
+        call, or (a shared pass) its first stages, the pass handed to the helper threads."""
+        # the period's inputs; an ended team's last row shows its estimates
         keep = self.estimates or self.ended is not None
         # ‖ⁱr_k‖ where read: a log row, a snapshot, or the exclusion instant (at the next
         # period's start): a t_r is Δt_d,max after the flag, or a period after a postponement;
@@ -413,81 +432,59 @@ class Team:
         rec, dt = self.recovery, self.config.dt
         norms = keep or bool(rec.pending) or rec.dt_d_max < 2 * dt or self.radios is not None
         self._norms_kept = norms
-        fdir, now = self.config.fdir, self.rounds.now
+        inputs = PeriodInputs(
+            x_m, self.members, c, c_dot, offsets, rates, self.config.fdir, self.rounds.now,
+            keep, norms,
+        )  # fmt: skip
+        flat = inputs + self._th + self._fields()
         sharing = self._sharing
-        table, mu, timer, numbers = self._flat_records()  # the records' arrays, by address
-        if sharing is not None:  # a large team: the pass shared, the commands beside it
-            args = (x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms,
-                    self._stream, table, mu, timer, numbers)  # fmt: skip
-            # the stages called one by one, each with the records taken apart (period.py)
-            shared_begin(*args)  # each robot's own block of the state, before it moves
-            code = 0
-            bits = (fdir, now, keep, norms, self._stream)  # as resident.FLAGS holds them
-            flat = (*bits, table, mu, timer, numbers)
+        if sharing is None:
+            return int(team_period_call(*flat))
+        begin_call(*flat)  # each robot's own block of the state, before the pass moves it
+        sharing.start(lambda lo, hi, b: rows_call(*flat, lo, hi, b), len(self.members))
+        self._pending = flat
+        try:
+            return int(commands_call(*flat))  # beside the helpers' rows
+        except BaseException:
+            self._joined(flat)
+            raise
 
-            def rows(lo: int, hi: int, b: int) -> int:
-                return shared_rows(*flat, lo, hi, b)
+    def _joined(self, flat: tuple[Any, ...]) -> int:
+        """A shared pass ended (the caller taking the rows left) and integrated: RAISED or 0."""
+        assert self._sharing is not None
+        self._pending = None
+        try:
+            raised = self._sharing.finish()
+        finally:
+            integrate_call(*flat)
+        return RAISED if raised else 0
 
-            def command_then_beside() -> None:  # in this thread while helpers take rows
-                nonlocal code
-                code = shared_commands(*args)
-                if beside is not None:
-                    beside()
-
-            flags = sum(int(bool(on)) << j for j, on in enumerate(bits))
-            posted = (table, mu, timer, numbers, flags)
-            try:
-                if sharing.run(rows, len(self.members), command_then_beside, posted):
-                    code |= RAISED
-            finally:
-                shared_integrate(table, mu, timer, numbers)
-        else:  # one compiled call, the records taken apart (team_period_flat)
-            code = team_period_flat(
-                x_m, self.members, c, c_dot, offsets, rates, fdir, now, keep, norms,
-                self._stream, table, mu, timer, numbers,
-            )  # fmt: skip
-            if beside is not None:
-                beside()
-        if now:
-            self.observer.advance()  # ŷ of the next period (eq. 19)
-        return code
-
-    def _flat_records(self) -> tuple:
-        """Every record but the period's inputs, taken apart as team_period_flat takes them
-        (:func:`.period.flat_arguments`): the table of their arrays' addresses, ⁱμ_k's array,
-        the timers and the numbers. Their arrays change only at an exclusion (ŷ is then new),
-        ŷ and ŷ⁺ swap every period and the thresholds' record changes from a dense array to
-        eq. 40's factors: the arguments are kept per (ŷ, factors, range reading), at most a
-        few, each entry with the arrays its table points into (:class:`.addresses.Tables`: a
-        copied team starts without), so they live as long as the table and no id is reused.
-        ⁱμ_k's own array, which a rule may hand out anew each round, is passed as it is."""
-        key = (id(self.observer.y_hat), id(self._th.coef), self._sensed, self.drive.accel_step)
-        flat = self._flat.get(key)
-        if flat is None:
-            if len(self._flat) >= 4:
-                self._flat.clear()
-            records = (
-                self.observer.record(),
-                *self._records(),
-                self._th,
-                self.decision.record(),
-                self._buffers,
-            )
-            arrays, (_, timer, numbers) = flat_arguments(records)  # ⁱμ_k: at each call
-            flat = self._flat[key] = (arrays, address_table(arrays), timer, numbers)
-        return flat[1], self._th.dense, flat[2], flat[3]
-
-    def _records(self) -> tuple[Any, ...]:
-        """The records that change only at an exclusion (and with the range sensor's
-        reading): controller, supervisor, surroundings, drive, fault estimator, alarms."""
-        return (
+    def _fields(self) -> tuple[Any, ...]:
+        """The fields of the records after the period's inputs and the thresholds (the
+        compiled entries take them in :data:`.period.RECORDS`' order). They change only at an
+        exclusion (when :meth:`_resize` forgets them), but for ŷ and ŷ⁺, which swap every
+        period, the range sensor's reading and the drive's acceleration after the start: a
+        few are kept, each checked by the very objects it was made from."""
+        y, sensed, accel = self.observer.y_hat, self._sensed, self.drive.accel_step
+        for key_y, key_sensed, key_accel, kept in self._flat:
+            if key_y is y and key_sensed == sensed and key_accel == accel:
+                return kept
+        records = (
+            self.observer.record(),
             self.controller.record(),
-            self.supervisor.record(self._sensed),
+            self.supervisor.record(sensed),
             self._seen,
             self.drive.record(),
             self.estimator.record(self._touch),
             self.alarm.record(),
+            self.decision.record(),
+            self._buffers,
         )
+        kept = fields(records)
+        if len(self._flat) >= 4:
+            self._flat.clear()
+        self._flat.append((y, sensed, accel, kept))
+        return kept
 
     # ------------------------------------------------------------------ outputs
 

@@ -1,9 +1,10 @@
 """Bumpers: each robot's own touch sensor, read from MuJoCo's contacts.
 
 A robot knows when its hull touches something (a bumper, a contact switch, a motor-current
-spike): this is that sensor, on the simulator side. Each period :meth:`Bumpers.read` says
-which robots touch a teammate, an excluded robot or a cylinder (the floor does not count).
-The onboard recovery uses it to postpone an exclusion that a contact may explain
+spike): this is that sensor, on the simulator side. Each period :func:`contacts` says
+which robots touch a teammate, an excluded robot or a cylinder (the floor does not count),
+and how deep (``physics_step.py`` senses it with the rest of the period's truth). The
+onboard recovery uses the bumpers to postpone an exclusion that a contact may explain
 (``onboard/recovery.py``); the premises monitor labels the same contacts with their depth.
 """
 
@@ -30,35 +31,18 @@ def geom_owners(scene: Any) -> np.ndarray:
 
 
 @njit(cache=True)
-def touching(owner, contact_geom, ncon, out):  # pragma: no cover - compiled
-    """``out`` (N,) set to whether each robot touches another robot or a cylinder."""
-    out[:] = False
+def contacts(owner, contact_geom, contact_dist, ncon, depth, touching):  # pragma: no cover
+    """Each robot's deepest contact with another robot or a cylinder into ``depth`` (N,)
+    (0: none) and its bumper into ``touching`` (N,), from MuJoCo's ``ncon`` contacts (each
+    geom's ``owner``: :func:`geom_owners`)."""
+    depth[:] = 0.0
+    touching[:] = False
     for c in range(ncon):
         a, b = owner[contact_geom[c, 0]], owner[contact_geom[c, 1]]
         if a == FLOOR or b == FLOOR or a == b or (a < 0 and b < 0):
-            continue
-        if a >= 0:
-            out[a] = True
-        if b >= 0:
-            out[b] = True
-
-
-class Bumpers:
-    """Every robot's touch sensor (N,), read after each physics step."""
-
-    def __init__(self, scene: Any, data: Any) -> None:
-        self.owner = geom_owners(scene)
-        self.data = data
-        self.value = np.zeros(len(scene.body), bool)
-        self._clear = True  # ``value`` is all False (the last read had no contact)
-
-    def read(self) -> np.ndarray:
-        """Which robots touch something now (a view, rewritten by the next read)."""
-        ncon = self.data.ncon
-        if ncon:
-            touching(self.owner, self.data.contact.geom, ncon, self.value)
-            self._clear = False
-        elif not self._clear:  # no contact at all: nobody touches (no compiled call)
-            self.value[:] = False
-            self._clear = True
-        return self.value
+            continue  # the floor, the world, a robot's own parts, cylinder against cylinder
+        deep = max(-contact_dist[c], 1e-12)
+        for r in (a, b):
+            if r >= 0:
+                depth[r] = max(depth[r], deep)
+                touching[r] = True

@@ -46,25 +46,6 @@ def _gather_xy(src, idx, out):  # pragma: no cover - compiled
         out[i, 1] = src[idx[i], 1]
 
 
-@njit(cache=True)
-def _sense_xy(src, idx, eta, out, measured):  # pragma: no cover - compiled
-    """:func:`_gather_xy` into ``out``, and ``out`` + ``eta`` into ``measured`` (eq. 4)."""
-    for i in range(idx.shape[0]):
-        for d in range(2):
-            out[i, d] = src[idx[i], d]
-            measured[i, d] = out[i, d] + eta[i, d]
-
-
-@njit(cache=True)
-def _gather_pose(xpos, xmat, idx, out):  # pragma: no cover - compiled
-    """out[i] = (x, y, heading) of body idx[i] from MuJoCo's xpos and row-major xmat."""
-    for i in range(idx.shape[0]):
-        b = idx[i]
-        out[i, 0] = xpos[b, 0]
-        out[i, 1] = xpos[b, 1]
-        out[i, 2] = np.arctan2(xmat[b, 3], xmat[b, 0])
-
-
 def _disk_chunk(r: np.ndarray, radius: float, at_bound: bool) -> np.ndarray:
     """Planar vectors (C, N, 2) from uniform draws ``r`` (C, 2, N): row 0 gives the angle,
     row 1 the radius (uniform in the disk, or ``radius`` itself if ``at_bound``)."""
@@ -86,36 +67,18 @@ def _disk_fill(r, radius, at_bound, out):  # pragma: no cover - compiled
             out[c, i, 1] = mag * np.sin(ang)
 
 
-@njit(cache=True)
-def _noise_period(r, k, eta_bar, xi_bar, at_bound, alpha, state, eta, w, xi):  # pragma: no cover
-    """Period ``k`` of a chunk's η and ξ from its uniform draws ``r`` (C, 2, 2, N): the
-    same operations on the same floats as :meth:`NoiseStream._refill`'s on the whole chunk
-    (:func:`_disk_fill` element by element, :func:`_low_pass` period by period)."""
-    _disk_fill(r[k : k + 1, 0], eta_bar, at_bound, eta[k : k + 1])
-    _disk_fill(r[k : k + 1, 1], xi_bar, False, w[k : k + 1])
-    _low_pass(w[k : k + 1], alpha, state, at_bound, xi_bar, xi[k : k + 1])
-
-
 class NoiseStream:
     """η and ξ of every control period, drawn ahead in chunks from the run's generator.
 
     The draws are the same, in the same order, as one η then one ξ per period
     (the generator fills a chunk in order), so the numbers do not depend on
     the chunk size; drawing ahead only removes per-period work from the loop.
-
-    With :attr:`spread` set, a chunk's uniform draws are still taken at once (the
-    generator's order is the same), but each period's η and ξ are computed from them one
-    period at a time: by :meth:`ahead`, which the loop calls where a core would otherwise
-    wait (a large team: beside the shared pass), else by :meth:`next`. At N = 1000 a chunk's
-    sines and cosines took 24 ms of the calling thread at once, 46 µs a period.
     """
 
     def __init__(self, plant: Plant, chunk: int = 512) -> None:
         self.plant = plant
         self.chunk = chunk
         self.k = chunk  # next row to hand out
-        self.spread = False  # each period's rows computed apart (see above)
-        self._made = chunk  # rows 0 .. _made - 1 of the chunk are computed
         n = plant.n
         self.eta = np.empty((chunk, n, 2))
         self.xi = np.empty((chunk, n, 2))
@@ -128,47 +91,24 @@ class NoiseStream:
         if self.k == self.chunk:
             self._refill()
         k = self.k
-        if k == self._made:
-            self._make()
         self.k += 1
         return self._rows[k]
-
-    def ahead(self) -> None:
-        """Compute the rows :meth:`next` hands out next, if its chunk is drawn and they are
-        not yet computed (:attr:`spread`); draws nothing."""
-        if self.k == self._made < self.chunk:
-            self._make()
 
     def peek(self) -> tuple[np.ndarray, np.ndarray]:
         """(η, ξ) that :meth:`next` hands out next, without taking them (copies)."""
         if self.k == self.chunk:
             self._refill()
-        if self.k == self._made:
-            self._make()
         return self.eta[self.k].copy(), self.xi[self.k].copy()
 
     def _refill(self) -> None:
         p = self.plant
         r = p.rng.random(out=self._r)  # per period: η's (2, N), then ξ's (2, N)
-        if self.spread:
-            self._made = 0
-        else:
-            _disk_fill(r[:, 0], p.noise.eta_bar, p.at_bound, self.eta)
-            _disk_fill(r[:, 1], p.xi_bar, False, self._w)
-            _low_pass(self._w, p._alpha, p._xi_state, p.at_bound, p.xi_bar, self.xi)
-            self._made = self.chunk
+        _disk_fill(r[:, 0], p.noise.eta_bar, p.at_bound, self.eta)
+        _disk_fill(r[:, 1], p.xi_bar, False, self._w)
+        _low_pass(self._w, p._alpha, p._xi_state, p.at_bound, p.xi_bar, self.xi)
         if not self._rows:  # the views of every period, made once (0.1 µs a period each)
             self._rows = list(zip(self.eta, self.xi, strict=True))
         self.k = 0
-
-    def _make(self) -> None:
-        """Row :attr:`k` of a spread chunk (the rows before it are made)."""
-        p = self.plant
-        _noise_period(
-            self._r, self.k, p.noise.eta_bar, p.xi_bar, p.at_bound, p._alpha, p._xi_state,
-            self.eta, self._w, self.xi,
-        )  # fmt: skip
-        self._made = self.k + 1
 
 
 class Plant:
@@ -212,12 +152,9 @@ class Plant:
             self._ctrl_index = slice(None)  # a copy instead of a gather each period
         # views into MjData's own memory, taken once (the hot loop reads and writes them)
         self._site_xpos = self.data.site_xpos
-        self._xpos = self.data.xpos
-        self._xmat = self.data.xmat
         self._ctrl = self.data.ctrl
         self._warnings = self.data.warning.number
         self._site = np.ascontiguousarray(scene.site, dtype=np.intp)
-        self._body = np.ascontiguousarray(scene.body, dtype=np.intp)
 
     @staticmethod
     def initial_data(scene: Scene) -> mujoco.MjData:
@@ -238,18 +175,6 @@ class Plant:
         if out is None:
             out = np.empty((self.n, 2))
         _gather_xy(self._site_xpos, self._site, out)
-        return out
-
-    def sense(self, eta: np.ndarray, x: np.ndarray, x_m: np.ndarray) -> None:
-        """The true positions into ``x`` (N, 2) and each robot's own measurement x_m,i = x_i
-        + η_i into ``x_m`` (eq. 4) for the noise ``eta``, in one compiled call."""
-        _sense_xy(self._site_xpos, self._site, eta, x, x_m)
-
-    def poses(self, out: np.ndarray | None = None) -> np.ndarray:
-        """Each robot base's planar pose (N, 3): x, y, heading [rad]."""
-        if out is None:
-            out = np.empty((self.n, 3))
-        _gather_pose(self._xpos, self._xmat, self._body, out)
         return out
 
     def velocities(self) -> np.ndarray:
