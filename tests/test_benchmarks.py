@@ -147,3 +147,17 @@ def test_a_ratio_just_beyond_the_line_does_not_read_as_met():
     (_, above, above_met), (_, below, below_met) = targets.judge(rows, large, peak, 1000)[:2]
     assert above.startswith("2.002 ") and above_met is False
     assert below.startswith("2.000 ") and below_met is True
+
+
+def test_the_environment_benchmark_times_a_step_and_a_vector_of_teams():
+    """``bench_envs.py``: the period, the Gymnasium step and their ratio, and team-steps per
+    second of a vector of teams; VMAS named as not installed, or timed. Times are printed,
+    never judged."""
+    out = _bench("bench_envs.py", "--steps", "40", "--repeat", "1", "--envs", "1", "2", "--vmas")
+    period = float(re.search(r"^simulator period\s+([\d.]+) us", out, re.M).group(1))
+    step = float(re.search(r"^Gymnasium step\s+([\d.]+) us", out, re.M).group(1))
+    ratio = float(re.search(r"^ratio\s+([\d.]+)", out, re.M).group(1))
+    assert period > 0 and step > 0 and abs(ratio - step / period) < 0.01
+    assert len(re.findall(r"^vector,\s+\d+ teams:\s+\d+ team-steps/s", out, re.M)) == 2
+    vmas = importlib.util.find_spec("vmas") is not None
+    assert ("VMAS: not installed" in out) != vmas, out
