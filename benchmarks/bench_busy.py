@@ -78,13 +78,13 @@ def main() -> None:
     for label, got in (("alone", alone), (f"beside {args.hogs} CPU-bound processes", busy)):
         for way, (wall, cpu, threads) in got.items():
             print(
-                f"  {label:32s} {way:10s} ({threads} threads)  wall {wall:7.2f} s  CPU {cpu:7.2f} s"
+                f"  {label:32s} {way:10s} ({threads} threads)  wall {wall:8.4f} s  CPU {cpu:8.4f} s"
             )
     fair = alone["one thread"][0] * (1 + args.hogs) / (cores or 1)
     shared = busy["shared"][0]
     print(
-        f"  fair share beside the hogs: {fair:.2f} s (one thread alone × {1 + args.hogs} / "
-        f"{cores}); the shared pass took {shared:.2f} s, {shared / fair:.2f} of it; "
+        f"  fair share beside the hogs: {fair:.4f} s (one thread alone × {1 + args.hogs} / "
+        f"{cores}); the shared pass took {shared:.4f} s, {shared / fair:.2f} of it; "
         f"sharing saves {1 - alone['shared'][0] / alone['one thread'][0]:.0%} alone, "
         f"{1 - shared / busy['one thread'][0]:.0%} beside the hogs"
     )

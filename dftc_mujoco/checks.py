@@ -250,9 +250,10 @@ def preflight(
             "mission.centroid.speed",
             f"{speed:g} m/s is beyond the {name} robots' applied range of ±{input_limit:.3g} "
             f"m/s per axis (the command range ±{command_limit:.3g} m/s less the compensation's "
-            "headroom Φ̄): the team could follow the path only with every command saturated, "
-            "where no threshold rule holds (its premise 'saturation'); lower the speed",
-            refuse=True,
+            "headroom Φ̄), flown as given (mission.centroid.governor = false): the robots' "
+            "commands saturate on the path, where no threshold rule's guarantee holds (its "
+            "premise 'saturation'); set the governor on to fly it slower, or lower the speed",
+            refuse=False,
         )
     cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))
     for k, f in enumerate(s.faults):

@@ -26,8 +26,9 @@ def test_every_event_of_paper_case_is_a_known_kind_in_one_line():
 
 
 def test_the_recovery_events_are_known_kinds_in_one_line():
-    """A line whose middle robot stops and is excluded without a relay: exclusion, split,
-    horizon and scheduling events all have their words."""
+    """A line whose middle robot stops and is excluded with neither a relay nor a re-wiring
+    (``fdir.rewire = "none"``): exclusion, split, horizon and scheduling events all have
+    their words."""
     line = [[1, 2], [2, 1], [2, 3], [3, 2], [3, 4], [4, 3]]
     s = load_scenario(
         "paper_case",
@@ -35,6 +36,7 @@ def test_the_recovery_events_are_known_kinds_in_one_line():
             "team.graph": line,
             "faults": [{"robot": 2, "kind": "stop", "t": 30.0}],
             "fdir.dt_d_max": "auto",
+            "fdir.rewire": "none",
             "onboard.thresholds": "l1",
             "duration": 40.0,
         },

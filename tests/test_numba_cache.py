@@ -73,3 +73,23 @@ def test_a_cold_cache_runs_at_once_and_the_next_run_is_compiled(tmp_path):
         for k in a.files:  # the general path is the same computation, bit for bit
             assert np.array_equal(a[k], b[k], equal_nan=True), k
     assert cold["events"] == warmed["events"]
+
+
+def test_the_background_compilation_compiles_the_types_the_run_calls_with():
+    """The background process gets the scenario pickled, and a read-only array of the
+    scenario comes back writable: the compiled period took K read-only in the run and
+    writable in the background, so the run after the background compilation compiled again."""
+    import pickle
+
+    from numba import typeof
+
+    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.scenario import load_scenario
+
+    s = load_scenario("paper_case", {"duration": 0.1})
+
+    def period_types(scenario):
+        team = Simulation(scenario).team
+        return [typeof(a) for a in team._th + team._fields()]
+
+    assert period_types(s) == period_types(pickle.loads(pickle.dumps(s)))

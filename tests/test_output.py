@@ -322,9 +322,10 @@ def test_plot_replaces_figures_and_video_only_when_complete(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
 
 
-def test_a_signal_while_the_run_is_built_still_leaves_its_records(tmp_path):
+def test_a_signal_while_the_run_is_built_writes_nothing(tmp_path):
     """SIGINT as soon as the run holds its folder (the simulation is still being built):
-    the run stops before its first period and lands whole, status "interrupted"."""
+    the run stops before its first period, says that nothing ran, and leaves neither a run
+    folder nor its lock."""
     out = tmp_path / "run"
     first = subprocess.Popen(
         [
@@ -343,5 +344,5 @@ def test_a_signal_while_the_run_is_built_still_leaves_its_records(tmp_path):
     first.send_signal(signal.SIGINT)
     _, err = first.communicate(timeout=900)
     assert first.returncode == 130 and "Traceback" not in err
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "interrupted"
+    assert "before the run started: nothing was written" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], list(tmp_path.iterdir())

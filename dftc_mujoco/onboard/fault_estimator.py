@@ -133,7 +133,9 @@ class FaultEstimator(Block):
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Start z at the first measurement, ∫e and φ̂ at zero."""
-        self.K = np.ascontiguousarray(config.K, dtype=float)
+        # a copy: the scenario's K is read-only, and an unpickled one (the background
+        # compilation's) is not; numba compiles each kind apart
+        self.K = np.array(config.K, dtype=float, order="C")
         self.g_inv = np.linalg.inv(config.G)
         self.dt = config.dt
         self.command_limit = float(config.command_limit)
