@@ -60,18 +60,29 @@ PAPER_XI_BAR = 0.005
 
 def threshold_rule(s: Scenario, robot: robots.RobotModel | None) -> Scenario:
     """The scenario with ``onboard.thresholds = "auto"`` made a rule: the paper's eq. 40 where
-    the robots move within the paper's ξ̄ (0.005 m/s) on an ideal network, else
-    ``block_row`` (its row of eq. 40, which a larger ξ̄ widens less), or ``l1`` over a
-    network (eq. 40 is not derived for the observers' rounds)."""
+    the robots move within the paper's ξ̄ (0.005 m/s) on an ideal network; beyond it the
+    ``drive`` rule where the drive's lag is known (calibrated, or ``fdir.drive_lag``: its Φ̄
+    then bounds ‖φ̂‖ at every period), else ``block_row`` (its row of eq. 40, which a larger
+    ξ̄ widens less); ``l1`` over a network (eq. 40 is not derived for the observers'
+    rounds)."""
     if s.onboard.thresholds != "auto":
         return s
     if not s.network.ideal:
         rule = "l1"
     elif effective_xi_bar(s, robot) <= PAPER_XI_BAR * (1 + 1e-9):
         rule = "paper"
+    elif _lag_known(s, robot):
+        rule = "drive"
     else:
         rule = "block_row"
     return dataclasses.replace(s, onboard=dataclasses.replace(s.onboard, thresholds=rule))
+
+
+def _lag_known(s: Scenario, robot: robots.RobotModel | None) -> bool:
+    """Whether the robots' drive lag is known: given (``fdir.drive_lag``) or calibrated."""
+    if s.fdir.drive_lag != "robot":
+        return float(s.fdir.drive_lag) > 0
+    return robot is not None and (robot.lag > 0 or robot.fast_lag > 0)
 
 
 def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:

@@ -11,7 +11,9 @@ from ..errors import EXIT_OK, EXIT_OUTPUT, ScenarioError
 from .compensation import acceleration, acceleration_report, compensation, compensation_report
 from .drift import REPLAN_WINDOW, drift
 from .files import Change, check_writable, values_of, write
-from .mismatch import detectability, measure, report
+from .mismatch import TIMESTEP, Calibration, detectability, measure, report, robot_with
+from .physics import STEPS, OffPlane, limits
+from .track import skid_track
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,20 +95,22 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
         path = robots.resolve(args.model, where="MODEL") if args.write else None
         if path is not None:
             check_writable(path)
-        cal = measure(args.model)
+        cal, measured = on_plane(args.model)
         print(report(cal))
         line, warn = detectability(cal, args.scenario, args.model, overrides)
         print(f"WARNING: {line}" if warn else line)
         if cal.lag > 0:  # the missions below run the drive model the robot will run
             overrides.setdefault("fdir.drive_lag", cal.lag)
-        loop_results = compensation(args.model, args.scenario, overrides=overrides, lag=cal.lag)
+        loop_results = compensation(
+            args.model, args.scenario, overrides=overrides, lag=cal.lag, measured=measured
+        )
         line, warn = compensation_report(loop_results)
         print(f"WARNING: {line}" if warn else line)
         if loop_results[0].rings and "gains.G" not in overrides:
             overrides["gains.G"] = loop_results[-1].G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
         cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
-        jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag)
+        jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag, measured=measured)
         line, warn = acceleration_report(jumps)
         print(f"WARNING: {line}" if warn else line)
         if not jumps[-1][1].runs_away:
@@ -163,3 +167,41 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
         print(f"error: cannot write the calibration: {exc}", file=sys.stderr)
         return EXIT_OUTPUT
     return EXIT_OK
+
+
+def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
+    """:func:`.mismatch.measure` at the robot's physics step, and where the robot leaves the
+    plane there, at each shorter step of :data:`.physics.STEPS` until it stays on it (the
+    fix, stored as ``timestep``); with a skid steer's track measured first. Returns the
+    calibration and what it measured besides (``timestep``, ``track``); refuses in one line
+    when no step keeps the robot on the plane."""
+    robot = robot_with(model)
+    first = min(TIMESTEP, robot.timestep)
+    tried = []
+    for step in (first, *(s for s in STEPS if s < first)):
+        measured = {"timestep": step} if step < TIMESTEP else {}
+        try:
+            track = skid_track(model, measured)
+            if track is not None:
+                measured["track"] = track
+            cal = measure(model, measured)
+        except OffPlane as exc:
+            tried.append((step, exc.trouble))
+            continue
+        if tried:
+            step0, trouble = tried[0]
+            print(
+                f"WARNING: {trouble.line(step0)}, beyond what a run allows ({limits()}): its "
+                f"drive runs away at that step; at {step * 1000:g} ms it stays on the plane: "
+                f"calibrated there (timestep = {step:g}: every run with this robot steps at it)"
+            )
+        return cal, measured
+    (step0, trouble), (last, why) = tried[0], tried[-1]
+    shorter = ", ".join(f"{s * 1000:g}" for s, _ in tried[1:])
+    raise ScenarioError(
+        f"{robot.path}: calibration refused, nothing written: {trouble.line(step0)}, beyond "
+        f"what a run allows ({limits()}); at the shorter steps tried ({shorter} ms) it leaves "
+        f"the plane too, {why.line(last)}: its model does not stay a planar robot under its "
+        "drive's commands (check its wheels' contacts, its servos' gains and the pose its "
+        "other joints hold)"
+    )

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .mismatch import CONTROL_PERIOD, TIMESTEP, programme
+from .mismatch import CONTROL_PERIOD, programme, robot_with, step_for
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,7 @@ def compensation(
     seed: int = 0,
     overrides: dict | None = None,
     lag: float = 0.0,
+    measured: dict[str, float] | None = None,
 ) -> list[Compensation]:
     """Run the paper's fault estimator in closed loop on one robot (smooth commands, η at
     its bound) for the scenario's G (after ``overrides``) and larger ones, until the loop
@@ -55,17 +56,18 @@ def compensation(
     deadbeat on an integrator and marginal on any robot with lag: healthy ‖φ̂‖ then
     grows far beyond its ideal-plant bound and feeds the robot's commands. With ``lag`` the
     robot models its drive as the team will (``onboard/applied.py``): the estimator is
-    driven by the modelled velocity, the drive by the command.
+    driven by the modelled velocity, the drive by the command. ``measured``: what this
+    calibration measured before (:func:`.mismatch.robot_with`).
     """
     from ..assembly import PAPER_G
     from ..onboard.thresholds import estimator_gain
     from ..scenario import load_scenario
-    from ..sim import robots, scene
+    from ..sim import scene
     from ..sim.plant import Plant
 
     s = load_scenario(scenario_name, overrides)
-    robot = robots.get(name, where="MODEL")
-    sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
+    robot = robot_with(name, measured)
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=step_for(robot))
     K = np.ascontiguousarray(s.gains.K, float)
 
     # the search starts from the scenario's G, or the paper's where it says "auto"
@@ -111,7 +113,7 @@ def closed_loop(
     from ..onboard.fault_estimator import estimate_faults
 
     steps = len(u_all)
-    nsub = round(CONTROL_PERIOD / TIMESTEP)
+    nsub = round(CONTROL_PERIOD / sc.model.opt.timestep)
     rng = np.random.default_rng(seed)
     ang = rng.uniform(0, 2 * np.pi, steps)
     eta = eta_bar * np.stack([np.cos(ang), np.sin(ang)], axis=1)
@@ -169,7 +171,12 @@ def turns(limit: float, dt: float = CONTROL_PERIOD, hold: float = 2.0) -> np.nda
 
 
 def acceleration(
-    name: str, G: float, lag: float = 0.0, eta_bar: float = 0.001, seed: int = 0
+    name: str,
+    G: float,
+    lag: float = 0.0,
+    eta_bar: float = 0.001,
+    seed: int = 0,
+    measured: dict[str, float] | None = None,
 ) -> list[tuple[float, Compensation]]:
     """The compensation loop at G on commands that jump (:func:`turns`), with the nominal
     input's change held to a_max per second for each of ``ACCEL_CANDIDATES`` until the loop
@@ -177,11 +184,11 @@ def acceleration(
     offset point round) reads the jump as a fault, the compensation adds it to the command
     and the loop runs away (healthy ‖φ̂‖ 4.6 m/s measured on the diffdrive in a crowd)."""
     from ..onboard.thresholds import estimator_gain
-    from ..sim import robots, scene
+    from ..sim import scene
     from ..sim.plant import Plant
 
-    robot = robots.get(name, where="MODEL")
-    sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
+    robot = robot_with(name, measured)
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=step_for(robot))
     K = 3.0 * np.eye(2)  # the paper's K
     ideal = estimator_gain(K, G * np.eye(2), CONTROL_PERIOD, eta_bar, 0.0, lag=lag)
     out = []
@@ -209,8 +216,8 @@ def acceleration_report(results: list[tuple[float, Compensation]]) -> tuple[str,
     if last.runs_away:
         return (
             f"jumping commands run the compensation loop away (|phi_hat| p99 "
-            f"{first.phi_p99:.3g} m/s) even at {a:g} m/s²: this drive cannot follow the "
-            "team's commands",
+            f"{first.phi_p99:.3g} m/s) even at {a:g} m/s², the least acceleration tried: this "
+            "drive cannot follow the team's commands (no acceleration limit stored)",
             True,
         )
     return (
@@ -236,7 +243,8 @@ def compensation_report(results: list[Compensation]) -> tuple[str, bool]:
         f"--set gains.G={last.G:g} keeps it at {last.phi_p99:.3g} m/s (ideal plant "
         f"{last.ideal:.3g})"
         if not last.rings
-        else f"even G = {last.G:g} I does not calm it"
+        else f"even G = {last.G:g} I, the top of the gains tried, does not calm it (stored "
+        "all the same: the calmest tried)"
     )
     return (
         f"the compensation loop rings on this robot at G = {first.G:g} I: healthy |phi_hat| "

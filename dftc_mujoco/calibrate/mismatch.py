@@ -7,11 +7,11 @@ import dataclasses
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import ScenarioError
+from .physics import OffPlane, Trouble, Watch
 
 if TYPE_CHECKING:
     from .drift import Drift
@@ -73,10 +73,10 @@ def programme(limit: float = 1.0, dt: float = CONTROL_PERIOD) -> Programme:
         ang = np.arange(1, k + 1) * dt * speed / radius
         add(speed * np.stack([np.cos(ang), np.sin(ang)], axis=1))
         ramp([speed, 0], [v0, 0])
-    k = round(20 / dt)  # figure-eight at up to ~2.5 v0
+    k = round(20 / dt)  # figure-eight at up to ~2.5 v0 (each axis within the cap)
     tt = np.arange(1, k + 1) * dt
     w = 2 * np.pi / 20
-    fig8 = np.stack([v0 * np.cos(w * tt), 2 * v0 * np.sin(2 * w * tt)], axis=1)
+    fig8 = np.stack([v0 * np.cos(w * tt), min(2 * v0, cap) * np.sin(2 * w * tt)], axis=1)
     add(fig8)
     ramp(fig8[-1], [0, 0])
     step = speeds[1]
@@ -113,6 +113,8 @@ class Calibration:
     rms_command: float = 0.0  # rms ‖ẋ − u‖ over the programme [m/s]
     rms_lag: float = 0.0  # rms ‖ẋ − v̂‖ with the fitted lag [m/s]
     accel: float = math.inf  # a_max of the nominal input's change (inf: not limited) [m/s²]
+    timestep: float = 0.0  # the shorter physics step its drive needs (0: the scene's) [s]
+    track: float = 0.0  # a skid steer's effective axle width (0: not measured) [m]
 
     @property
     def recommended_xi_bar(self) -> float:
@@ -132,6 +134,8 @@ class Calibration:
             **({"fast_lag": round(self.fast_lag, 4)} if self.fast_lag > 0 else {}),
             **({"compensation_G": self.compensation_G} if self.compensation_G else {}),
             **({"accel": self.accel} if math.isfinite(self.accel) else {}),
+            **({"timestep": self.timestep} if self.timestep else {}),
+            **({"track": round(self.track, 4)} if self.track else {}),
             **(
                 {
                     "drift_bound": round(self.drift.drift_bound, 6),
@@ -149,20 +153,39 @@ class Calibration:
         }
 
 
-def measure(name: str) -> Calibration:
-    """Drive one robot of model ``name`` through :func:`programme` and measure ‖ẋ − u‖."""
-    import mujoco
+def step_for(robot: Any) -> float:
+    """The physics step a robot is measured at: the scene's, or its calibrated shorter one."""
+    return min(TIMESTEP, robot.timestep)
 
-    from ..sim import robots, scene
-    from ..sim.plant import Plant
+
+def robot_with(name: str, measured: dict[str, float] | None = None) -> Any:
+    """Robot model ``name`` with what this calibration has measured so far (``measured``:
+    its physics step, a skid steer's track) in place of its file's values."""
+    from ..sim import robots
 
     robot = robots.get(name, where="MODEL")
-    sc = scene.compose(robot, np.zeros((1, 2)), timestep=TIMESTEP)
+    if not measured:
+        return robot
+    return dataclasses.replace(robot, calibration={**robot.calibration, **measured})
+
+
+def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
+    """Drive one robot of model ``name`` through :func:`programme` and measure ‖ẋ − u‖, at
+    its physics step (:func:`step_for`, :func:`robot_with`). Raises
+    :class:`~.physics.OffPlane` when the robot leaves the plane after its start-up."""
+    import mujoco
+
+    from ..sim import scene
+    from ..sim.plant import Plant
+
+    robot = robot_with(name, measured)
+    step = step_for(robot)
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=step)
     data = Plant.initial_data(sc)
     drive = robot.adapter(sc, data, CONTROL_PERIOD)
     limit = drive.command_limit
     prog = programme(limit)
-    nsub = round(CONTROL_PERIOD / TIMESTEP)
+    nsub = round(CONTROL_PERIOD / step)
     velocity = np.empty((len(prog.u), 2))
     clamped = np.zeros(len(prog.u), bool)
     vel = np.empty(6)
@@ -171,7 +194,10 @@ def measure(name: str) -> Calibration:
     driven = sc.actuator[0]
     lo, hi = sc.model.actuator_ctrlrange[driven].T
     limited = sc.model.actuator_ctrllimited[driven].astype(bool)
+    watch = None
     for k, u in enumerate(prog.u):
+        if k == prog.startup:  # settled: from here on it must stay a planar robot
+            watch = Watch(sc.model, data, int(sc.body[0]), sc.model.geom("floor").id)
         ctrl = drive.command(u[None])[0]
         data.ctrl[ids] = ctrl
         c = ctrl[: len(driven)]
@@ -179,25 +205,29 @@ def measure(name: str) -> Calibration:
         mujoco.mj_step(sc.model, data, nstep=nsub)
         mujoco.mj_objectVelocity(sc.model, data, mujoco.mjtObj.mjOBJ_SITE, site, vel, 0)
         velocity[k] = vel[3:5]
+        t = (k + 1) * CONTROL_PERIOD
         if data.warning.number.any() or not np.isfinite(data.qvel).all():
-            raise ScenarioError(
-                f"{robot.path}: the physics failed during calibration at t = {data.time:.2f} s"
-            )
+            raise OffPlane(Trouble(t, "the physics diverged (MuJoCo's accelerations blew up)"))
+        if watch is not None:
+            watch.check(t)
+            if watch.trouble is not None:
+                raise OffPlane(watch.trouble)
     mismatch = np.hypot(*(velocity - prog.u).T)
     tau, rms_lag = fit_lag(prog.u, velocity, prog.startup)
     rms = float(np.sqrt(np.mean(mismatch[prog.startup :] ** 2)))
-    fits = rms_lag < 0.5 * rms
-    modelled = tau >= LAG_MIN and fits
-    if modelled:  # measure the rest against the drive model the robot will run
+    lag, fast_lag = lag_choice(tau, rms_lag, rms)
+    if lag > 0:  # measure the rest against the drive model the robot will run
         mismatch = np.hypot(*(velocity - lag_response(prog.u, tau)).T)
     cal = _analyse(robot.name, prog, mismatch, clamped, limit)
     return dataclasses.replace(
         cal,
-        lag=tau if modelled else 0.0,
+        lag=lag,
         lag_fit=tau,
-        fast_lag=tau if rms_lag < rms and not modelled else 0.0,
+        fast_lag=fast_lag,
         rms_command=rms,
         rms_lag=rms_lag,
+        timestep=step if step < TIMESTEP else 0.0,
+        track=float(robot.calibration.get("track", 0.0)),
     )
 
 
@@ -212,6 +242,22 @@ def lag_response(u: np.ndarray, tau: float, dt: float = CONTROL_PERIOD) -> np.nd
     if a == 0.0:
         return np.array(u, dtype=float)
     return lfilter([a], [1.0, a - 1.0], u, axis=0)
+
+
+def at_search_edge(tau: float) -> bool:
+    """Whether a fitted τ is the longest lag tried: no lag in the search range fits."""
+    return tau >= 0.99 * LAG_CANDIDATES[-1]
+
+
+def lag_choice(tau: float, rms_lag: float, rms: float) -> tuple[float, float]:
+    """(lag, fast_lag) stored for a best-fitting ``tau`` whose rms mismatch is ``rms_lag``
+    against ``rms`` without a lag: ``lag`` where τ ≥ :data:`LAG_MIN` halves the mismatch,
+    ``fast_lag`` where it only lowers it; neither at the edge of the search."""
+    if at_search_edge(tau):
+        return 0.0, 0.0
+    if tau >= LAG_MIN and rms_lag < 0.5 * rms:
+        return tau, 0.0
+    return 0.0, (tau if rms_lag < rms else 0.0)
 
 
 def fit_lag(u: np.ndarray, v: np.ndarray, skip: int = 0) -> tuple[float, float]:
@@ -367,7 +413,15 @@ def report(cal: Calibration) -> str:
         f"{cal.rms_command * mm:.2f} mm/s against the command, {cal.rms_lag * mm:.2f} mm/s "
         "against the lag)"
     )
-    if cal.lag > 0:
+    if at_search_edge(cal.lag_fit):
+        lines.append(
+            f"WARNING: drive lag: the best fit is {cal.lag_fit:.3g} s, the longest lag tried "
+            f"(the edge of the search, {LAG_CANDIDATES[0]:g}-{LAG_CANDIDATES[-1]:g} s): no "
+            "first-order lag describes this drive (rms mismatch "
+            f"{cal.rms_command * mm:.2f} mm/s against the command, {cal.rms_lag * mm:.2f} "
+            "mm/s against that lag); none is stored"
+        )
+    elif cal.lag > 0:
         lines.insert(
             1,
             fit + ": the robot models it (lag), and every mismatch below is ‖ẋ − v̂‖ against "

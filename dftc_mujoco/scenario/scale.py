@@ -2,10 +2,13 @@
 
 The stock missions are drawn for the 0.2 m disk. A bigger robot needs the same mission
 bigger: every length k times longer (the path, its corner radius, the formation, the start
-positions, the cylinders and their distances, the distances kept around an excluded robot,
-the radio's ranges) and, at the same speed, every time of the mission k times later (the
-duration, the ramp, the transient, the re-plan, each fault's start and end). Speeds,
-gains, noise bounds and rates are unchanged. The scaling is applied to the document before
+positions, the cylinders and their distances, the distances kept around an excluded robot
+and between teammates, the radio's ranges, the sighting tolerance, the bound ε̄ on the
+observers' start error that the threshold rules take, ``fdir.initial_error_bound``) and, at
+the same speed, every time of the mission k times later (the duration, the ramp, the
+transient, the re-plan, each fault's start and end). Speeds, gains, noise bounds and rates
+are unchanged, and so are the robot's own figures (its drift offset ē, calibrated in the
+scaled mission). The scaling is applied to the document before
 it is read, so that the scenario read is the scaled one (``scenario.toml`` in a run's
 folder holds the scaled values, without the key) and every check sees what will run.
 Defaults that are lengths or times are written out scaled.
@@ -28,6 +31,9 @@ LENGTHS: tuple[tuple[tuple[str, ...], str, float | None], ...] = (
     (("network",), "range", None),
     (("network",), "range_hysteresis", None),
     (("network",), "sighting_range", None),
+    (("network",), "sighting_tolerance", None),  # a number: "auto" follows the slots
+    (("fdir",), "initial_error_bound", None),  # a number: "auto" follows the start
+    (("supervisor",), "teammate_distance", None),  # a number: "auto" follows the footprints
 )
 #: the same for times
 TIMES: tuple[tuple[tuple[str, ...], str, float | None], ...] = (

@@ -88,18 +88,22 @@ class ActuatorInfo:
     # L = Σ c q: (joint id in the robot's own model, c) of each joint it moves (gear included)
     moment: tuple[tuple[int, float], ...] = ()
     tendon: str = ""  # the fixed tendon it pulls ("" for a joint transmission)
-    damping: float = 0.0  # of its joint (a joint transmission): losses its command overcomes
+    damping: float = 0.0  # of its joint (a tendon: the most of its joints'): losses it overcomes
     frictionloss: float = 0.0
 
     @property
     def velocity_limit(self) -> float:
-        """Largest joint velocity the ctrl range lets a velocity servo ask for (inf otherwise),
-        after the joint's own damping and friction loss take their share (a tendon: for every
-        joint it moves at once)."""
-        if self.kind != VELOCITY or self.ctrlrange is None:
+        """Largest joint velocity the ctrl range lets the actuator hold (inf otherwise): a
+        velocity servo's, after the joint's own damping and friction loss take their share;
+        a torque motor's against that damping (its full force spent on it). A tendon's for
+        every joint it moves at once (a motor: each joint's least share of its force)."""
+        if self.kind == POSITION or self.ctrlrange is None:
             return np.inf
         lo, hi = self.ctrlrange
         reach = min(abs(lo), abs(hi)) * self.gain
+        if self.kind == MOTOR:  # L̇ where the damping takes all the force: d v = reach·c
+            least = min(abs(c) for _, c in self.moment)
+            return (reach * least - self.frictionloss) / self.damping if self.damping else np.inf
         if self.tendon:
             return reach / (self.kv * sum(abs(c) for _, c in self.moment))
         g = abs(self.gear)
@@ -164,8 +168,8 @@ def classify(model: mujoco.MjModel, a: int) -> ActuatorInfo | str:
         inertia=0.0,
         moment=moment,
         tendon=tendon,
-        damping=0.0 if tendon else float(model.dof_damping[model.jnt_dofadr[j]]),
-        frictionloss=0.0 if tendon else float(model.dof_frictionloss[model.jnt_dofadr[j]]),
+        damping=max(float(model.dof_damping[model.jnt_dofadr[k]]) for k, _ in moment),
+        frictionloss=max(float(model.dof_frictionloss[model.jnt_dofadr[k]]) for k, _ in moment),
     )
 
 

@@ -59,10 +59,14 @@ class Drive:
         self.hold_target = None if self.held is None else data.qpos[self.held.qpos_adr].copy()
         width = scene.actuator.shape[1] + scene.held.shape[1]
         self._ctrl = np.zeros((self.n, width))
-        limit = self._planar_limit(min(i.velocity_limit for i in robot.driven_infos))
+        servos = [i.velocity_limit for i in robot.driven_infos if i.kind == "velocity"]
+        limit = self._planar_limit(min(servos, default=np.inf))
         cap = robot.max_speed
         if cap is None:  # position servos and motors do not limit the speed themselves
             cap = limit if np.isfinite(limit) else DEFAULT_MAX_SPEED
+        # ... but a motor's force does, where its joint's damping takes all of it
+        motors = [i.velocity_limit for i in robot.driven_infos if i.kind == "motor"]
+        cap = min(cap, self._planar_limit(min(motors, default=np.inf)))
         self.command_limit = min(limit, cap)
         self._clip = cap < limit  # then the drive clips the planar command
         # velocity servos that take the planar command as it is (the disk): ctrl = ū

@@ -70,7 +70,17 @@ def for_scenario(scenario: Scenario) -> tuple[Scenario, Fleet]:
     )
     if paths != names:
         scenario = scenario.with_overrides(robot_model=paths if team.mixed else paths[0])
-    return scenario, team
+    return with_step(scenario, min(m.timestep for m in team.models)), team
+
+
+def with_step(scenario: Scenario, most: float) -> Scenario:
+    """``scenario`` stepping at most ``most`` s (a robot whose drive runs away at a longer
+    step: its calibrated ``timestep``), a whole number of steps per control period."""
+    physics = scenario.physics
+    if not most < physics.timestep:
+        return scenario
+    steps = math.ceil(physics.control_period / most - 1e-9)
+    return replace(scenario, physics=replace(physics, timestep=physics.control_period / steps))
 
 
 def actuation(

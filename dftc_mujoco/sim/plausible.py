@@ -19,6 +19,8 @@ LIMITS: dict[str, tuple[float, str, str, str]] = {
     "drift_settle": (3600.0, "s", "5 s is 5.0", "keeps the start-up's bound for the whole run"),
     "saturation": (1.0, "", "a share of the commands: 5 % is 0.05", "is more than all of them"),
     "compensation_G": (10.0, "s", "the paper's is 0.01", "switches the compensation off"),
+    "timestep": (0.01, "s", "0.5 ms is 0.0005", "is longer than a control period"),
+    "track": (10.0, "m", "45 cm is 0.45", "is no planar robot's axle"),
 }
 #: [m/s²] the least acceleration limit a robot that follows a mission can have
 LEAST_ACCEL = 0.01

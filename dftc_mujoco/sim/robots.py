@@ -332,7 +332,7 @@ def _robot_spec(robot: RobotModel, key: str | None = "mjcf") -> mujoco.MjSpec:
         from . import planar_base
 
         base = spec.body(robot.base)
-        if base.joints or base.freejoint:
+        if base.joints:
             said = ", ".join(j.name or "unnamed" for j in base.joints) or "a free joint"
             raise ScenarioError(
                 f"{robot.path}: planar_base: body {robot.base!r} already moves on {said}; "

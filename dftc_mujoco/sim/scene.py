@@ -320,15 +320,23 @@ def _roots(model: mujoco.MjModel, body: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def _notes(robot: RobotModel, spec: mujoco.MjSpec) -> tuple[str, ...]:
-    """One warning for the <option> settings of the robot file that the arena overrides."""
+    """One warning for the <option> settings of the robot file that the arena overrides,
+    and one for the step its calibration asks for."""
     clash = [
         f"{name}={value}"
         for name, value in robot.options
         if option_value(spec.option, name) != value
     ]
+    step: tuple[str, ...] = ()
+    if robot.timestep < np.inf:
+        step = (
+            f"the {robot.name} drive runs away at longer steps (calibration.timestep = "
+            f"{robot.timestep:g} s): the scene steps at {spec.option.timestep:g} s",
+        )
     if not clash:
-        return ()
+        return step
     return (
+        *step,
         f"{robot.mjcf.name} sets <option {' '.join(clash)}>: the arena's options apply "
         f"(timestep {spec.option.timestep:g} s and integrator "
         f"{option_value(spec.option, 'integrator')} from the scenario and the robot files, "

@@ -1,0 +1,153 @@
+"""A user's own robot, unchanged: small models of the kinds public mobile bases are published
+as (tests/data/robots): a differential drive on coupled tendons, a four-wheel skid steer
+spawned above the floor, servos that throw their robot off the plane, a fixed-base arm
+given a planar base. Each is driven through the simulator's own drive and physics."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from dftc_mujoco import calibrate, load_scenario, simulate
+from dftc_mujoco.calibrate.mismatch import LAG_CANDIDATES, Calibration, lag_choice, report
+from dftc_mujoco.loop import Simulation
+from dftc_mujoco.sim import robots, scene
+from dftc_mujoco.sim.plant import Plant
+
+DATA = Path(__file__).parent / "data" / "robots"
+DT = 0.01
+
+
+def _copy(tmp_path: Path, name: str) -> Path:
+    """The robot file ``name`` and its folder of models in ``tmp_path`` (calibrate writes)."""
+    shutil.copytree(DATA / name, tmp_path / name)
+    shutil.copy(DATA / f"{name}.robot.toml", tmp_path)
+    return tmp_path / f"{name}.robot.toml"
+
+
+def _drive(path: Path | str, u: tuple[float, float], seconds: float, step: float = 0.002):
+    """One robot of the file at ``path`` driven by the planar command ``u`` [m/s] for
+    ``seconds``: (its controlled point's start, its end, the base's lowest height at the start
+    and the largest tilt of its base [rad])."""
+    robot = robots.get(str(path))
+    sc = scene.compose(robot, np.zeros((1, 2)), timestep=step)
+    data = Plant.initial_data(sc)
+    drive = robot.adapter(sc, data, DT)
+    ids = drive.controlled()[0]
+    site, body = int(sc.site[0]), int(sc.body[0])
+    mujoco.mj_forward(sc.model, data)
+    start = data.site_xpos[site][:2].copy()
+    tilt = 0.0
+    for _ in range(round(seconds / DT)):
+        data.ctrl[ids] = drive.command(np.array([u], float))[0]
+        mujoco.mj_step(sc.model, data, nstep=round(DT / step))
+        tilt = max(tilt, math.acos(min(1.0, float(data.xmat[body][8]))))
+    return start, data.site_xpos[site][:2].copy(), sc, data, tilt
+
+
+def test_a_diffdrive_on_coupled_tendons_follows_its_commands():
+    """Two torque motors pull fixed tendons forward = ½ q_L + ½ q_R and turn = −½ q_L + ½ q_R
+    (as MuJoCo Menagerie's Stretch is published): the drive reads the wheels under them and
+    steers the controlled point where it is asked, forward and sideways."""
+    robot = robots.get(str(DATA / "tendonbot.robot.toml"))
+    assert robot.drive == "diffdrive"
+    for u in ((0.1, 0.0), (0.0, 0.1)):
+        start, end, *_ = _drive(DATA / "tendonbot.robot.toml", u, 4.0)
+        moved = end - start
+        assert moved @ np.array(u) / 0.1 > 0.25, moved  # most of the 0.4 m asked
+        side = moved[0] * u[1] / 0.1 - moved[1] * u[0] / 0.1
+        assert abs(side) < 0.1, moved  # in the direction asked
+
+
+def test_a_skid_steer_spawned_above_the_floor_starts_on_it_and_calibrates_its_track(tmp_path):
+    """A four-wheel skid steer (two wheels a side) whose MJCF puts it 0.17 m up: it starts on
+    the floor; calibrate spins it in place and stores the track its slipping wheels give,
+    wider than the wheels' own; paper_case at the scale the footprint check suggests then has
+    robot 1's stop flagged by every teammate and robot 1 alone excluded."""
+    path = _copy(tmp_path, "skidbot")
+    _, _, sc, data, tilt = _drive(path, (0.0, 0.0), 0.5)
+    cylinder = mujoco.mjtGeom.mjGEOM_CYLINDER
+    wheels = [g for g in range(sc.model.ngeom) if sc.model.geom_type[g] == cylinder]
+    lowest = min(data.geom_xpos[g][2] - sc.model.geom_size[g][0] for g in wheels)
+    assert abs(lowest) < 0.005 and tilt < 0.05  # on the floor, level
+    geometric = robots.get(str(path)).params["axle_width"]
+    assert calibrate.main([str(path), "--write"]) == 0
+    track = robots.get(str(path)).calibration["track"]
+    assert track > geometric * 1.05, (track, geometric)
+    s = load_scenario("paper_case", {"team.robot_model": str(path), "mission.scale": 1.8})
+    r = simulate(s, progress=False)
+    out = r.summary
+    assert out["onboard"]["blocks"]["thresholds"] == "drive"  # "auto": its lag is calibrated
+    flagged = {d["by"] for d in out["detections"] if d["robot"] == 1}
+    assert flagged == {1, 2, 3, 4}
+    assert {d["robot"] for d in out["detections"]} == {1}
+    assert [e["robot"] for e in out["exclusions"]] == [1]
+
+
+def test_a_fixed_base_arm_given_a_planar_base_moves_as_a_holonomic_base():
+    """planar_base = true gives a model published without a base joint the simulator's own
+    x, y and yaw joints: it is driven like any holonomic base and its arm keeps its pose."""
+    path = DATA / "armbase.robot.toml"
+    start, end, _, _, tilt = _drive(path, (0.1, -0.05), 3.0)
+    np.testing.assert_allclose(end - start, [0.3, -0.15], atol=0.03)
+    assert tilt < 1e-6  # the planar joints keep it level
+
+
+def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path, capsys):
+    """Servos far too strong for their wheels (kv 400 with no force range) throw the robot off
+    the floor at every physics step calibrate tries: nothing is written, and the one line
+    says when, how much, at which steps, and what to check."""
+    path = _copy(tmp_path, "stiffbot")
+    before = path.read_bytes()
+    assert calibrate.main([str(path), "--write"]) != 0
+    err = capsys.readouterr().err
+    line = err.strip().splitlines()[-1]
+    assert "calibration refused, nothing written" in line and "the base rose" in line, err
+    assert "at the shorter steps tried (1, 0.5, 0.25, 0.125, 0.1 ms)" in line, err
+    assert path.read_bytes() == before
+
+
+def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):
+    """[calibration] timestep (a drive that runs away at longer steps) makes the scene step at
+    most that long, a whole number of steps a control period, and the run says so."""
+    path = _copy(tmp_path, "tendonbot")
+    text = path.read_text()
+    path.write_text(text + "\n[calibration]\nxi_bar = 0.05\ntimestep = 0.0007\n")
+    s = load_scenario("paper_case", {"team.robot_model": str(path), "mission.scale": 1.4})
+    sim = Simulation(s)
+    h = sim.model.opt.timestep
+    assert h <= 0.0007 and abs(0.01 / h - round(0.01 / h)) < 1e-9, h
+    said = [e["message"] for e in sim.events.items if e["kind"] == "warning"]
+    assert any("calibration.timestep = 0.0007" in m for m in said), said
+
+
+def test_a_lag_fit_at_the_edge_of_its_search_is_said_and_not_stored():
+    """A drive no first-order lag in the search range describes (a weak servo that reaches a
+    third of its command fits the longest lag tried) is reported as such, and no lag is
+    stored; inside the range the same fit is."""
+    edge = LAG_CANDIDATES[-1]
+    assert lag_choice(edge, 0.01, 0.2) == (0.0, 0.0)
+    assert lag_choice(0.5, 0.01, 0.2) == (0.5, 0.0)  # halves the mismatch: modelled
+    assert lag_choice(0.02, 0.15, 0.2) == (0.0, 0.02)  # only lowers it: the drive rule's
+    cal = Calibration(
+        model="weak", smooth_max=0.2, smooth_p99=0.2, all_max=0.3, all_p99=0.3, samples=100,
+        jump_samples=0, lag_fit=edge, rms_command=0.2, rms_lag=0.01,
+    )  # fmt: skip
+    said = report(cal)
+    assert "the longest lag tried (the edge of the search" in said and "none is stored" in said
+    assert "lag" not in cal.table() and "fast_lag" not in cal.table()
+
+
+@pytest.mark.parametrize("scale", [2.5, 5.1])
+def test_the_scale_the_footprint_check_suggests_runs(scale):
+    """mission.scale scales every length the checks compare: the start bound, the sighting
+    tolerance and the teammates' distance as well as the path (at 2.5 the start bound stayed
+    1 m, and the disk's paper_case was refused)."""
+    s = load_scenario("paper_case", {"mission.scale": scale, "fdir.initial_error_bound": 1.0})
+    assert s.fdir.initial_error_bound == pytest.approx(scale)
+    Simulation(s)  # builds: nothing refused
