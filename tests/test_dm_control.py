@@ -67,3 +67,47 @@ def test_a_team_attached_in_many_groups_loads():
     physics = dm_mujoco.Physics.from_xml_string(scene_xml(made))
     assert physics.model.nbody == made.model.nbody == 41
     np.testing.assert_array_equal(physics.model.body_pos, made.model.body_pos)
+
+
+def test_make_dm_env_is_a_dm_control_environment_over_the_simulation():
+    """make_dm_env is dm_control's rl.control.Environment: its Physics is the simulation's
+    own MjData (a step is one control period), its Task observes the driven robot in named
+    fields and ends an excluded robot's episode with discount 0; the same seed replays an
+    episode and the Physics renders the team."""
+    from dm_control.rl import control
+
+    from dftc_mujoco.envs import make_dm_env
+    from dftc_mujoco.envs.dm import HoldSlotTask, TeamPhysics
+    from dftc_mujoco.envs.seat import FIELDS
+
+    def episode(env, policy, limit=10_000):
+        step, seen = env.reset(), []
+        while not step.last() and len(seen) < limit:
+            seen.append(np.concatenate(list(step.observation.values())))
+            step = env.step(policy(env))
+        return step, np.array(seen)
+
+    env = make_dm_env("paper_case", robot=2, seed=4, overrides={"duration": 0.5})
+    assert isinstance(env, control.Environment)
+    assert isinstance(env.physics, TeamPhysics) and isinstance(env.task, HoldSlotTask)
+    assert env.physics.data.ptr is env.physics.seats.sim.data
+    assert env.physics.timestep() == 0.01
+    assert list(env.observation_spec()) == [name for name, *_ in FIELDS]
+    last, a = episode(env, lambda e: np.zeros(2))
+    assert last.discount == 1.0 and len(a) == 50  # truncated at the duration
+    assert env.physics.seats.sim.t == pytest.approx(0.5)
+    frame = env.physics.render(height=48, width=64)
+    assert frame.shape == (48, 64, 3) and frame.std() > 0
+    _, b = episode(make_dm_env("paper_case", robot=2, seed=4, overrides={"duration": 0.5}),
+                   lambda e: np.zeros(2))  # fmt: skip
+    np.testing.assert_array_equal(a, b)
+    # a robot held still from 2 s is flagged and excluded by its teammates: discount 0
+    s = load_scenario("paper_case", {"duration": 20.0, "faults": []})
+    env = make_dm_env(s, robot=2, seed=1)
+
+    def still(e):
+        seats = e.physics.seats
+        return np.zeros(2) if seats.sim.t >= 2.0 else seats.sim.team.u_bar[1]
+
+    last, _ = episode(env, still)
+    assert last.discount == 0.0 and env.physics.seats.sim.t < 20.0

@@ -103,11 +103,13 @@ def make_dm_env(
     overrides: Mapping[str, Any] | None = None,
     **kwargs: Any,
 ) -> Any:
-    """A ``dm_env.Environment`` in which a policy drives ``robot`` (numbered from 1)."""
-    _need("dm_env")
-    from .dm import DFTCDmEnv
+    """dm_control's ``rl.control.Environment`` (a ``dm_env.Environment``) in which a policy
+    drives ``robot`` (numbered from 1): :mod:`dftc_mujoco.envs.dm`'s physics and task;
+    ``seed``, ``vary`` and ``action`` as for :func:`make_gym`."""
+    _need("dm_control")
+    from .dm import environment
 
-    return DFTCDmEnv(_scenario(scenario, overrides), robot, **kwargs)
+    return environment(_scenario(scenario, overrides), robot, **kwargs)
 
 
 def register() -> list[str]:
