@@ -25,13 +25,16 @@ import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
 
 from .errors import InputError, SimulationError, raised_line
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
+
+if TYPE_CHECKING:
+    from .onboard.team import Team
 
 #: the premises, in the order the tables print them, with a one-line meaning each
 PREMISES: dict[str, str] = {
@@ -304,7 +307,7 @@ class Monitor:
     @classmethod
     def for_team(
         cls,
-        team: Any,
+        team: Team,
         rule: str,
         command_limit: float,
         start: StartBound,
