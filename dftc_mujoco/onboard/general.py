@@ -7,15 +7,12 @@ Fig. 1, and both paths compute the same thing for the paper's blocks (tested).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .block import BadOutput, Block, blame_not_finite, shaped
 from .period import RAISED, SATURATED, SWITCHED
-
-if TYPE_CHECKING:
-    from .team import Team
 
 
 def judged(
@@ -37,7 +34,7 @@ def judged(
     return out
 
 
-def general_period(team: Team, x_m, c, c_dot, offsets, rates) -> int:
+def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
     """One period of :class:`~.team.Team` ``team`` through its blocks' Python methods
     (any block set); returns RAISED | SWITCHED | SATURATED bits. The arguments are those
     of the compiled period (:class:`~.period.PeriodInputs`)."""

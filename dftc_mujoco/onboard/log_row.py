@@ -11,7 +11,7 @@ or False (:func:`_team_row`: 1.4 µs a row at N = 4, where placing the arrays in
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -19,9 +19,6 @@ from numba import njit
 from .decision import flagged_by_teammates
 from .team_axis import place
 from .thresholds.paper import factored_at
-
-if TYPE_CHECKING:
-    from .team import Team
 
 #: the log's fields the team writes, in the order the compiled call takes them
 FIELDS = ("u", "active", "x_d", "reactive", "flagged", "phi_hat", "x_hat", "residual", "threshold")
@@ -112,7 +109,7 @@ def _team_row(
                 )
 
 
-def write_row(team: Team, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
+def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
     """Write the team's outputs into row ``row`` of the log's preallocated arrays (the N × N
     ones into row ``row_nn`` unless it is -1), on the original robot axis: one compiled call
     for a compiled team (:func:`_team_row`), :func:`placed_row` for a team of plug-in blocks
@@ -133,7 +130,7 @@ def write_row(team: Team, log: dict[str, np.ndarray], row: int, fdir: bool, row_
     )  # fmt: skip
 
 
-def placed_row(team: Team, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
+def placed_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
     """:func:`write_row` in Python: the members' rows placed on the original robot axis
     (:func:`~.team_axis.place`), the others filled."""
     mem = team.members

@@ -23,14 +23,11 @@ Only what robot i knows is used: its links, its range sensor, the mission and th
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..events import make
-
-if TYPE_CHECKING:
-    from .team import Team
 
 #: [s] a silent robot keeps the wider tolerance this long after it was near something
 HOLD = 2.0
@@ -117,7 +114,7 @@ class Sighting:
         return raised, events
 
     def watch(
-        self, t: float, team: Team, c: np.ndarray, c_dot: np.ndarray, plan: tuple, seen: np.ndarray
+        self, t: float, team: Any, c: np.ndarray, c_dot: np.ndarray, plan: tuple, seen: np.ndarray
     ) -> list[dict[str, Any]]:
         """One period of ``team`` (:class:`~.team.Team`): its radios' silent robots, its
         links, the slots ``c`` + offsets moving at ``c_dot`` + rates (``plan``: the
