@@ -90,6 +90,22 @@ def runs_compiled(blocks: Mapping[str, Block]) -> bool:
     return all(type(blocks[k]) is PAPER_BLOCKS[k] for k in _COMPILED if k in blocks)
 
 
+def choose_blocks(blocks: Mapping[str, Block] | None) -> dict[str, Block]:
+    """Every block of the period: the given ones (each an instance of its paper block's
+    class or of a class derived from it), the paper's for the others."""
+    unknown = set(blocks or {}) - set(PAPER_BLOCKS)
+    if unknown:
+        raise ValueError(f"unknown blocks {sorted(unknown)}; expected {list(PAPER_BLOCKS)}")
+    given = dict(blocks or {})
+    for k, b in given.items():  # a block that is falsy is still the user's block
+        if not isinstance(b, PAPER_BLOCKS[k]):
+            raise ValueError(
+                f"blocks[{k!r}]: expected an instance of a class derived from "
+                f"{PAPER_BLOCKS[k].__name__}, got {type(b).__name__}"
+            )
+    return {k: given[k] if k in given else cls() for k, cls in PAPER_BLOCKS.items()}
+
+
 class Team:
     """The team's onboard computers; :meth:`step` advances all of them by one period.
 
@@ -108,17 +124,7 @@ class Team:
         centroid0: np.ndarray,
         blocks: Mapping[str, Block] | None = None,
     ) -> None:
-        unknown = set(blocks or {}) - set(PAPER_BLOCKS)
-        if unknown:
-            raise ValueError(f"unknown blocks {sorted(unknown)}; expected {list(PAPER_BLOCKS)}")
-        given = dict(blocks or {})
-        for k, b in given.items():  # a block that is falsy is still the user's block
-            if not isinstance(b, PAPER_BLOCKS[k]):
-                raise ValueError(
-                    f"blocks[{k!r}]: expected an instance of a class derived from "
-                    f"{PAPER_BLOCKS[k].__name__}, got {type(b).__name__}"
-                )
-        chosen = {k: given[k] if k in given else cls() for k, cls in PAPER_BLOCKS.items()}
+        chosen = choose_blocks(blocks)
         n = config.graph.n
         self.config = config
         self.n = n
@@ -168,6 +174,16 @@ class Team:
         )
         # each robot's own alarm from its fault estimate confirms its exclusion
         self.alarm = EstimateAlarm.of(config, n, getattr(self.thresholds, "phi_bar", None))
+        self._scratch(config, n)
+        self._resize()
+        # what the team shows before its first period: the robots' first estimates and slots
+        np.copyto(self.x_hat, self.observer.estimate())
+        self.x_d[:] = prior
+
+    def _scratch(self, config: TeamConfig, n: int) -> None:
+        """The state the team keeps between periods besides its blocks': contacts, the
+        network's rounds and radios, the sighting of silent robots, what a pass under way
+        was given."""
         self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
         self._sensed = False  # the last period had range-sensor readings
         # a plug-in supervisor whose step() predates teammate avoidance is called without it
@@ -202,10 +218,6 @@ class Team:
         self.horizon: float | None = None  # the run's duration, once settle_time has looked
         self.settles_at = 0.0  # T_s: faults from then on are in eq. 46's domain
         self.restarted_at: float | None = None  # the last exclusion, which restarted the rule
-        self._resize()
-        # what the team shows before its first period: the robots' first estimates and slots
-        np.copyto(self.x_hat, self.observer.estimate())
-        self.x_d[:] = prior
 
     def settle_time(self, horizon: float) -> float:
         """T_s of the team's thresholds (:func:`~.thresholds.settling.rule_settle_time`), up
