@@ -17,6 +17,10 @@ from pathlib import Path
 
 import pytest
 
+# one local Ray instance at a time: these tests share a worker when the suite runs in
+# parallel (pytest -n auto --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("ray")
+
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -90,6 +90,38 @@ Documentation: the project's docs/ folder (campaigns: every key of a spec).
     )
 
 
+def _checked(args: argparse.Namespace, spec: Any) -> Any:
+    """The campaign ``spec`` with the command line's --runs and --seed, once every option
+    is checked (one line each for what cannot run; a note for more workers than CPUs)."""
+    if args.runs is not None:
+        if args.runs < 1:
+            raise ScenarioError(f"--runs: expected at least 1, got {args.runs}")
+        spec = dataclasses.replace(spec, runs=args.runs)
+    if args.seed is not None:
+        if not 0 <= args.seed <= 2**63 - 1:
+            raise ScenarioError(f"--seed: expected an integer from 0 to 2**63 - 1, got {args.seed}")
+        spec = dataclasses.replace(spec, seed=args.seed)
+    if args.limit is not None and args.limit < 1:
+        raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
+    if args.workers < 1:
+        raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
+    cpus = os.cpu_count() or 1
+    if args.ray is None and args.workers > cpus:  # said: each is a process of its own
+        print(
+            f"note: --workers {args.workers} is more than the {cpus} CPUs here: the runs share "
+            "them, each worker a process with its own memory (one worker per run at most)",
+            file=sys.stderr,
+        )
+    if args.ray_timeout is not None:
+        if args.ray is None:
+            raise ScenarioError("--ray-timeout: only with --ray")
+        if not 0 < args.ray_timeout <= 3600:  # also refuses nan
+            raise ScenarioError(
+                f"--ray-timeout: expected seconds in (0, 3600], got {args.ray_timeout:g}"
+            )
+    return spec
+
+
 def _main(args: argparse.Namespace, signals: Signals) -> int:
     from ..errors import ClusterError
     from . import folder, report, runner
@@ -98,36 +130,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
     engine: Any = False
     try:
         with signals.active():
-            spec = spec_mod.load(args.spec)
-            if args.runs is not None:
-                if args.runs < 1:
-                    raise ScenarioError(f"--runs: expected at least 1, got {args.runs}")
-                spec = dataclasses.replace(spec, runs=args.runs)
-            if args.seed is not None:
-                if not 0 <= args.seed <= 2**63 - 1:
-                    raise ScenarioError(
-                        f"--seed: expected an integer from 0 to 2**63 - 1, got {args.seed}"
-                    )
-                spec = dataclasses.replace(spec, seed=args.seed)
-            if args.limit is not None and args.limit < 1:
-                raise ScenarioError(f"--limit: expected at least 1, got {args.limit}")
-            if args.workers < 1:
-                raise ScenarioError(f"--workers: expected at least 1, got {args.workers}")
-            cpus = os.cpu_count() or 1
-            if args.ray is None and args.workers > cpus:  # said: each is a process of its own
-                print(
-                    f"note: --workers {args.workers} is more than the {cpus} CPUs here: the "
-                    "runs share them, each worker a process with its own memory (one worker "
-                    "per run at most)",
-                    file=sys.stderr,
-                )
-            if args.ray_timeout is not None:
-                if args.ray is None:
-                    raise ScenarioError("--ray-timeout: only with --ray")
-                if not 0 < args.ray_timeout <= 3600:  # also refuses nan
-                    raise ScenarioError(
-                        f"--ray-timeout: expected seconds in (0, 3600], got {args.ray_timeout:g}"
-                    )
+            spec = _checked(args, spec_mod.load(args.spec))
         name = spec.name if args.seed is None else f"{spec.name}_seed{spec.seed}"
         out = Path(args.out or Path.cwd() / "renders" / "campaigns" / name).absolute()
         if args.ray is not None:  # join the cluster first: a failure leaves no folder behind
