@@ -370,3 +370,47 @@ def governed_text(s: Scenario, name: str, applied: float, flown: float) -> str:
         "range less the compensation's headroom): the path is flown at "
         f"{flown:.3g} m/s, so that their commands stay inside it (summary: mission_speed)"
     )
+
+
+def preflight(
+    s: Scenario,
+    model: robots.RobotModel,
+    models: Sequence[robots.RobotModel],
+    limit: float,
+    config: TeamConfig,
+    xi_bar: float,
+    refusal: str | None,
+    path: np.ndarray,
+    dt: float,
+    rule: str,
+) -> list[str]:
+    """Every check of scenario ``s`` against its robots (``model``: the team's envelope,
+    ``models``: each robot's own) before the run: one :class:`~.errors.InputError` of every
+    refusal (``refusal``: the start bound's, if any); returns the warnings. ``path`` is the
+    desired centroid every control period ``dt``, ``rule`` the threshold rule's name."""
+    from . import checks, premises
+
+    every = max(1, round(0.1 / dt))  # the path every 0.1 s is enough to check it
+    found = checks.preflight(
+        s,
+        model,
+        limit,
+        config.obstacle_safe,
+        config.obstacle_activation,
+        path[::every],
+        every * dt,
+        input_limit=config.input_limit,
+        xi_bar=xi_bar,
+        G=effective_G(s, model),
+        footprints=np.array([m.footprint_radius for m in models]),
+    )
+    if refusal:
+        found.refusals.append(refusal)
+    found.refusals += premises.rule_refusals(
+        rule, s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
+    )
+    radio_refused, radio_warned = network.refusals(s, rule, str(s.source))
+    found.refusals += radio_refused
+    found.warnings += radio_warned
+    found.raise_refusals()
+    return found.warnings

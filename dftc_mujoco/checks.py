@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -122,6 +123,117 @@ def check_memory(s: Scenario, available: int | None = None) -> None:
 # --------------------------------------------------------------------------- the set-up
 
 
+def _formation_room(
+    s: Scenario, reach: float, name: str, contacts: bool, finding: Callable[..., None]
+) -> None:
+    """The formation, and the one re-planned without a robot: hulls must not overlap."""
+    need = 2 * reach + CLEARANCE
+    n = s.team.robots
+    for m in (n, n - 1) if s.fdir.enabled and n > 2 else (n,):
+        spacing = _closest_pair(formation_offsets(s.mission.formation, m))
+        if spacing < need:
+            which = "the formation" if m == n else f"the re-planned formation of {m} robots"
+            finding(
+                "mission.formation.side",
+                f"{which} puts two slots {spacing:.3f} m apart, but two {name} robots need "
+                f"{need:.3f} m (footprint radius {reach:.3f} m each, + {CLEARANCE:g} m): use "
+                f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}, or "
+                f"mission.scale = {math.ceil(10 * need / max(spacing, 1e-9)) / 10:g} (the "
+                "whole mission that much bigger: path, cylinders, starts, times)"
+                + ("" if contacts else " (robot contacts are off: hulls will pass through)"),
+                refuse=contacts,
+            )
+            break
+
+
+def _starts(
+    s: Scenario,
+    reach: float,
+    safe: np.ndarray,
+    footprints: np.ndarray | None,
+    contacts: bool,
+    finding: Callable[..., None],
+) -> None:
+    """Where the robots start: not inside a cylinder, not inside each other."""
+    x0 = np.asarray(s.team.initial_positions, float)
+    own = np.full(len(x0), reach) if footprints is None else np.asarray(footprints, float)
+    for k, ob in enumerate(s.obstacles):
+        gap = np.linalg.norm(x0 - ob.position, axis=1) - ob.radius - own
+        for i in np.flatnonzero(gap < 0):
+            finding(
+                "team.initial_positions",
+                f"robot {i + 1} starts with its hull {-gap[i]:.3f} m inside cylinder {k + 1} "
+                f"(its footprint radius is {own[i]:.3f} m); move it or the cylinder",
+                refuse=True,
+            )
+        inside = np.flatnonzero((gap >= 0) & (np.linalg.norm(x0 - ob.position, axis=1) < safe[k]))
+        for i in inside:
+            finding(
+                "team.initial_positions",
+                f"robot {i + 1} starts inside cylinder {k + 1}'s safe distance "
+                f"({safe[k]:.3f} m): its first command is to get out",
+                refuse=False,
+            )
+    near = sorted(cKDTree(x0).query_pairs(2 * reach)) if reach > 0 else []
+    pairs = [(i, j) for i, j in near if np.linalg.norm(x0[i] - x0[j]) < own[i] + own[j]]
+    for i, j in pairs[:3]:
+        d = float(np.linalg.norm(x0[i] - x0[j]))
+        finding(
+            "team.initial_positions",
+            f"robots {i + 1} and {j + 1} start {d:.3f} m apart: their hulls overlap "
+            f"(footprint radii {own[i]:.3f} m and {own[j]:.3f} m)"
+            + ("" if contacts else " (robot contacts are off: they pass through)"),
+            refuse=contacts,
+        )
+    if len(pairs) > 3:
+        finding("team.initial_positions", f"... {len(pairs) - 3} more overlapping pairs", contacts)
+
+
+def _fault_sizes(
+    s: Scenario, name: str, command_limit: float, finding: Callable[..., None]
+) -> None:
+    """Biases and drifts against the command range: beyond any actuator offset (refused), or
+    beyond what the compensation can cancel while the team moves (warned)."""
+    speed = s.mission.centroid.speed
+    cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))
+    for k, f in enumerate(s.faults):
+        if f.kind == "drift":  # a bias growing at value [m/s²]: as big as a bias, at its end
+            rate = float(np.abs(f.value).max())
+            until = min(s.duration, f.end)
+            peak = rate * max(until - f.t, 0.0)
+            if peak > cap:
+                finding(
+                    f"faults[{k + 1}].value",
+                    f"a drift of {rate:g} m/s² on robot {f.robot + 1} grows to a bias of "
+                    f"{peak:g} m/s by t = {until:g} s, {peak / cap * FAULT_CAP:.0f} times the "
+                    f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator "
+                    f"offset produces that; expected at most {cap / max(until - f.t, 1e-12):.3g} "
+                    "m/s² (a drift is in m/s per second), or an end",
+                    refuse=True,
+                )
+            continue
+        if f.kind != "bias":
+            continue
+        size = float(np.abs(f.value).max())
+        key = f"faults[{k + 1}].value"
+        if size > cap:
+            finding(
+                key,
+                f"a bias of {size:g} m/s is {size / cap * FAULT_CAP:.0f} times the "
+                f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator offset "
+                f"produces that; expected at most {cap:g} m/s",
+                refuse=True,
+            )
+        elif size + speed > command_limit:
+            finding(
+                key,
+                f"a bias of {size:g} m/s on robot {f.robot + 1} cannot be compensated within "
+                f"the ±{command_limit:.3g} m/s command range while the team moves at "
+                f"{speed:g} m/s: it acts as an unrecoverable fault",
+                refuse=False,
+            )
+
+
 def preflight(
     s: Scenario,
     robot,
@@ -160,57 +272,9 @@ def preflight(
             f"{round(periods) * s.physics.control_period:g} s",
             False,
         )
-    # the formation, and the one re-planned without a robot: hulls must not overlap
-    need = 2 * reach + CLEARANCE
     n = s.team.robots
-    for m in (n, n - 1) if s.fdir.enabled and n > 2 else (n,):
-        spacing = _closest_pair(formation_offsets(s.mission.formation, m))
-        if spacing < need:
-            which = "the formation" if m == n else f"the re-planned formation of {m} robots"
-            finding(
-                "mission.formation.side",
-                f"{which} puts two slots {spacing:.3f} m apart, but two {name} robots need "
-                f"{need:.3f} m (footprint radius {reach:.3f} m each, + {CLEARANCE:g} m): use "
-                f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}, or "
-                f"mission.scale = {math.ceil(10 * need / max(spacing, 1e-9)) / 10:g} (the "
-                "whole mission that much bigger: path, cylinders, starts, times)"
-                + ("" if contacts else " (robot contacts are off: hulls will pass through)"),
-                refuse=contacts,
-            )
-            break
-    # where the robots start: not inside a cylinder, not inside each other
-    x0 = np.asarray(s.team.initial_positions, float)
-    own = np.full(len(x0), reach) if footprints is None else np.asarray(footprints, float)
-    for k, ob in enumerate(s.obstacles):
-        gap = np.linalg.norm(x0 - ob.position, axis=1) - ob.radius - own
-        for i in np.flatnonzero(gap < 0):
-            finding(
-                "team.initial_positions",
-                f"robot {i + 1} starts with its hull {-gap[i]:.3f} m inside cylinder {k + 1} "
-                f"(its footprint radius is {own[i]:.3f} m); move it or the cylinder",
-                refuse=True,
-            )
-        inside = np.flatnonzero((gap >= 0) & (np.linalg.norm(x0 - ob.position, axis=1) < safe[k]))
-        for i in inside:
-            finding(
-                "team.initial_positions",
-                f"robot {i + 1} starts inside cylinder {k + 1}'s safe distance "
-                f"({safe[k]:.3f} m): its first command is to get out",
-                refuse=False,
-            )
-    near = sorted(cKDTree(x0).query_pairs(2 * reach)) if reach > 0 else []
-    pairs = [(i, j) for i, j in near if np.linalg.norm(x0[i] - x0[j]) < own[i] + own[j]]
-    for i, j in pairs[:3]:
-        d = float(np.linalg.norm(x0[i] - x0[j]))
-        finding(
-            "team.initial_positions",
-            f"robots {i + 1} and {j + 1} start {d:.3f} m apart: their hulls overlap "
-            f"(footprint radii {own[i]:.3f} m and {own[j]:.3f} m)"
-            + ("" if contacts else " (robot contacts are off: they pass through)"),
-            refuse=contacts,
-        )
-    if len(pairs) > 3:
-        finding("team.initial_positions", f"... {len(pairs) - 3} more overlapping pairs", contacts)
+    _formation_room(s, reach, name, contacts, finding)
+    _starts(s, reach, safe, footprints, contacts, finding)
     # the cylinders' distances, raised for a big robot
     for k, ob in enumerate(s.obstacles):
         if safe[k] > ob.safe_distance + 1e-12:
@@ -255,43 +319,7 @@ def preflight(
             "premise 'saturation'); set the governor on to fly it slower, or lower the speed",
             refuse=False,
         )
-    cap = FAULT_CAP * (command_limit if math.isfinite(command_limit) else max(1.0, speed))
-    for k, f in enumerate(s.faults):
-        if f.kind == "drift":  # a bias growing at value [m/s²]: as big as a bias, at its end
-            rate = float(np.abs(f.value).max())
-            until = min(s.duration, f.end)
-            peak = rate * max(until - f.t, 0.0)
-            if peak > cap:
-                finding(
-                    f"faults[{k + 1}].value",
-                    f"a drift of {rate:g} m/s² on robot {f.robot + 1} grows to a bias of "
-                    f"{peak:g} m/s by t = {until:g} s, {peak / cap * FAULT_CAP:.0f} times the "
-                    f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator "
-                    f"offset produces that; expected at most {cap / max(until - f.t, 1e-12):.3g} "
-                    "m/s² (a drift is in m/s per second), or an end",
-                    refuse=True,
-                )
-            continue
-        if f.kind != "bias":
-            continue
-        size = float(np.abs(f.value).max())
-        key = f"faults[{k + 1}].value"
-        if size > cap:
-            finding(
-                key,
-                f"a bias of {size:g} m/s is {size / cap * FAULT_CAP:.0f} times the "
-                f"{name} robots' command range (±{command_limit:.3g} m/s): no actuator offset "
-                f"produces that; expected at most {cap:g} m/s",
-                refuse=True,
-            )
-        elif size + speed > command_limit:
-            finding(
-                key,
-                f"a bias of {size:g} m/s on robot {f.robot + 1} cannot be compensated within "
-                f"the ±{command_limit:.3g} m/s command range while the team moves at "
-                f"{speed:g} m/s: it acts as an unrecoverable fault",
-                refuse=False,
-            )
+    _fault_sizes(s, name, command_limit, finding)
     _magnitudes(s, finding, name, command_limit, xi_bar, G)
     _sightings(s, finding)
     _walls(s, finding, name, safe, reach, dist, path_dt)

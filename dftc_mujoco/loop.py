@@ -29,10 +29,10 @@ from . import checks, mission, network, numba_cache, premises, warm
 from .assembly import (
     block_names,
     calibration_warnings,
-    effective_G,
     effective_xi_bar,
     governed_text,
     make_blocks,
+    preflight,
     team_config,
     threshold_rule,
 )
@@ -40,7 +40,7 @@ from .block_failure import block_error, setup_error
 from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
 from .execution import Execution
-from .onboard.block import Block
+from .onboard.block import Block, TeamConfig
 from .onboard.team import Team
 from .onboard.thresholds import prefetch_decay_bounds
 from .physics_step import PhysicsStep, Sensed
@@ -52,6 +52,16 @@ from .sim.faults import Fault
 from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
 from .snapshot import Snapshot
+
+
+def _check_seed(seed: object) -> None:
+    """Refuse a seed that is not a whole number in 0..2**63 − 1 (None: keep the scenario's)."""
+    if seed is not None and (
+        isinstance(seed, bool)
+        or not isinstance(seed, int | np.integer)
+        or not 0 <= seed <= np.iinfo(np.int64).max
+    ):
+        raise ValueError(f"reset(seed): expected a whole number in 0..2**63 - 1, got {seed!r}")
 
 
 class Simulation:
@@ -155,12 +165,7 @@ class Simulation:
     def reset(self, seed: int | None = None) -> None:
         """Start the run again from t = 0 (with another ``seed`` if given: a whole number
         ≥ 0)."""
-        if seed is not None and (
-            isinstance(seed, bool)
-            or not isinstance(seed, int | np.integer)
-            or not 0 <= seed <= np.iinfo(np.int64).max
-        ):
-            raise ValueError(f"reset(seed): expected a whole number in 0..2**63 - 1, got {seed!r}")
+        _check_seed(seed)
         wall0 = time.perf_counter()
         compiling0 = self._clock.total()
         if seed is not None:
@@ -211,39 +216,12 @@ class Simulation:
             s.fdir.initial_error_bound, x0, slots, s.noise.eta_bar, meaning, str(s.source)
         )
         config = team_config(s, model, limit, self.start_bound.value)
-        flown = mission.governed_speed(s.mission.centroid.speed, config.input_limit, limit)
-        if flown is not None and s.mission.centroid.governor:  # the path governor
-            text = governed_text(s, model.name, config.input_limit, flown)
-            self.events.add(0.0, "warning", message=text)
-            self.scenario = s = s.with_overrides(speed=flown)
-            self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
-            config = team_config(s, model, limit, self.start_bound.value)
-        every = max(1, round(0.1 / dt))  # the path every 0.1 s is enough to check it
-        found = checks.preflight(
-            s,
-            model,
-            limit,
-            config.obstacle_safe,
-            config.obstacle_activation,
-            self.path.position[::every],
-            every * dt,
-            input_limit=config.input_limit,
-            xi_bar=xi_bar,
-            G=effective_G(s, model),
-            footprints=np.array([m.footprint_radius for m in self.fleet.models]),
-        )
-        if refusal:
-            found.refusals.append(refusal)
-        found.refusals += premises.rule_refusals(
-            self.block_names["thresholds"], s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
-        )
-        radio_refused, radio_warned = network.refusals(
-            s, self.block_names["thresholds"], str(s.source)
-        )
-        found.refusals += radio_refused
-        found.warnings += radio_warned
-        found.raise_refusals()
-        for message in found.warnings:
+        s, config = self._governed(s, config)
+        rule = self.block_names["thresholds"]
+        path = self.path.position
+        for message in preflight(
+            s, model, self.fleet.models, limit, config, xi_bar, refusal, path, dt, rule
+        ):
             self.events.add(0.0, "warning", message=message)
         ex = self.execution
         config = replace(
@@ -261,6 +239,43 @@ class Simulation:
             if said is None:
                 raise
             raise said from exc
+        self._team_warnings(s)
+        self.monitor = premises.Monitor.for_team(
+            self.team, self.block_names["thresholds"], self.command_limit, self.start_bound,
+            x0, self.data.xpos[self.scene.body, 2], self.events,
+        )  # fmt: skip
+        self._network(s, dt)
+        self.k = 0  # next control period
+        self.error: SimulationError | None = None
+        self.stopped: str | None = None  # why the run was stopped early (request_stop)
+        self.left: str | None = None  # a robot left the arena: the mission is over
+        self._seen = 0  # events already handed out by step()
+        # what a period senses, the commands and the physics step (drive(): from outside)
+        self._physics = PhysicsStep(
+            plant, self.team.u_bar, self.adapter, self.faults, s.physics.substeps
+        )
+        self._x, self._x_m = self._physics.sensed.x, self._physics.sensed.x_m
+        self._x[:], self._x_m[:] = x0, x_m0  # what a snapshot before the first step shows
+        self._build = self._build_time + self._without_compiling(wall0, compiling0)
+        self._wall = self._build
+        self._build_time = 0.0
+
+    def _governed(self, s: Scenario, config: TeamConfig) -> tuple[Scenario, TeamConfig]:
+        """The path governor: a path speed that leaves the drives no room in their applied
+        range is flown slower (said in a warning); the scenario and the team's configuration
+        as they then are."""
+        limit = self.command_limit
+        flown = mission.governed_speed(s.mission.centroid.speed, config.input_limit, limit)
+        if flown is None or not s.mission.centroid.governor:
+            return s, config
+        text = governed_text(s, self.robot.name, config.input_limit, flown)
+        self.events.add(0.0, "warning", message=text)
+        self.scenario = s = s.with_overrides(speed=flown)
+        self.path = mission.centroid_table(s.mission.centroid, s.duration, self.dt)
+        return s, team_config(s, self.robot, limit, self.start_bound.value)
+
+    def _team_warnings(self, s: Scenario) -> None:
+        """Warn of an unmet detection horizon and of thresholds that never flag."""
         if "warning" in self.team.dt_d_max_info:
             self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
         if self.team.never_flags and s.fdir.enabled:
@@ -276,10 +291,9 @@ class Simulation:
         self.team.dt_d_max_info["settle_time"] = (
             self.settle_time if np.isfinite(self.settle_time) else None
         )
-        self.monitor = premises.Monitor.for_team(
-            self.team, self.block_names["thresholds"], self.command_limit, self.start_bound,
-            x0, self.data.xpos[self.scene.body, 2], self.events,
-        )  # fmt: skip
+
+    def _network(self, s: Scenario, dt: float) -> None:
+        """The medium between the radios (None: an ideal network), its links in the log."""
         # the medium between the radios (None: the ideal network, which needs no model)
         self.channel: network.Channel | None = None
         if not s.network.ideal:
@@ -292,20 +306,6 @@ class Simulation:
             self.log.static["links"] = self.channel.edges + 1
             self.log.static["link_bounds"] = np.array(self.channel.bounds())
             self._ages = np.zeros(e)
-        self.k = 0  # next control period
-        self.error: SimulationError | None = None
-        self.stopped: str | None = None  # why the run was stopped early (request_stop)
-        self.left: str | None = None  # a robot left the arena: the mission is over
-        self._seen = 0  # events already handed out by step()
-        # what a period senses, the commands and the physics step (drive(): from outside)
-        self._physics = PhysicsStep(
-            plant, self.team.u_bar, self.adapter, self.faults, s.physics.substeps
-        )
-        self._x, self._x_m = self._physics.sensed.x, self._physics.sensed.x_m
-        self._x[:], self._x_m[:] = x0, x_m0  # what a snapshot before the first step shows
-        self._build = self._build_time + self._without_compiling(wall0, compiling0)
-        self._wall = self._build
-        self._build_time = 0.0
 
     def _without_compiling(self, wall0: float, compiling0: float) -> float:
         """Seconds since ``wall0`` less numba's compilation since then (added to

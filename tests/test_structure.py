@@ -159,3 +159,18 @@ def test_every_module_has_a_row_in_the_layout_table():
             continue
         missing.append(rel)
     assert not missing, sorted(missing)
+
+
+def test_no_function_in_the_package_is_over_100_lines():
+    """A function a reader can hold: none of the package's is longer than 100 lines
+    (Simulation.reset was 181, checks.preflight 167, events.describe 139)."""
+    import ast
+
+    long = []
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > 100:
+                    long.append(f"{name}.{node.name}: {lines} lines")
+    assert not long, long

@@ -160,6 +160,22 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if r.get("status") == "ok"]
+    lines = [*_measures(s, title, description), ""]
+    lines += _delay_figure(ok, s, figs)
+    lines += _bias_figure(ok, figs)
+    lines += _rule_table(ok)
+    lines += _kind_table(ok)
+    lines += _kept_table(ok)
+    lines += _scale_table(ok, figs)
+    lines += _network_table(ok, figs)
+    lines += _method_table(ok, figs)
+    path = out / "report.md"
+    write_text(path, "\n".join(lines) + "\n")
+    return path
+
+
+def _measures(s: dict[str, Any], title: str, description: str) -> list[str]:
+    """The report's title and its table of measures over every run (:func:`summarise`)."""
     rph = s["false_alarms_per_robot_hour"]
     per_hour = "n/a" if rph is None else f"{rph:.3f}"
     lines = [
@@ -224,7 +240,12 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         f"| healthy robots' distance from their slots after the transient: median of runs' "
         f"rms | {_num(s['healthy_slot_rms_median'], 4)} m |",
     ]
-    lines.append("")
+    return lines
+
+
+def _delay_figure(ok: list[dict[str, Any]], s: dict[str, Any], figs: Path) -> list[str]:
+    """The histogram of first-detection delays (``figs/delays.png``) and its line."""
+    lines: list[str] = []
     if ok and any(r["delay_first"] is not None for r in ok):
         d = [r["delay_first"] for r in ok if r["delay_first"] is not None]
         fig, ax = new_figure(figsize=(6, 3.5))
@@ -237,6 +258,12 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
         ax.set_title("Detection delay")
         _save(fig, figs / "delays.png")
         lines += ["![detection delays](figures/delays.png)", ""]
+    return lines
+
+
+def _bias_figure(ok: list[dict[str, Any]], figs: Path) -> list[str]:
+    """Detection against bias magnitude (``figs/bias_detection.png``) and its lines."""
+    lines: list[str] = []
     biases = [r for r in ok if r["fault_kind"] == "bias"]
     if biases:
         mags = np.array([r["bias_magnitude"] for r in biases])
@@ -262,15 +289,7 @@ def write(rows: list[dict[str, Any]], out: Path, title: str, description: str = 
             "![bias detection](figures/bias_detection.png)",
             "",
         ]
-    lines += _rule_table(ok)
-    lines += _kind_table(ok)
-    lines += _kept_table(ok)
-    lines += _scale_table(ok, figs)
-    lines += _network_table(ok, figs)
-    lines += _method_table(ok, figs)
-    path = out / "report.md"
-    write_text(path, "\n".join(lines) + "\n")
-    return path
+    return lines
 
 
 def _bias_limits(rows: list[dict[str, Any]]) -> tuple[float | None, float | None]:

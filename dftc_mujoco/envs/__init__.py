@@ -13,7 +13,8 @@ draws the next, the scenario's duration truncates, an exclusion terminates.
   registered with Gymnasium when this package is imported (``gymnasium.make``,
   ``gymnasium.make_vec``);
 * :func:`make_parallel` — a PettingZoo ``ParallelEnv``, one agent per driven robot;
-* :func:`make_dm_env` — a ``dm_env.Environment`` for one robot.
+* :func:`make_dm_env` — dm_control's ``rl.control.Environment`` (a ``dm_env.Environment``)
+  for one robot.
 
 ``pip install -e ".[rl]"`` installs gymnasium, pettingzoo and dm-env.
 """

@@ -1,4 +1,4 @@
-"""dm_control's environment: a policy drives one robot of the team (:mod:`.seat`).
+"""dm_control's environment: a policy drives one robot of the team (``dftc_mujoco.envs.seat``).
 
 :func:`environment` is a ``dm_control.rl.control.Environment`` of two parts, as dm_control's
 own domains are:
@@ -10,7 +10,7 @@ own domains are:
   state as it is.
 * :class:`HoldSlotTask`, a ``dm_control.suite.base.Task``: it starts each episode from its
   own random state (``random``, dm_control's convention), commands the driven robot before
-  each step, observes it (:data:`.seat.FIELDS`, one named entry each), rewards minus its
+  each step, observes it (``seat.FIELDS``, one named entry each), rewards minus its
   distance from its slot in slots' spacings, and ends the episode with discount 0 when the
   robot is excluded. The scenario's duration is the environment's time limit: the last
   step of a full episode has discount 1 (truncation).
@@ -90,7 +90,7 @@ class HoldSlotTask(base.Task):
         physics.command(self.robot, action)
 
     def get_observation(self, physics: TeamPhysics) -> collections.OrderedDict:
-        """The robot's view, one entry per field of :data:`.seat.FIELDS` (float32)."""
+        """The robot's view, one entry per field of ``seat.FIELDS`` (float32)."""
         view = physics.seats.observe(self.robot)
         out = collections.OrderedDict()
         at = 0

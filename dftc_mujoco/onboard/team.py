@@ -39,6 +39,7 @@ from .fault_estimator import FaultEstimator, held
 from .general import general_period
 from .log_row import write_row
 from .observer import Observer
+from .paper_blocks import PAPER_BLOCKS, choose_blocks
 from .period import (
     RAISED,
     SWITCHED,
@@ -64,16 +65,6 @@ from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig", "runs_compiled"]
 
-#: the paper's block classes, by plug-in point
-PAPER_BLOCKS: dict[str, type[Block]] = {
-    "observer": Observer,
-    "controller": Controller,
-    "supervisor": Supervisor,
-    "fault_estimator": FaultEstimator,
-    "thresholds": Thresholds,
-    "decision": Decision,
-    "detector": Detector,  # last: the other blocks' random streams keep their slots
-}
 # the blocks the compiled period contains (thresholds enter it as an array)
 _COMPILED = ("observer", "controller", "supervisor", "fault_estimator", "decision", "detector")
 #: [s] a robot's fault estimator holds from its bumper's first touch until the bumper stayed
@@ -88,22 +79,6 @@ def runs_compiled(blocks: Mapping[str, Block]) -> bool:
     """Whether a team of these blocks can run the compiled period: the paper's own classes
     in every block it contains (a thresholds rule of any class enters it as an array)."""
     return all(type(blocks[k]) is PAPER_BLOCKS[k] for k in _COMPILED if k in blocks)
-
-
-def choose_blocks(blocks: Mapping[str, Block] | None) -> dict[str, Block]:
-    """Every block of the period: the given ones (each an instance of its paper block's
-    class or of a class derived from it), the paper's for the others."""
-    unknown = set(blocks or {}) - set(PAPER_BLOCKS)
-    if unknown:
-        raise ValueError(f"unknown blocks {sorted(unknown)}; expected {list(PAPER_BLOCKS)}")
-    given = dict(blocks or {})
-    for k, b in given.items():  # a block that is falsy is still the user's block
-        if not isinstance(b, PAPER_BLOCKS[k]):
-            raise ValueError(
-                f"blocks[{k!r}]: expected an instance of a class derived from "
-                f"{PAPER_BLOCKS[k].__name__}, got {type(b).__name__}"
-            )
-    return {k: given[k] if k in given else cls() for k, cls in PAPER_BLOCKS.items()}
 
 
 class Team:

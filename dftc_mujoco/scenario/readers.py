@@ -44,40 +44,19 @@ def name_problem(name: str) -> str | None:
     )
 
 
-def document(doc: Doc, data: Any) -> dict[str, Any] | None:
-    """Every table of a scenario document read and checked: the Scenario's fields, or None
-    when a problem was recorded (``doc`` holds them)."""
-    top = Table(doc.file, data, "", doc)
-    name = top.string("name")
-    problem = name_problem(name) if top.ok("name") else None
-    if problem:
-        top.report("name", problem)
-    description = top.string("description", "")
-    duration = top.number("duration", low=0.0)
-    seed = top.integer("seed", 0, low=0, high=2**63 - 1)
-    known_duration = duration if top.ok("duration") else None
-
-    physics = doc.guard(lambda: _physics(top.table("physics", {})))
-    mission = doc.guard(lambda: _mission(top.table("mission"), known_duration))
-    team = doc.guard(lambda: _team(top.table("team"), mission, seed))
-    gains = doc.guard(lambda: _gains(top.table("gains")))
-    noise = doc.guard(lambda: _noise(top.table("noise")))
-    obstacles = doc.guard(lambda: tuple(doc.guard(_obstacle, t) for t in top.tables("obstacles")))
-    robots = team.robots if team is not None and doc.ok("team.robots") else None
-    all_faults = doc.guard(
-        lambda: tuple(
-            doc.guard(read_fault, t, robots, known_duration) for t in top.tables("faults")
-        )
-    )
-    faults = radio = None
-    if all_faults is not None:
-        faults = tuple(f for f in all_faults if isinstance(f, Fault))
-        radio = tuple(f for f in all_faults if isinstance(f, RadioFault))
-    network = doc.guard(lambda: read_network(top.table("network", {}), physics, radio or ()))
-    fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
-    onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
-    supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
-    top.finish()
+def _across_tables(
+    doc: Doc,
+    duration: float,
+    physics: Any,
+    mission: Any,
+    team: Any,
+    gains: Any,
+    network: Any,
+    all_faults: tuple[Any, ...] | None,
+) -> None:
+    """The checks that read several tables: the observer's stability at the control period,
+    the network's and the radio faults' links against the graph, the duration, the faults'
+    timing and the path's ramp against the period (each recorded in ``doc``)."""
     # Forward Euler on d/dt ŷ = k_o r is stable when every eigenvalue z of
     # k_o (L + Πₖ) satisfies |1 − dt z| < 1; Gershgorin's discs guarantee it
     # when k_o dt (2 d_max + 1) < 2.
@@ -140,6 +119,43 @@ def document(doc: Doc, data: Any) -> dict[str, Any] | None:
             f"expected at least control_period = {physics.control_period:g} s, got "
             f"{mission.centroid.ramp_time:g}",
         )
+
+
+def document(doc: Doc, data: Any) -> dict[str, Any] | None:
+    """Every table of a scenario document read and checked: the Scenario's fields, or None
+    when a problem was recorded (``doc`` holds them)."""
+    top = Table(doc.file, data, "", doc)
+    name = top.string("name")
+    problem = name_problem(name) if top.ok("name") else None
+    if problem:
+        top.report("name", problem)
+    description = top.string("description", "")
+    duration = top.number("duration", low=0.0)
+    seed = top.integer("seed", 0, low=0, high=2**63 - 1)
+    known_duration = duration if top.ok("duration") else None
+
+    physics = doc.guard(lambda: _physics(top.table("physics", {})))
+    mission = doc.guard(lambda: _mission(top.table("mission"), known_duration))
+    team = doc.guard(lambda: _team(top.table("team"), mission, seed))
+    gains = doc.guard(lambda: _gains(top.table("gains")))
+    noise = doc.guard(lambda: _noise(top.table("noise")))
+    obstacles = doc.guard(lambda: tuple(doc.guard(_obstacle, t) for t in top.tables("obstacles")))
+    robots = team.robots if team is not None and doc.ok("team.robots") else None
+    all_faults = doc.guard(
+        lambda: tuple(
+            doc.guard(read_fault, t, robots, known_duration) for t in top.tables("faults")
+        )
+    )
+    faults = radio = None
+    if all_faults is not None:
+        faults = tuple(f for f in all_faults if isinstance(f, Fault))
+        radio = tuple(f for f in all_faults if isinstance(f, RadioFault))
+    network = doc.guard(lambda: read_network(top.table("network", {}), physics, radio or ()))
+    fdir = doc.guard(lambda: _fdir(top.table("fdir", {})))
+    onboard = doc.guard(lambda: _onboard(top.table("onboard", {})))
+    supervision = doc.guard(lambda: _supervision(top.table("supervisor", {})))
+    top.finish()
+    _across_tables(doc, duration, physics, mission, team, gains, network, all_faults)
     if doc.problems:
         return None
     # every reader returned its value where it recorded no problem

@@ -49,6 +49,37 @@ def resolved(path: Path, where: str) -> Path:
         ) from None
 
 
+def _drive_table(
+    sub: Any, kind: str, roles: dict[str, str], held: dict[str, str], params: dict[str, float]
+) -> None:
+    """Read the drive's table ``sub`` (``[diffdrive]``, ``[holonomic]``, ...) into the
+    actuators it drives (``roles``), those it holds (``held``) and its geometry (``params``)."""
+    if kind == "diffdrive":
+        roles.update(_sides(sub))
+    else:
+        for role in DRIVE_ROLES[kind]:
+            roles[role] = sub.string(role)
+    if kind == "swerve":
+        roles.update(_modules(sub))
+    if kind == "omni":  # wheels = ["w0", "w1", "w2", ...]: the wheels' actuators
+        listed = sub.raw("wheels")
+        if not isinstance(listed, list) or not all(isinstance(w, str) for w in listed):
+            sub.report("wheels", f"expected a list of actuator names, got {listed!r}")
+        elif len(listed) < 3:
+            sub.report("wheels", f"expected three or more wheels, got {len(listed)}")
+        else:
+            roles.update({f"wheel{k}": w for k, w in enumerate(listed)})
+    for role in HELD_ROLES[kind]:
+        if role in sub.data:
+            held[role] = sub.string(role)
+    geometry = ("wheel_radius", "axle_width") if kind == "diffdrive" else ()
+    for key in geometry:
+        if key in sub.data:
+            params[key] = sub.number(key, low=0.0)
+    sub.used.update((*HELD_ROLES[kind], *geometry))  # optional: known when misspelt
+    sub.finish()
+
+
 def read(path: Path, calibration_keys: tuple[str, ...]) -> dict[str, Any]:
     """Read and check one robot file: the fields of its :class:`~.robots.RobotModel` before
     the model is inspected."""
@@ -89,30 +120,7 @@ def read(path: Path, calibration_keys: tuple[str, ...]) -> dict[str, Any]:
         if kind != drive:
             t.report(kind, f"this table goes with drive = {kind!r}, but drive = {drive!r}")
             continue
-        if kind == "diffdrive":
-            roles.update(_sides(sub))
-        else:
-            for role in DRIVE_ROLES[kind]:
-                roles[role] = sub.string(role)
-        if kind == "swerve":
-            roles.update(_modules(sub))
-        if kind == "omni":  # wheels = ["w0", "w1", "w2", ...]: the wheels' actuators
-            listed = sub.raw("wheels")
-            if not isinstance(listed, list) or not all(isinstance(w, str) for w in listed):
-                sub.report("wheels", f"expected a list of actuator names, got {listed!r}")
-            elif len(listed) < 3:
-                sub.report("wheels", f"expected three or more wheels, got {len(listed)}")
-            else:
-                roles.update({f"wheel{k}": w for k, w in enumerate(listed)})
-        for role in HELD_ROLES[kind]:
-            if role in sub.data:
-                held[role] = sub.string(role)
-        geometry = ("wheel_radius", "axle_width") if kind == "diffdrive" else ()
-        for key in geometry:
-            if key in sub.data:
-                params[key] = sub.number(key, low=0.0)
-        sub.used.update((*HELD_ROLES[kind], *geometry))  # optional: known when misspelt
-        sub.finish()
+        _drive_table(sub, kind, roles, held, params)
     if t.ok("drive") and drive not in data:
         if planar and drive == "holonomic":  # its own joints' actuators
             roles.update({"x": PLANAR_ACTUATORS[0], "y": PLANAR_ACTUATORS[1]})

@@ -137,44 +137,9 @@ def compose(
             frame = group.worldbody.add_frame(pos=[x - shift[i, 0], y - shift[i, 1], -drop])
             frame.attach_body(bases[models[i].path], robot_prefix(i).removeprefix(PREFIX), "")
         spec.attach(group, frame=spec.worldbody.add_frame(), prefix=PREFIX, suffix="")
-    for k, ob in enumerate(obstacles):
-        spec.worldbody.add_geom(
-            name=f"obstacle{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-            size=[ob.radius, ob.height / 2, 0.0],
-            pos=[ob.position[0], ob.position[1], ob.height / 2],
-            rgba=[0.55, 0.55, 0.6, 1.0],
-            contype=OBSTACLE,
-            conaffinity=HULL,
-        )
+    _add_obstacles(spec, obstacles)
     model = spec.compile()
-
-    def ids(obj: mujoco.mjtObj, rows: Sequence[int], names: list[str]) -> np.ndarray:
-        found = [[mujoco.mj_name2id(model, obj, robot_prefix(i) + s) for s in names] for i in rows]
-        return np.array(found, dtype=np.int64).reshape(len(rows), len(names))
-
-    every = list(range(n))
-    body = np.array(
-        [
-            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot_prefix(i) + models[i].base)
-            for i in every
-        ],
-        dtype=np.int64,
-    )
-    site = ids(mujoco.mjtObj.mjOBJ_SITE, every, [CONTROL_SITE])[:, 0]
-    groups = []
-    for m in kinds.values():
-        mine = [i for i in every if models[i].path == m.path]
-        act = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.actuators.values()))
-        held = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.held.values()))
-        rows = np.array(mine, dtype=np.int64)
-        groups.append(Group(model, rows, body[rows], act, held))
-    if len(groups) == 1:  # one model: the drive's columns, robot by robot
-        act, held = groups[0].actuator, groups[0].held
-        ctrl_index = np.hstack([act, held]).ravel()
-    else:  # a mixed team: each model's robots in turn (MixedDrive's order)
-        act = held = np.zeros((n, 0), dtype=int)
-        ctrl_index = np.concatenate([np.hstack([g.actuator, g.held]).ravel() for g in groups])
+    body, site, groups, act, held, ctrl_index = _indices(model, models, list(kinds.values()))
     obs = np.array([model.geom(f"obstacle{k + 1}").id for k in range(len(obstacles))], dtype=int)
     qpos, ctrl = _initial_state(model, models, body, positions - shift)
     root, origin = _roots(model, body)
@@ -200,6 +165,57 @@ def compose(
         ctrl_index,
         spec,
     )
+
+
+def _add_obstacles(spec: mujoco.MjSpec, obstacles: tuple[Obstacle, ...]) -> None:
+    """The cylinders, named ``obstacle1``, ``obstacle2``, ... (touched by the robots' hulls)."""
+    for k, ob in enumerate(obstacles):
+        spec.worldbody.add_geom(
+            name=f"obstacle{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            size=[ob.radius, ob.height / 2, 0.0],
+            pos=[ob.position[0], ob.position[1], ob.height / 2],
+            rgba=[0.55, 0.55, 0.6, 1.0],
+            contype=OBSTACLE,
+            conaffinity=HULL,
+        )
+
+
+def _indices(
+    model: mujoco.MjModel, models: list[RobotModel], kinds: list[RobotModel]
+) -> tuple[np.ndarray, np.ndarray, list[Group], np.ndarray, np.ndarray, np.ndarray]:
+    """Each robot's base body and control site in the compiled ``model``, its model's group
+    (``kinds``: each model once), and the actuators the drive commands: (body, site,
+    groups, actuator, held, ctrl_index)."""
+    n = len(models)
+
+    def ids(obj: mujoco.mjtObj, rows: Sequence[int], names: list[str]) -> np.ndarray:
+        found = [[mujoco.mj_name2id(model, obj, robot_prefix(i) + s) for s in names] for i in rows]
+        return np.array(found, dtype=np.int64).reshape(len(rows), len(names))
+
+    every = list(range(n))
+    body = np.array(
+        [
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot_prefix(i) + models[i].base)
+            for i in every
+        ],
+        dtype=np.int64,
+    )
+    site = ids(mujoco.mjtObj.mjOBJ_SITE, every, [CONTROL_SITE])[:, 0]
+    groups = []
+    for m in kinds:
+        mine = [i for i in every if models[i].path == m.path]
+        act = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.actuators.values()))
+        held = ids(mujoco.mjtObj.mjOBJ_ACTUATOR, mine, list(m.held.values()))
+        rows = np.array(mine, dtype=np.int64)
+        groups.append(Group(model, rows, body[rows], act, held))
+    if len(groups) == 1:  # one model: the drive's columns, robot by robot
+        act, held = groups[0].actuator, groups[0].held
+        ctrl_index = np.hstack([act, held]).ravel()
+    else:  # a mixed team: each model's robots in turn (MixedDrive's order)
+        act = held = np.zeros((n, 0), dtype=int)
+        ctrl_index = np.concatenate([np.hstack([g.actuator, g.held]).ravel() for g in groups])
+    return body, site, groups, act, held, ctrl_index
 
 
 def _filter(body: mujoco.MjsBody, robot: RobotModel, robot_contacts: bool) -> None:
