@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import os
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -79,3 +81,30 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     150 s), while the same tests pass alone, after test_campaign or test_platform, and
     after every module between them (one cause not found: each subset passed)."""
     items.sort(key=lambda item: item.path.name != "test_ray.py")
+
+
+@contextlib.contextmanager
+def _one_ray_at_a_time(factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Hold the lock that keeps Ray instances started by the tests apart: a bare `--ray`
+    joins the one instance running on the machine, so no other test may start its own
+    meanwhile. The lock file is in the folder every pytest-xdist worker's temp folder is
+    in, so the workers of a parallel run (`pytest -n auto`) share it."""
+    import fcntl
+
+    with open(factory.getbasetemp().parent / "dftc-ray.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # waits for the other worker's Ray tests
+        yield
+
+
+@pytest.fixture(scope="module")
+def ray_module_alone(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The Ray lock for a whole module (tests/test_ray.py: its head node lives that long)."""
+    with _one_ray_at_a_time(tmp_path_factory):
+        yield
+
+
+@pytest.fixture
+def ray_alone(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """The Ray lock for one test that starts a local Ray instance."""
+    with _one_ray_at_a_time(tmp_path_factory):
+        yield

@@ -50,8 +50,7 @@ def test_small_campaign_on_two_local_workers(local_run):
     assert (local_run / "figures" / "delays.png").stat().st_size > 5000
 
 
-@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
-def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, tmp_path):
+def test_same_campaign_on_a_local_ray_instance_gives_identical_rows(local_run, tmp_path, ray_alone):
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
     # a new private instance, whatever else runs here (or a stale ray_current_cluster says)
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)

@@ -94,8 +94,7 @@ def test_campaign_workers_import_the_users_blocks(two_workers):
     assert max(by_rule["mylab.fdi:Scaled"]) < min(by_rule["paper"])
 
 
-@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
-def test_campaign_on_ray_imports_the_users_blocks_too(two_workers, tmp_path):
+def test_campaign_on_ray_imports_the_users_blocks_too(two_workers, tmp_path, ray_alone):
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
     # a new private instance, whatever else runs here (or a stale ray_current_cluster says)
     ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)

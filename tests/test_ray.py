@@ -17,10 +17,6 @@ from pathlib import Path
 
 import pytest
 
-# one local Ray instance at a time: these tests share a worker when the suite runs in
-# parallel (pytest -n auto --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("ray")
-
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install -e '.[cluster]')")
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,7 +47,7 @@ def _rows(folder: Path) -> dict[int, dict]:
 
 
 @pytest.fixture(scope="module")
-def head():
+def head(ray_module_alone):
     """A Ray head node with token authentication, in a session of its own with a private
     temp folder (so that it neither meets nor leaves behind another instance's files);
     killed with its whole process group at the end."""
