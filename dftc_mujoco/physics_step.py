@@ -12,6 +12,7 @@ once the period's records are whole.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -103,19 +104,19 @@ class PhysicsStep:
             raise ValueError(f"drive(robot): expected a robot in 0..{n - 1}, got {robot!r}")
         if velocity is None:
             self.driven[robot] = False
-        else:
-            try:
-                v = np.asarray(velocity, dtype=float).reshape(2)
-            except (TypeError, ValueError):  # numpy's own words named neither argument
-                raise ValueError(
-                    f"drive(velocity): expected a planar velocity of 2 numbers (m/s), got "
-                    f"{velocity!r}"
-                ) from None
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"drive(velocity): expected finite numbers, got {v.tolist()}")
-            self.override[robot] = v
-            self.driven[robot] = True
-        self.any_driven = bool(self.driven.any())
+            self.any_driven = bool(self.driven.any())
+            return
+        try:
+            v0, v1 = (float(c) for c in np.asarray(velocity, dtype=float).reshape(2))
+        except (TypeError, ValueError):  # numpy's own words named neither argument
+            raise ValueError(
+                f"drive(velocity): expected a planar velocity of 2 numbers (m/s), got {velocity!r}"
+            ) from None
+        if not (math.isfinite(v0) and math.isfinite(v1)):
+            raise ValueError(f"drive(velocity): expected finite numbers, got {[v0, v1]}")
+        override = self.override[robot]
+        override[0], override[1] = v0, v1
+        self.driven[robot] = self.any_driven = True
 
     def commands(self, xi: np.ndarray) -> np.ndarray:
         """The actuator commands for the team's ū plus the drives' errors ``xi`` (eq. 2)

@@ -363,6 +363,11 @@ def detectability(
 
     s = load_scenario(scenario_name, {**(overrides or {}), "noise.xi_bar": cal.recommended_xi_bar})
     model = robots.get(robot, where="MODEL")
+    # the robot as it will run: with the lag this calibration measured (the rule "auto"
+    # chooses depends on it)
+    model = dataclasses.replace(
+        model, calibration={**model.calibration, "lag": cal.lag, "fast_lag": cal.fast_lag}
+    )
     s = threshold_rule(s, model)
     config = team_config(s, model, cal.command_limit)
     th = create("thresholds", s.onboard.thresholds, s.onboard.params.get("thresholds", {}))
