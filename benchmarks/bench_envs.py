@@ -5,13 +5,14 @@ second of many teams stepped together (Gymnasium's vector API).
 
 What is timed, in CPU time of this process (``time.process_time``) unless said otherwise:
 
-* **period**: ``Simulation.advance(1)`` on paper_case, the team's own commands (one control
-  period: sensing, the four robots' onboard blocks, the commands, ten ``mj_step``, the
-  premises' check, the log row);
+* **period**: ``Simulation.advance(K)`` on paper_case, the team's own commands, per period
+  (sensing, the four robots' onboard blocks, the commands, five ``mj_step``, the premises'
+  check, the log row);
 * **env step**: ``env.step(action)`` of ``gymnasium.make("dftc/PaperCase-v0")`` driving robot
-  2 with the team's own command (one control period plus the observation, the reward, the
+  3 with the team's last command (one control period plus the observation, the reward, the
   fault labels in ``info`` and Gymnasium's wrappers); the ratio env step / period is what
-  the environment adds;
+  the environment adds, and where it goes: one ``advance(1)`` call a period, then with
+  robot 3 driven as the environment drives it (``Simulation.drive``);
 * **vector**: ``gymnasium.make_vec(..., vectorization_mode="sync")`` with E teams in this
   process, wall-clock steps per second counted per team (E steps per vector step), the
   figure VMAS reports for its batched environments;
@@ -39,6 +40,23 @@ def _period_us(steps: int) -> float:
         t0 = time.process_time()
         sim.advance(steps)
         return (time.process_time() - t0) / steps * 1e6
+
+
+def _single_us(steps: int, driven: bool) -> float:
+    """``advance(1)`` a period, robot 3 driven with the team's last command or not."""
+    from dftc_mujoco import Simulation, load_scenario
+
+    with Simulation(load_scenario("paper_case", {"duration": 600.0})) as sim:
+        sim.advance(50)
+        spent = 0.0
+        for _ in range(steps):
+            t0 = time.process_time()
+            if driven:
+                u = sim.team.u_bar[2]
+                sim.drive(2, (float(u[0]), float(u[1])))
+            sim.advance(1)
+            spent += time.process_time() - t0
+        return spent / steps * 1e6
 
 
 def _env_step_us(steps: int) -> float:
@@ -121,14 +139,20 @@ def main() -> None:
     from targets import cpu_name
 
     print(f"{cpu_name()}, {os.cpu_count()} cores")
-    period, step = [], []
-    for _ in range(args.repeat):  # alternating, so that a change of load hits both
+    period, single, driven, step = [], [], [], []
+    for _ in range(args.repeat):  # alternating, so that a change of load hits all
         period.append(_period_us(args.steps))
+        single.append(_single_us(args.steps, False))
+        driven.append(_single_us(args.steps, True))
         step.append(_env_step_us(args.steps))
     pm, sm = float(np.median(period)), float(np.median(step))
     print(f"simulator period  {pm:7.1f} us CPU (median of {args.repeat}; best {min(period):.1f})")
     print(f"Gymnasium step    {sm:7.1f} us CPU (median of {args.repeat}; best {min(step):.1f})")
     print(f"ratio             {sm / pm:7.2f} (what the environment adds: {sm - pm:.1f} us)")
+    one, drv = float(np.median(single)), float(np.median(driven))
+    print(f"  {'one advance(1) call a period':50s} {one:7.1f} us")
+    print(f"  {'... with robot 3 driven from outside':50s} {drv:7.1f} us")
+    print(f"  {'... and the observation, reward, labels, wrappers':50s} {sm:7.1f} us")
     for n in args.envs:
         rates = [_vector_rate(n, max(1, args.steps // n)) for _ in range(args.repeat)]
         print(f"vector, {n:3d} teams: {np.median(rates):8.0f} team-steps/s (wall clock, median)")
