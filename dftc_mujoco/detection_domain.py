@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+from .events import Kind
 from .record import Events
 
 
@@ -35,7 +36,7 @@ class DetectionDomain:
         left = round(self.end - t, 6)  # the run left after its onset
         if left < dt_d_max:
             limit = round(dt_d_max, 6)
-            self.events.add(t, "detection_past_end", robot=robot, left=left, dt_d_max=limit)
+            self.events.add(t, Kind.DETECTION_PAST_END, robot=robot, left=left, dt_d_max=limit)
 
     def after_period(
         self, t: float, robot: int, settles_at: float, restarted: float | None, dt_d_max: float
@@ -45,7 +46,7 @@ class DetectionDomain:
         if t < settles_at:
             until = settles_at if math.isfinite(settles_at) else None  # None: not in the run
             self.events.add(
-                t, "detection_not_guaranteed", robot=robot, until=until, restarted=restarted
+                t, Kind.DETECTION_NOT_GUARANTEED, robot=robot, until=until, restarted=restarted
             )
         else:
             self.windows.append((robot, round(t, 6), t + dt_d_max))  # onset as its event's
@@ -56,5 +57,5 @@ class DetectionDomain:
         until = settles_at if math.isfinite(settles_at) else None
         for r, t_f, end in self.windows:
             if r != robot and t_f < t <= end + 1e-9:
-                self.events.add(t, "detection_window_restarted", robot=r, onset=t_f, until=until)
+                self.events.add(t, Kind.DETECTION_WINDOW_RESTARTED, robot=r, onset=t_f, until=until)
         self.windows.clear()  # cut, ended, or the excluded robot's own

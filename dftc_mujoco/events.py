@@ -1,65 +1,157 @@
 """The run's events: every kind with the facts it carries, and the one line that says each.
 
-An event is a plain dict (JSON in ``summary.json``) with ``t`` [s], ``kind`` and the fields
-:data:`KINDS` lists for that kind; robots are numbered from 1. :func:`make` is the one
-constructor (it refuses a kind or a field that :data:`KINDS` does not list), and
-:func:`describe` the only place an event is put into words: the console's event table, the
-warnings of a summary and the video's captions read it.
+An event is an :class:`Event` record (a dict, JSON in ``summary.json``) with ``t`` [s], its
+:class:`Kind` and the fields :data:`KINDS` lists for that kind; robots are numbered from 1.
+:func:`make` is the one constructor (it refuses a kind or a field that :data:`KINDS` does not
+list), and :func:`describe` the only place an event is put into words: the console's event
+table, the warnings of a summary and the video's captions read it. Code outside this module
+names a kind as ``Kind.EXCLUSION``, never as a string, so a misspelt kind fails where it is
+written.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from enum import StrEnum
+from typing import Any, Required, TypedDict, cast
+
+
+class Kind(StrEnum):
+    """Every kind of event; a member equals its name as a string (``Kind.EXCLUSION ==
+    "exclusion"``), which is how ``summary.json`` stores it."""
+
+    FAULT = "fault"
+    FAULT_ENDED = "fault_ended"
+    REACTIVE_ON = "reactive_on"
+    REACTIVE_OFF = "reactive_off"
+    DETECTION = "detection"
+    PREMISE_VIOLATED = "premise_violated"
+    EXCLUSION_SCHEDULED = "exclusion_scheduled"
+    EXCLUSION = "exclusion"
+    EXCLUSION_CANCELLED = "exclusion_cancelled"
+    EXCLUSION_POSTPONED = "exclusion_postponed"
+    SYSTEMIC_ANOMALY = "systemic_anomaly"
+    SYSTEMIC_ANOMALY_OVER = "systemic_anomaly_over"
+    DETECTION_NOT_GUARANTEED = "detection_not_guaranteed"
+    DETECTION_PAST_END = "detection_past_end"
+    DETECTION_WINDOW_RESTARTED = "detection_window_restarted"
+    DETECTION_HORIZON = "detection_horizon"
+    GRAPH_NOT_STRONGLY_CONNECTED = "graph_not_strongly_connected"
+    GRAPH_REWIRED = "graph_rewired"
+    WARNING = "warning"
+    MISSION_ENDED = "mission_ended"
+    SIMULATION_ERROR = "simulation_error"
+    RADIO_FAULT = "radio_fault"
+    LINK_SILENT = "link_silent"
+    LINK_HEARD = "link_heard"
+    ROBOT_SILENT = "robot_silent"
+    MESSAGE_FAULT = "message_fault"
+    SIGHTING = "sighting"
+
 
 #: kind -> the fields an event of that kind carries besides ``t`` and ``kind``
-KINDS: dict[str, tuple[str, ...]] = {
-    "fault": ("robot", "fault", "command"),
-    "fault_ended": ("robot", "fault"),
-    "reactive_on": ("robot", "obstacle"),
-    "reactive_off": ("robot",),
-    "detection": ("by", "robot", "premises"),
-    "premise_violated": ("premise", "robot", "value", "bound", "until"),
-    "exclusion_scheduled": ("robot", "t_r"),
-    "exclusion": ("robot", "flagged_by", "detected_by"),
-    "exclusion_cancelled": ("robot", "detected_by", "reason"),
-    "exclusion_postponed": ("robot", "reason", "last_contact", "t_r", "ratio", "was", "phi_bar"),
-    "systemic_anomaly": ("robots", "excluded", "max_faults", "premises"),
-    "systemic_anomaly_over": ("robots",),
-    "detection_not_guaranteed": ("robot", "until", "restarted"),
-    "detection_past_end": ("robot", "left", "dt_d_max"),
-    "detection_window_restarted": ("robot", "onset", "until"),
-    "detection_horizon": ("value", "before"),
-    "graph_not_strongly_connected": ("robots", "components", "unheard", "pairs"),
-    "graph_rewired": ("robot", "links", "how"),
-    "warning": ("message",),
-    "mission_ended": ("reason", "robots"),
-    "simulation_error": ("message",),
+KINDS: dict[Kind, tuple[str, ...]] = {
+    Kind.FAULT: ("robot", "fault", "command"),
+    Kind.FAULT_ENDED: ("robot", "fault"),
+    Kind.REACTIVE_ON: ("robot", "obstacle"),
+    Kind.REACTIVE_OFF: ("robot",),
+    Kind.DETECTION: ("by", "robot", "premises"),
+    Kind.PREMISE_VIOLATED: ("premise", "robot", "value", "bound", "until"),
+    Kind.EXCLUSION_SCHEDULED: ("robot", "t_r"),
+    Kind.EXCLUSION: ("robot", "flagged_by", "detected_by"),
+    Kind.EXCLUSION_CANCELLED: ("robot", "detected_by", "reason"),
+    Kind.EXCLUSION_POSTPONED: ("robot", "reason", "last_contact", "t_r", "ratio", "was", "phi_bar"),
+    Kind.SYSTEMIC_ANOMALY: ("robots", "excluded", "max_faults", "premises"),
+    Kind.SYSTEMIC_ANOMALY_OVER: ("robots",),
+    Kind.DETECTION_NOT_GUARANTEED: ("robot", "until", "restarted"),
+    Kind.DETECTION_PAST_END: ("robot", "left", "dt_d_max"),
+    Kind.DETECTION_WINDOW_RESTARTED: ("robot", "onset", "until"),
+    Kind.DETECTION_HORIZON: ("value", "before"),
+    Kind.GRAPH_NOT_STRONGLY_CONNECTED: ("robots", "components", "unheard", "pairs"),
+    Kind.GRAPH_REWIRED: ("robot", "links", "how"),
+    Kind.WARNING: ("message",),
+    Kind.MISSION_ENDED: ("reason", "robots"),
+    Kind.SIMULATION_ERROR: ("message",),
     # the network (dftc_mujoco.network)
-    "radio_fault": ("fault", "robot", "link", "value"),
-    "link_silent": ("robot", "heard_by", "since"),
-    "link_heard": ("robot", "heard_by"),
-    "robot_silent": ("robot", "reported_by", "since"),
-    "message_fault": ("robot", "reported_by"),
-    "sighting": ("by", "robot", "distance", "tolerance"),
+    Kind.RADIO_FAULT: ("fault", "robot", "link", "value"),
+    Kind.LINK_SILENT: ("robot", "heard_by", "since"),
+    Kind.LINK_HEARD: ("robot", "heard_by"),
+    Kind.ROBOT_SILENT: ("robot", "reported_by", "since"),
+    Kind.MESSAGE_FAULT: ("robot", "reported_by"),
+    Kind.SIGHTING: ("by", "robot", "distance", "tolerance"),
 }
 
 
-#: an event as it is stored: ``{"t": ..., "kind": ..., **fields}``
-Event = dict[str, Any]
+class Event(TypedDict, total=False):
+    """An event as it is stored: ``t`` [s], its :class:`Kind` and the fields :data:`KINDS`
+    lists for that kind (the others absent)."""
+
+    t: Required[float]
+    kind: Required[Kind]
+    before: Any
+    bound: Any
+    by: Any
+    command: Any
+    components: Any
+    detected_by: Any
+    distance: Any
+    dt_d_max: Any
+    excluded: Any
+    fault: Any
+    flagged_by: Any
+    heard_by: Any
+    how: Any
+    last_contact: Any
+    left: Any
+    link: Any
+    links: Any
+    max_faults: Any
+    message: Any
+    obstacle: Any
+    onset: Any
+    pairs: Any
+    phi_bar: Any
+    premise: Any
+    premises: Any
+    ratio: Any
+    reason: Any
+    reported_by: Any
+    restarted: Any
+    robot: Any
+    robots: Any
+    since: Any
+    t_r: Any
+    tolerance: Any
+    unheard: Any
+    until: Any
+    value: Any
+    was: Any
 
 
-def make(t: float, kind: str, **fields: Any) -> Event:
+def make(t: float, kind: Kind, **fields: Any) -> Event:
     """The event ``kind`` at ``t`` with ``fields``, each of which :data:`KINDS` lists for it
     (ValueError otherwise: a new kind or field is declared there first, with its words in
     :func:`describe`)."""
-    allowed = KINDS.get(kind)
-    if allowed is None:
-        raise ValueError(f"unknown event kind {kind!r}; known: {', '.join(KINDS)}")
+    try:
+        kind = Kind(kind)
+    except ValueError:
+        raise ValueError(f"unknown event kind {kind!r}; known: {', '.join(KINDS)}") from None
+    allowed = KINDS[kind]
     extra = set(fields) - set(allowed)
     if extra:
         raise ValueError(f"event {kind!r} has no field(s) {sorted(extra)}; it has {allowed}")
-    return {"t": t, "kind": kind, **fields}
+    return cast(Event, {"t": t, "kind": kind, **fields})
+
+
+def loaded(d: Mapping[str, Any]) -> Event:
+    """An event read back from ``summary.json``: its kind a :class:`Kind` again (a kind this
+    version does not know stays a string, which :func:`describe` still says)."""
+    e = dict(d)
+    try:
+        e["kind"] = Kind(e["kind"])
+    except (KeyError, ValueError):
+        pass
+    return cast(Event, e)
 
 
 def _fault(e: Mapping[str, Any], r: int) -> str:
@@ -250,40 +342,40 @@ def _robot_silent(e: Mapping[str, Any], r: int) -> str:
 
 
 #: each kind's line (robot ``r`` the event's robot, 0 for none)
-_LINES: dict[str, Callable[[Mapping[str, Any], int], str]] = {
-    "fault": _fault,
-    "fault_ended": _fault_ended,
-    "reactive_on": _reactive_on,
-    "reactive_off": _reactive_off,
-    "detection": _detection,
-    "premise_violated": _premise_violated,
-    "exclusion_scheduled": _exclusion_scheduled,
-    "exclusion": _exclusion,
-    "exclusion_cancelled": _exclusion_cancelled,
-    "exclusion_postponed": _exclusion_postponed,
-    "systemic_anomaly": _systemic_anomaly,
-    "detection_not_guaranteed": _detection_not_guaranteed,
-    "detection_window_restarted": _detection_window_restarted,
-    "detection_past_end": _detection_past_end,
-    "systemic_anomaly_over": _systemic_anomaly_over,
-    "detection_horizon": _detection_horizon,
-    "graph_not_strongly_connected": _graph_not_strongly_connected,
-    "graph_rewired": _graph_rewired,
-    "warning": _warning,
-    "mission_ended": _mission_ended,
-    "simulation_error": _simulation_error,
-    "radio_fault": _radio_fault,
-    "link_silent": _link_silent,
-    "link_heard": _link_heard,
-    "message_fault": _message_fault,
-    "sighting": _sighting,
-    "robot_silent": _robot_silent,
+_LINES: dict[Kind, Callable[[Mapping[str, Any], int], str]] = {
+    Kind.FAULT: _fault,
+    Kind.FAULT_ENDED: _fault_ended,
+    Kind.REACTIVE_ON: _reactive_on,
+    Kind.REACTIVE_OFF: _reactive_off,
+    Kind.DETECTION: _detection,
+    Kind.PREMISE_VIOLATED: _premise_violated,
+    Kind.EXCLUSION_SCHEDULED: _exclusion_scheduled,
+    Kind.EXCLUSION: _exclusion,
+    Kind.EXCLUSION_CANCELLED: _exclusion_cancelled,
+    Kind.EXCLUSION_POSTPONED: _exclusion_postponed,
+    Kind.SYSTEMIC_ANOMALY: _systemic_anomaly,
+    Kind.DETECTION_NOT_GUARANTEED: _detection_not_guaranteed,
+    Kind.DETECTION_WINDOW_RESTARTED: _detection_window_restarted,
+    Kind.DETECTION_PAST_END: _detection_past_end,
+    Kind.SYSTEMIC_ANOMALY_OVER: _systemic_anomaly_over,
+    Kind.DETECTION_HORIZON: _detection_horizon,
+    Kind.GRAPH_NOT_STRONGLY_CONNECTED: _graph_not_strongly_connected,
+    Kind.GRAPH_REWIRED: _graph_rewired,
+    Kind.WARNING: _warning,
+    Kind.MISSION_ENDED: _mission_ended,
+    Kind.SIMULATION_ERROR: _simulation_error,
+    Kind.RADIO_FAULT: _radio_fault,
+    Kind.LINK_SILENT: _link_silent,
+    Kind.LINK_HEARD: _link_heard,
+    Kind.MESSAGE_FAULT: _message_fault,
+    Kind.SIGHTING: _sighting,
+    Kind.ROBOT_SILENT: _robot_silent,
 }
 
 
 def describe(e: Mapping[str, Any]) -> str:
     """The one line that says what event ``e`` means (the console table, summaries and the
-    video captions all use it): its kind's line of :data:`_LINES`."""
+    video captions all use it)."""
     line = _LINES.get(e["kind"])
     return f"{e['kind']} {dict(e)}" if line is None else line(e, e.get("robot", 0))
 

@@ -19,7 +19,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -39,6 +38,7 @@ from .assembly import (
 from .block_failure import block_error, setup_error
 from .detection_domain import DetectionDomain
 from .errors import DftcError, SimulationError
+from .events import Event, Kind
 from .execution import Execution
 from .onboard.block import Block, TeamConfig
 from .onboard.team import Team
@@ -198,9 +198,9 @@ class Simulation:
         self.events = Events()
         self.domain = DetectionDomain(self.events, self.steps * dt)  # eq. 46's
         for message in calibration_warnings(s, model, xi_bar):
-            self.events.add(0.0, "warning", message=message)
+            self.events.add(0.0, Kind.WARNING, message=message)
         for note in sc.notes:
-            self.events.add(0.0, "warning", message=note)
+            self.events.add(0.0, Kind.WARNING, message=note)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, dt)
         self.command_limit = limit = self.adapter.command_limit
         blocks = make_blocks(s, self._given, self._search)
@@ -222,7 +222,7 @@ class Simulation:
         for message in preflight(
             s, model, self.fleet.models, limit, config, xi_bar, refusal, path, dt, rule
         ):
-            self.events.add(0.0, "warning", message=message)
+            self.events.add(0.0, Kind.WARNING, message=message)
         ex = self.execution
         config = replace(
             config, compiled=self._compiled_period(blocks), threads=ex.thread_count(),
@@ -269,7 +269,7 @@ class Simulation:
         if flown is None or not s.mission.centroid.governor:
             return s, config
         text = governed_text(s, self.robot.name, config.input_limit, flown)
-        self.events.add(0.0, "warning", message=text)
+        self.events.add(0.0, Kind.WARNING, message=text)
         self.scenario = s = s.with_overrides(speed=flown)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, self.dt)
         return s, team_config(s, self.robot, limit, self.start_bound.value)
@@ -277,11 +277,11 @@ class Simulation:
     def _team_warnings(self, s: Scenario) -> None:
         """Warn of an unmet detection horizon and of thresholds that never flag."""
         if "warning" in self.team.dt_d_max_info:
-            self.events.add(0.0, "warning", message=self.team.dt_d_max_info["warning"])
+            self.events.add(0.0, Kind.WARNING, message=self.team.dt_d_max_info["warning"])
         if self.team.never_flags and s.fdir.enabled:
             self.events.add(
                 0.0,
-                "warning",
+                Kind.WARNING,
                 message=(
                     f"onboard.thresholds: {self.block_names['thresholds']} gives +inf for every "
                     "pair at t = 0 and when steady: no robot can be flagged, a fault is never "
@@ -403,11 +403,11 @@ class Simulation:
         """(N, 2) each robot's own measured position after the last period (read only)."""
         return _read_only(self._x_m)
 
-    def new_events(self) -> list[dict[str, Any]]:
+    def new_events(self) -> list[Event]:
         """The events since the last call (or snapshot), robots numbered from 1."""
         ev = self.events.items[self._seen :]
         self._seen = len(self.events.items)
-        return [dict(e) for e in ev]
+        return [e.copy() for e in ev]
 
     def snapshot(self) -> Snapshot:
         """The state after the last control period (copies)."""
@@ -500,7 +500,7 @@ class Simulation:
                 self._take_team_events(k * dt)
             when = plant.time if exc is failed else k * dt  # the physics' own time, if its
             k += 1
-            self.events.add(when, "simulation_error", message=str(exc))
+            self.events.add(when, Kind.SIMULATION_ERROR, message=str(exc))
         finally:
             if team.events:  # an interrupt in the middle of a period
                 self._take_team_events(k * dt)
@@ -516,11 +516,11 @@ class Simulation:
         for f in onsets:
             # the speed it was told last: a stop's size at onset (eq. 46)
             told = float(np.hypot(*self.team.drive.command[f.robot]))
-            self.events.add(t, "fault", robot=f.robot + 1, fault=f.kind, command=round(told, 6))
+            self.events.add(t, Kind.FAULT, robot=f.robot + 1, fault=f.kind, command=round(told, 6))
             self.monitor.watched[f.robot] = False  # the fault is to be detected
             self.domain.onset(t, f.robot + 1, self.team.recovery.dt_d_max)
         for f in self.faults.just_ended:
-            self.events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
+            self.events.add(t, Kind.FAULT_ENDED, robot=f.robot + 1, fault=f.kind)
         return onsets
 
     def _decide(self, t: float, c: np.ndarray, c_dot: np.ndarray, seen: Sensed) -> None:
@@ -562,10 +562,10 @@ class Simulation:
         """Add the sensor faults' offsets to ``x_m``; their start and end are events."""
         began, over = self.sensors.apply(t, x_m)
         for f in began:
-            self.events.add(t, "fault", robot=f.robot + 1, fault=f.kind, command=None)
+            self.events.add(t, Kind.FAULT, robot=f.robot + 1, fault=f.kind, command=None)
             self.monitor.watched[f.robot] = False  # the fault is to be detected
         for f in over:
-            self.events.add(t, "fault_ended", robot=f.robot + 1, fault=f.kind)
+            self.events.add(t, Kind.FAULT_ENDED, robot=f.robot + 1, fault=f.kind)
 
     def _radio(self, t: float, k: int, channel: network.Channel) -> None:
         """Before period ``k``'s step: radio faults that start now, and the messages that
@@ -574,7 +574,7 @@ class Simulation:
             for f in channel.faults_due(t):
                 self.events.add(
                     t,
-                    "radio_fault",
+                    Kind.RADIO_FAULT,
                     fault=f.kind,
                     robot=f.robot + 1 if f.robot >= 0 else None,
                     link=[f.link[0] + 1, f.link[1] + 1] if f.kind == "link_down" else None,
@@ -591,17 +591,17 @@ class Simulation:
         of exclusions."""
         monitor = self.monitor
         for e in self.team.events:
-            kind = e.pop("kind")
-            if kind == "detection":
+            kind = e["kind"]
+            if kind == Kind.DETECTION:
                 e["premises"] = monitor.violated(e["robot"] - 1, t)
-            elif kind == "systemic_anomaly":  # what the flagged robots violated then
+            elif kind == Kind.SYSTEMIC_ANOMALY:  # what the flagged robots violated then
                 e["premises"] = sorted({p for r in e["robots"] for p in monitor.violated(r - 1, t)})
-            elif kind == "exclusion":
+            elif kind == Kind.EXCLUSION:
                 monitor.watched[e["robot"] - 1] = False
-            elif kind == "graph_not_strongly_connected":
+            elif kind == Kind.GRAPH_NOT_STRONGLY_CONNECTED:
                 monitor.graph_changed(t, False)
-            self.events.add(e["t"], kind, **{k: v for k, v in e.items() if k != "t"})
-            if kind == "exclusion":  # the thresholds restarted: windows of eq. 46 it cuts
+            self.events.add(e["t"], kind, **{k: v for k, v in e.items() if k not in ("t", "kind")})
+            if kind == Kind.EXCLUSION:  # the thresholds restarted: windows of eq. 46 it cuts
                 self.domain.excluded(e["t"], e["robot"], self.team.settles_at)
         self.team.events.clear()
 
@@ -609,7 +609,7 @@ class Simulation:
         """End the mission: a robot is off the floor (``checks.ARENA_HALF``)."""
         i = int(np.abs(x).max(axis=1).argmax())
         self.left = f"robot {i + 1} left the arena (at {np.round(x[i], 1).tolist()} m)"
-        self.events.add(t, "mission_ended", reason=self.left, robots=[i + 1])
+        self.events.add(t, Kind.MISSION_ENDED, reason=self.left, robots=[i + 1])
 
     def _sample(
         self, t: float, x: np.ndarray, cmd: np.ndarray, c: np.ndarray, pose: np.ndarray

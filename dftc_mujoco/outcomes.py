@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from .events import Event, Kind
 from .mission import Formation, slot_spacing
 from .record import Events
 
@@ -95,10 +96,10 @@ def fault_outcomes(
     slot error of its robot from :data:`JUDGED_AFTER` s after the onset on (not while it
     avoids an obstacle, nor in the :data:`JUDGED_AFTER` s after an exclusion re-forms the
     team)."""
-    faults = events.of_kind("fault")
-    exclusions = events.of_kind("exclusion")
-    flagged: dict[int, list[dict[str, Any]]] = {}  # a large run holds 10⁵ detections
-    for d in events.of_kind("detection"):
+    faults = events.of_kind(Kind.FAULT)
+    exclusions = events.of_kind(Kind.EXCLUSION)
+    flagged: dict[int, list[Event]] = {}  # a large run holds 10⁵ detections
+    for d in events.of_kind(Kind.DETECTION):
         flagged.setdefault(d["robot"], []).append(d)
     t = log["t"]
     err = _slot_error(log) if len(t) else np.zeros((0, 0))

@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from .errors import InputError, SimulationError, raised_line
+from .events import Kind
 from .onboard.fault_estimator import ANTI_WINDUP_BAND
 
 if TYPE_CHECKING:
@@ -437,7 +438,7 @@ class Monitor:
                 self.count[name] += 1
                 self.events.add(
                     t0,
-                    "premise_violated",
+                    Kind.PREMISE_VIOLATED,
                     premise=name,
                     robot=None if robot is None else robot + 1,
                     value=float(worst),

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .atomic import atomic_write, write_text
-from .events import make
+from .events import Event, Kind, make
 
 __all__ = ["Events", "Log", "write_json", "write_npz", "write_text"]
 
@@ -159,15 +159,15 @@ class Log:
 class Events:
     """Time-stamped events of a run; robots are numbered from 1 (as in ``summary.json``)."""
 
-    items: list[dict[str, Any]] = field(default_factory=list)
+    items: list[Event] = field(default_factory=list)
 
-    def add(self, t: float, kind: str, **info: Any) -> None:
+    def add(self, t: float, kind: Kind, **info: Any) -> None:
         self.items.append(make(round(float(t), 6), kind, **info))
 
-    def of_kind(self, kind: str) -> list[dict[str, Any]]:
+    def of_kind(self, kind: Kind) -> list[Event]:
         return [e for e in self.items if e["kind"] == kind]
 
-    def ordered(self) -> list[dict[str, Any]]:
+    def ordered(self) -> list[Event]:
         return sorted(self.items, key=lambda e: e["t"])
 
 

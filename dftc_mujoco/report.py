@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .events import describe
+from .events import Kind, describe
 
 if TYPE_CHECKING:
     from .results import RunResult
@@ -75,7 +75,7 @@ def headline(s: dict[str, Any]) -> str:
 def event_table(result: RunResult, verbose: bool) -> list[str]:
     """The events in time order; without ``verbose`` no premise spans (the premises line
     sums them up) and at most :data:`LISTED` rows."""
-    rows = [e for e in result.events.ordered() if verbose or e["kind"] != "premise_violated"]
+    rows = [e for e in result.events.ordered() if verbose or e["kind"] != Kind.PREMISE_VIOLATED]
     lines = ["   t [s]  event"]
     shown = rows if verbose else rows[:LISTED]
     lines += [f"{e['t']:8.2f}  {describe(e)}" for e in shown]
@@ -110,7 +110,7 @@ def _due(s: dict[str, Any], fault: dict[str, Any]) -> str:
     due = [
         e["t_r"]
         for e in s.get("events", [])
-        if e.get("kind") == "exclusion_scheduled"
+        if e.get("kind") == Kind.EXCLUSION_SCHEDULED
         and e.get("robot") == fault["robot"]
         and e["t"] >= fault["t"]
     ]
@@ -201,7 +201,7 @@ def premises_line(result: RunResult) -> str | None:
     table = result.summary.get("premises")
     if not table:
         return None
-    spans = result.events.of_kind("premise_violated")
+    spans = result.events.of_kind(Kind.PREMISE_VIOLATED)
     start = {e["premise"] for e in spans if e["until"] <= START}
     later = {e["premise"] for e in spans if e["until"] > START}
     broken = [p for p, v in table.items() if not v["held"]]

@@ -22,7 +22,7 @@ from numba import njit
 
 from . import outcomes
 from .errors import ScenarioError, SimulationError
-from .events import split_text
+from .events import Kind, loaded, split_text
 from .mission import slot_spacing
 from .record import LOG_FIELDS, Events, matrix_rows, write_json, write_npz, write_text
 
@@ -127,7 +127,7 @@ def open_run(folder: str | Path) -> RunResult:
     except (OSError, ValueError, RecursionError) as exc:
         raise ScenarioError(f"{files['scenario.toml']}: unreadable: {_one_line(exc)}") from None
     scenario = from_dict(data, source=str(files["scenario.toml"]))
-    events = Events([dict(e) for e in summary.get("events", [])])
+    events = Events([loaded(e) for e in summary.get("events", [])])
     failed = summary.get("status") == "failed"
     error = SimulationError(str(summary.get("error") or "failed")) if failed else None
     return RunResult(scenario, log, events, summary, error)
@@ -270,9 +270,9 @@ def reactive_spans(events: Events) -> list[dict[str, Any]]:
     on: dict[int, float] = {}
     spans = []
     for e in events.items:
-        if e["kind"] == "reactive_on":
+        if e["kind"] == Kind.REACTIVE_ON:
             on[e["robot"]] = e["t"]
-        elif e["kind"] == "reactive_off" and e["robot"] in on:
+        elif e["kind"] == Kind.REACTIVE_OFF and e["robot"] in on:
             spans.append({"robot": e["robot"], "t_on": on.pop(e["robot"]), "t_off": e["t"]})
     spans += [{"robot": r, "t_on": t, "t_off": None} for r, t in on.items()]
     return sorted(spans, key=lambda r: (r["t_on"], r["robot"]))
@@ -288,7 +288,11 @@ def fault_estimates(s: Scenario, log: dict[str, np.ndarray], events: Events) -> 
     """
     t = log["t"]
     marks = sorted(
-        {e["t"] for e in events.items if e["kind"] in ("fault", "exclusion", "simulation_error")}
+        {
+            e["t"]
+            for e in events.items
+            if e["kind"] in (Kind.FAULT, Kind.EXCLUSION, Kind.SIMULATION_ERROR)
+        }
     )
     end_of_log = t[-1] + 1e-9 if len(t) else 0.0
     by_robot: dict[int, list[float]] = {}
@@ -382,14 +386,15 @@ def summarize(
         "wall_time": wall,
         "real_time_factor": (simulated / wall) if wall > 0 else None,
         "faults": [
-            {"robot": e["robot"], "kind": e["fault"], "t": e["t"]} for e in events.of_kind("fault")
+            {"robot": e["robot"], "kind": e["fault"], "t": e["t"]}
+            for e in events.of_kind(Kind.FAULT)
         ],
         "reactive": reactive_spans(events),
         "detections": [
             {"by": e["by"], "robot": e["robot"], "t": e["t"], "premises": e.get("premises", [])}
-            for e in events.of_kind("detection")
+            for e in events.of_kind(Kind.DETECTION)
         ],
-        "exclusions": [{"robot": e["robot"], "t": e["t"]} for e in events.of_kind("exclusion")],
+        "exclusions": [{"robot": e["robot"], "t": e["t"]} for e in events.of_kind(Kind.EXCLUSION)],
         "errors": {
             "window": [s.mission.transient, simulated],
             "centroid_rms": _rms(err[window, 0]),
@@ -399,11 +404,7 @@ def summarize(
         },
         "xi_bar": xi_bar,
         "xi_bar_source": "scenario" if s.noise.xi_bar is not None else "robot model",
-        "warnings": [e["message"] for e in events.of_kind("warning")]
-        + [
-            f"t = {e['t']:g} s: " + split_text(e)
-            for e in events.of_kind("graph_not_strongly_connected")
-        ],
+        "warnings": _warnings(events),
         "min_obstacle_clearance": _finite_or_none(gap),
         "min_safe_distance_margin": _finite_or_none(margin_d),
     }
@@ -426,9 +427,9 @@ def summarize(
             by_premise[p] = by_premise.get(p, 0) + 1
     summary["healthy_flags_by_premise"] = dict(sorted(by_premise.items()))
     summary["healthy_exclusions"] = sum(
-        1 for e in events.of_kind("exclusion") if _healthy_at(onset, e["robot"], e["t"])
+        1 for e in events.of_kind(Kind.EXCLUSION) if _healthy_at(onset, e["robot"], e["t"])
     )
-    summary["systemic_anomalies"] = len(events.of_kind("systemic_anomaly"))
+    summary["systemic_anomalies"] = len(events.of_kind(Kind.SYSTEMIC_ANOMALY))
     tol = outcomes.tolerance(s.mission.formation, s.team.robots)
     faulty = {r - 1 for r in onset}
     summary["mission"] = outcomes.mission_outcome(
@@ -457,10 +458,18 @@ def _estimates_off(s: Scenario, found: dict[str, Any], events: Events, end: floa
     return out
 
 
+def _warnings(events: Events) -> list[str]:
+    """The run's warnings, and each split of the graph an exclusion left, as lines."""
+    return [e["message"] for e in events.of_kind(Kind.WARNING)] + [
+        f"t = {e['t']:g} s: " + split_text(e)
+        for e in events.of_kind(Kind.GRAPH_NOT_STRONGLY_CONNECTED)
+    ]
+
+
 def fault_onsets(events: Events) -> dict[int, float]:
     """Each faulty robot's (1-based) first fault onset, from the ``fault`` events."""
     onset: dict[int, float] = {}
-    for e in events.of_kind("fault"):
+    for e in events.of_kind(Kind.FAULT):
         onset[e["robot"]] = min(e["t"], onset.get(e["robot"], np.inf))
     return onset
 

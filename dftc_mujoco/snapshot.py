@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+
+from .events import Event
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,7 @@ class Snapshot:
     flagged: np.ndarray
     reactive: np.ndarray
     active: np.ndarray
-    events: list[dict[str, Any]] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
 
     @classmethod
     def of(
@@ -43,12 +44,12 @@ class Snapshot:
         x: np.ndarray,
         x_m: np.ndarray,
         outputs: dict[str, np.ndarray],
-        events: list[dict[str, Any]],
+        events: list[Event],
     ) -> Snapshot:
         """A snapshot at ``t`` of true positions ``x``, measurements ``x_m`` and the team's
         ``outputs`` (``Team.outputs``), every array copied."""
         copied = {k: np.array(outputs[k], copy=True) for k in _TEAM}
-        return cls(t=t, x=x.copy(), x_m=x_m.copy(), events=[dict(e) for e in events], **copied)
+        return cls(t=t, x=x.copy(), x_m=x_m.copy(), events=[e.copy() for e in events], **copied)
 
 
 #: the snapshot's fields the team's outputs give

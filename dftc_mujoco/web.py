@@ -38,7 +38,7 @@ import numpy as np
 
 from .display import COLOURS, STATES
 from .errors import ServeError
-from .events import describe
+from .events import Kind, describe
 from .viewer import Marker, init_geom, markers, snapshot_states
 
 #: frames per second sent to the browser (the browser draws at its own rate between them)
@@ -272,12 +272,12 @@ def live_captions(events: Sequence[dict[str, Any]], seen: set[int]) -> list[tupl
     flag (``seen``: the robots flagged before, updated) and exclusions."""
     out = []
     for e in events:
-        if e["kind"] == "detection":
+        if e["kind"] == Kind.DETECTION:
             if e["robot"] in seen:
                 continue
             seen.add(e["robot"])
             out.append((e["t"], describe(e) + " (first detection)"))
-        elif e["kind"] in ("fault", "exclusion"):
+        elif e["kind"] in (Kind.FAULT, Kind.EXCLUSION):
             out.append((e["t"], describe(e)))
     return out
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ScenarioError
+from ..events import Kind
 
 REPLAN_WINDOW = 5.0  # s after an exclusion that count as the re-plan's transient
 
@@ -103,7 +104,7 @@ def drift(
         if not r.ok:
             raise ScenarioError(f"{s.source}: the run for the re-plan failed: {r.error}")
         t = r.log["t"]
-        gone = r.events.of_kind("exclusion")
+        gone = r.events.of_kind(Kind.EXCLUSION)
         faulty = {int(f["robot"]) - 1 for f in stops}
         healthy = np.array(sorted(set(range(r.log["x"].shape[1])) - faulty), dtype=int)
         if not gone or not len(healthy):

@@ -16,6 +16,7 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..events import Kind
 from .spec import Spec, scenario_for
 
 if TYPE_CHECKING:
@@ -74,7 +75,7 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
     end = float(summary.get("simulated_time") or summary.get("duration") or 0.0)
     planned = float(summary.get("duration") or end)
     out = []
-    for f in (e for e in events if e["kind"] == "fault"):
+    for f in (e for e in events if e["kind"] == Kind.FAULT):
         robot, t_f = f["robot"], f["t"]
         gone_before = sum(1 for e in summary["exclusions"] if e["t"] < t_f)
         dt = horizon.get("value")
@@ -104,7 +105,7 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
             (
                 e["t"]
                 for e in events
-                if e["kind"] == "detection_window_restarted"
+                if e["kind"] == Kind.DETECTION_WINDOW_RESTARTED
                 and e["robot"] == robot
                 and e["onset"] == t_f
             ),
@@ -148,7 +149,7 @@ def fault_facts(summary: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 #: the recovery's events about a flagged robot's exclusion (the last one says why it stayed)
-RECOVERY_KINDS = ("exclusion_scheduled", "exclusion_postponed", "exclusion_cancelled")
+RECOVERY_KINDS = (Kind.EXCLUSION_SCHEDULED, Kind.EXCLUSION_POSTPONED, Kind.EXCLUSION_CANCELLED)
 
 
 def kept_why(
@@ -172,16 +173,16 @@ def kept_why(
             last = e
         else:  # before the onset: in force at it while its t_r (None: never) is still to come
             t_r = e.get("t_r")
-            pending = e["kind"] != "exclusion_cancelled" and (t_r is None or t_r >= t_f)
+            pending = e["kind"] != Kind.EXCLUSION_CANCELLED and (t_r is None or t_r >= t_f)
             last = e if pending else None
     if last is None:
         return "never_flagged"
-    if last["kind"] == "exclusion_cancelled":
+    if last["kind"] == Kind.EXCLUSION_CANCELLED:
         return "cancelled_" + str(last.get("reason")).replace(" ", "_")
     t_r = last.get("t_r")
     if t_r is not None and end + 1e-9 < t_r <= planned + 1e-9:
         return "run_stopped"
-    if last["kind"] == "exclusion_postponed":
+    if last["kind"] == Kind.EXCLUSION_POSTPONED:
         return "postponed_" + str(last.get("reason"))
     return "due_after_end" if t_r is not None and t_r > planned + 1e-9 else "run_stopped"
 
@@ -191,20 +192,20 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
     soon its stop was flagged by itself and seen by a listener, and the channel's measured
     loss rate and largest delay."""
     events = summary.get("events", [])
-    silent = [e for e in events if e["kind"] == "radio_fault" and e.get("fault") == "silent"]
-    reported = [e for e in events if e["kind"] == "robot_silent"]
+    silent = [e for e in events if e["kind"] == Kind.RADIO_FAULT and e.get("fault") == "silent"]
+    reported = [e for e in events if e["kind"] == Kind.ROBOT_SILENT]
     delay = self_seen = sighted = None
     if silent:
         robot = silent[0]["robot"]
         later = [e["t"] for e in reported if e["robot"] == robot]
         delay = min(later) - silent[0]["t"] if later else None
         # its own later stop, flagged by itself (its teammates no longer hear it)
-        stop = [e["t"] for e in events if e["kind"] == "fault" and e["robot"] == robot]
+        stop = [e["t"] for e in events if e["kind"] == Kind.FAULT and e["robot"] == robot]
         own = [
             e["t"] - stop[0]
             for e in events
             if stop
-            and e["kind"] == "detection"
+            and e["kind"] == Kind.DETECTION
             and e["by"] == robot == e["robot"]
             and e["t"] >= stop[0]
         ]
@@ -213,7 +214,7 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
         by_sight = [
             e["t"] - stop[0]
             for e in events
-            if stop and e["kind"] == "sighting" and e["robot"] == robot and e["t"] >= stop[0]
+            if stop and e["kind"] == Kind.SIGHTING and e["robot"] == robot and e["t"] >= stop[0]
         ]
         sighted = min(by_sight) if by_sight else None
     net = summary.get("network") or {}
@@ -221,12 +222,12 @@ def _radio_facts(summary: dict[str, Any]) -> dict[str, Any]:
     sent = sum(x["sent"] for x in links)
     delays = [x["delay_max"] for x in links if x.get("delay_max") is not None]
     return {
-        "radio_faults": sum(e["kind"] == "radio_fault" for e in events),
+        "radio_faults": sum(e["kind"] == Kind.RADIO_FAULT for e in events),
         "silent_reported": bool(silent) and delay is not None,
         "silent_report_delay": delay,
         "silent_stop_self_flag_delay": self_seen,
         "silent_stop_sighted_delay": sighted,
-        "sightings": sum(e["kind"] == "sighting" for e in events),
+        "sightings": sum(e["kind"] == Kind.SIGHTING for e in events),
         "round_periods": net.get("round_periods", 1),
         "estimation_error_max": (summary.get("estimation_error") or {}).get("max"),
         "loss_measured": sum(x["lost"] for x in links) / sent if sent else None,

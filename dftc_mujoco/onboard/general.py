@@ -7,12 +7,55 @@ Fig. 1, and both paths compute the same thing for the paper's blocks (tested).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from .block import BadOutput, Block, blame_not_finite, shaped
+from .applied import DriveModel
+from .block import BadOutput, Block, TeamConfig, blame_not_finite, shaped
+from .controller import Controller
+from .decision import Decision
+from .detector import Detector
+from .fault_estimator import FaultEstimator
+from .observer import Observer
 from .period import RAISED, SATURATED, SWITCHED
+from .radio import Rounds
+from .supervisor import Supervisor
+
+
+class GeneralTeam(Protocol):
+    """What one period of the general path reads and writes of the team (:class:`~.team.Team`
+    is one): its blocks, its drive model and network rounds, the surroundings its range
+    sensors gave, and the period's arrays on the members' axis."""
+
+    config: TeamConfig
+    n: int
+    members: np.ndarray
+    observer: Observer
+    controller: Controller
+    supervisor: Supervisor
+    estimator: FaultEstimator
+    decision: Decision
+    detector: Detector
+    drive: DriveModel
+    rounds: Rounds
+    #: the obstacles' positions, safe distances and activation distances; teammates seen
+    obs_p: np.ndarray
+    obs_d: np.ndarray
+    obs_a: np.ndarray
+    mates: np.ndarray
+    sensed: bool  # the range sensors read this period
+    supervisor_sees_mates: bool  # the supervisor's step() takes ``teammates``
+    estimator_holds: bool  # the fault estimator's step() takes ``hold``
+    touch: np.ndarray  # each robot's bumper, held
+    x_d: np.ndarray
+    xd_dot: np.ndarray
+    x_hat: np.ndarray
+    u: np.ndarray
+    u_bar: np.ndarray
+    r_norm: np.ndarray
+    mu: np.ndarray
+    raised: np.ndarray
 
 
 def judged(
@@ -34,7 +77,14 @@ def judged(
     return out
 
 
-def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
+def general_period(
+    team: GeneralTeam,
+    x_m: np.ndarray,
+    c: np.ndarray,
+    c_dot: np.ndarray,
+    offsets: np.ndarray,
+    rates: np.ndarray,
+) -> int:
     """One period of :class:`~.team.Team` ``team`` through its blocks' Python methods
     (any block set); returns RAISED | SWITCHED | SATURATED bits. The arguments are those
     of the compiled period (:class:`~.period.PeriodInputs`)."""
@@ -53,13 +103,13 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
         ctl.collective_input(x_hat, team.x_d, team.xd_dot), stacked, ctl, "collective_input()"
     )  # eq. 15
     u_g = shaped(ctl.own_input(u_hat_g), own, ctl, "own_input()")  # eq. 16
-    mates = team._mates if team._sensed and cfg.teammate_safe > 0 else None
-    if mates is not None and team._supervisor_sees_mates:
+    mates = team.mates if team.sensed and cfg.teammate_safe > 0 else None
+    if mates is not None and team.supervisor_sees_mates:
         u_mem, delta_u = team.supervisor.step(
-            x_own, u_g, team._obs_p, team._obs_d, team._obs_a, teammates=mates
+            x_own, u_g, team.obs_p, team.obs_d, team.obs_a, teammates=mates
         )
     else:
-        u_mem, delta_u = team.supervisor.step(x_own, u_g, team._obs_p, team._obs_d, team._obs_a)
+        u_mem, delta_u = team.supervisor.step(x_own, u_g, team.obs_p, team.obs_d, team.obs_a)
     # the applied input (Remark 4.1), saturated here
     u_mem = np.array(shaped(u_mem, own, sup, "step()[0]"), dtype=float)
     delta_u = np.array(shaped(delta_u, own, sup, "step()[1]"), dtype=float)
@@ -90,8 +140,8 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
     if saturated:
         code |= SATURATED
     if cfg.fdir:
-        if team._estimator_holds:  # eqs. 28-31, nominal u (docs/notes.md, 2)
-            u_bar = team.estimator.step(x_m, team.u, hold=team._touch)
+        if team.estimator_holds:  # eqs. 28-31, nominal u (docs/notes.md, 2)
+            u_bar = team.estimator.step(x_m, team.u, hold=team.touch)
         else:
             u_bar = team.estimator.step(x_m, team.u)
         u_bar = shaped(u_bar, team.u.shape, team.estimator, "step()")
@@ -103,8 +153,8 @@ def general_period(team: Any, x_m, c, c_dot, offsets, rates) -> int:
             team.u_bar[:] = u_bar
         if team.rounds.now:
             raised = team.decision.update(team.r_norm, team.mu)
-            team._raised = np.asarray(shaped(raised, pairs, team.decision, "update()"), bool)
-            if team._raised.any():  # eq. 39
+            team.raised = np.asarray(shaped(raised, pairs, team.decision, "update()"), bool)
+            if team.raised.any():  # eq. 39
                 code |= RAISED
     else:
         team.u_bar[:] = team.drive.command

@@ -11,14 +11,39 @@ or False (:func:`_team_row`: 1.4 µs a row at N = 4, where placing the arrays in
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numba import njit
 
 from .decision import flagged_by_teammates
+from .supervisor import Supervisor
 from .team_axis import place
-from .thresholds.paper import factored_at
+from .thresholds.paper import ThresholdRecord, factored_at
+
+
+class RowTeam(Protocol):
+    """What a log row reads of the team (:class:`~.team.Team` is one): the period's outputs,
+    on the members' axis except ``u``, ``active``, ``phi_hat`` (the original robot axis)."""
+
+    compiled: bool  # the period ran compiled: one compiled call writes the row
+    members: np.ndarray
+    u: np.ndarray
+    active: np.ndarray
+    x_d: np.ndarray
+    x_hat: np.ndarray
+    mu: np.ndarray
+    supervisor: Supervisor  # its ``active``: each robot's obstacle, -1 for none
+
+    @property
+    def threshold_factors(self) -> ThresholdRecord | None: ...
+    @property
+    def r_norm(self) -> np.ndarray: ...
+    @property
+    def flag(self) -> np.ndarray: ...
+    @property
+    def phi_hat(self) -> np.ndarray: ...
+
 
 #: the log's fields the team writes, in the order the compiled call takes them
 FIELDS = ("u", "active", "x_d", "reactive", "flagged", "phi_hat", "x_hat", "residual", "threshold")
@@ -109,7 +134,7 @@ def _team_row(
                 )
 
 
-def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
+def write_row(team: RowTeam, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
     """Write the team's outputs into row ``row`` of the log's preallocated arrays (the N × N
     ones into row ``row_nn`` unless it is -1), on the original robot axis: one compiled call
     for a compiled team (:func:`_team_row`), :func:`placed_row` for a team of plug-in blocks
@@ -130,7 +155,9 @@ def write_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_n
     )  # fmt: skip
 
 
-def placed_row(team: Any, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int) -> None:
+def placed_row(
+    team: RowTeam, log: dict[str, np.ndarray], row: int, fdir: bool, row_nn: int
+) -> None:
     """:func:`write_row` in Python: the members' rows placed on the original robot axis
     (:func:`~.team_axis.place`), the others filled."""
     mem = team.members

@@ -15,11 +15,9 @@ used: the rounds its own links carry.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from ..events import make
+from ..events import Event, Kind, make
 from .observer import Observer
 
 #: rounds in a row without the round's message after which a robot reports a link silent
@@ -49,7 +47,7 @@ class Radios:
         ok = mine >= 0
         self.observer.receive(mine[ok], rounds[ok], offset[ok])
 
-    def watch(self, t: float, s: int, members: np.ndarray) -> list[dict[str, Any]]:
+    def watch(self, t: float, s: int, members: np.ndarray) -> list[Event]:
         """At round ``s``: each robot checks its links for the round's message; returns the
         events of links it stops or starts reading again and of robots nobody hears.
         ``members``: the original robot of each team row."""
@@ -71,9 +69,11 @@ class Radios:
             sender, heard_by = int(ids[src[e]]), int(ids[dst[e]])
             if deaf[e]:
                 since = int(obs.link_round[e])
-                events.append(make(t, "link_silent", robot=sender, heard_by=heard_by, since=since))
+                events.append(
+                    make(t, Kind.LINK_SILENT, robot=sender, heard_by=heard_by, since=since)
+                )
             else:
-                events.append(make(t, "link_heard", robot=sender, heard_by=heard_by))
+                events.append(make(t, Kind.LINK_HEARD, robot=sender, heard_by=heard_by))
         self.deaf = deaf
         for j in np.unique(src[changed]):
             out = src == j
@@ -83,7 +83,7 @@ class Radios:
                 events.append(
                     make(
                         t,
-                        "robot_silent",
+                        Kind.ROBOT_SILENT,
                         robot=robot + 1,
                         reported_by=[int(ids[d]) for d in dst[out]],
                         since=int(obs.link_round[out].max()),
@@ -94,7 +94,7 @@ class Radios:
 
     def message_faults(
         self, t: float, flag: np.ndarray, members: np.ndarray, max_faults: int
-    ) -> list[dict[str, Any]]:
+    ) -> list[Event]:
         """A robot whose flags stand on more of its columns than the fault hypothesis admits
         cannot be seeing actuator faults (each moves one column only): something it
         receives is wrong. The first robots to show it report it (``message_fault``), naming
@@ -114,7 +114,7 @@ class Radios:
         common = set.intersection(*(set(src[dst == i].tolist()) for i in first))
         sender = int(members[common.pop()]) + 1 if len(common) == 1 else None
         by = [int(members[i]) + 1 for i in first]
-        return [make(t, "message_fault", robot=sender, reported_by=by)]
+        return [make(t, Kind.MESSAGE_FAULT, robot=sender, reported_by=by)]
 
     def drop(self, p: int) -> None:
         """Before the observer drops team row ``p``: its links go with it."""

@@ -25,11 +25,10 @@ Robots are on the original axis (0-based); events carry them 1-based.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any
 
 import numpy as np
 
-from ..events import make
+from ..events import Event, Kind, make
 from ..graph import Graph
 
 #: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
@@ -69,16 +68,16 @@ class Recovery:
         self.ratio_at: dict[int, tuple[float, float]] = {}
         self.waiting: set[int] = set()  # robots whose own estimate has not confirmed yet
 
-    def flagged(self, t: float, pairs: Iterable[tuple[int, int]]) -> list[dict[str, Any]]:
+    def flagged(self, t: float, pairs: Iterable[tuple[int, int]]) -> list[Event]:
         """Robot ``by`` raised a flag on ``robot`` at ``t`` for each pair: a ``detection``
         event for each first flag of a pair, and the exclusion scheduled at t_r (eq. 43)
         for each robot flagged for the first time."""
-        events: list[dict[str, Any]] = []
+        events: list[Event] = []
         for by, robot in pairs:
             if (by, robot) in self.detected:
                 continue
             self.detected.add((by, robot))
-            events.append(make(t, "detection", by=by + 1, robot=robot + 1))
+            events.append(make(t, Kind.DETECTION, by=by + 1, robot=robot + 1))
             if not self.counts(by, robot):
                 continue  # its own flag is reported, but exclusion needs teammates
             if robot not in self.first_detection:
@@ -87,16 +86,14 @@ class Recovery:
                 self.pending[robot] = t_r
                 # a contact up to T_s + Δt_d,max earlier may explain it (a new start)
                 self.since[robot] = t - self.settle - self.dt_d_max
-                events.append(make(t, "exclusion_scheduled", robot=robot + 1, t_r=t_r))
+                events.append(make(t, Kind.EXCLUSION_SCHEDULED, robot=robot + 1, t_r=t_r))
         return events
 
     def counts(self, by: int, robot: int) -> bool:
         """Whether robot ``by`` flagging ``robot`` counts towards its exclusion."""
         return by != robot or self.self_exclusion
 
-    def hypothesis(
-        self, t: float, flagged: list[int], excluded: int, members: int
-    ) -> dict[str, Any] | None:
+    def hypothesis(self, t: float, flagged: list[int], excluded: int, members: int) -> Event | None:
         """The robots flagged by teammates now among ``members`` robots (``excluded`` were
         excluded before): an event when a ``systemic_anomaly`` begins or ends.
 
@@ -111,7 +108,7 @@ class Recovery:
             self.anomaly = sorted(flagged)
             return make(
                 t,
-                "systemic_anomaly",
+                Kind.SYSTEMIC_ANOMALY,
                 robots=[r + 1 for r in self.anomaly],
                 max_faults=bound,
                 excluded=excluded,
@@ -120,7 +117,7 @@ class Recovery:
             self.anomaly = sorted(set(self.anomaly) | set(flagged))
             return None
         robots, self.anomaly = self.anomaly, None
-        return make(t, "systemic_anomaly_over", robots=[r + 1 for r in robots])
+        return make(t, Kind.SYSTEMIC_ANOMALY_OVER, robots=[r + 1 for r in robots])
 
     def due(self, t: float) -> list[int]:
         """The robots whose t_r has come, earliest first; they are no longer pending."""
@@ -135,7 +132,7 @@ class Recovery:
         for robot in robots:
             self.last_contact[int(robot)] = t
 
-    def postpone(self, t: float, robot: int, ratio: float = np.nan) -> dict[str, Any] | None:
+    def postpone(self, t: float, robot: int, ratio: float = np.nan) -> Event | None:
         """At t_r: an ``exclusion_postponed`` event when ``robot`` touched something since its
         window began (its new t_r is its last contact + T_s + Δt_d,max, and that window must
         be free of contact in turn), or when the flags a contact raised are still decaying
@@ -155,14 +152,14 @@ class Recovery:
         self.since[robot] = last + 1e-9  # only a later contact postpones it again
         return make(
             t,
-            "exclusion_postponed",
+            Kind.EXCLUSION_POSTPONED,
             robot=robot + 1,
             reason="contact",
             last_contact=last,
             t_r=t_r if np.isfinite(t_r) else None,  # None: not within the run
         )
 
-    def transient(self, t: float, robot: int, ratio: float) -> dict[str, Any] | None:
+    def transient(self, t: float, robot: int, ratio: float) -> Event | None:
         """A robot a contact postponed is still flagged at its new t_r: if its largest
         residual/threshold among teammates fell by at least :data:`DECAYING` since then, the
         flags are the contact's trace decaying through the observers (a push moves y_m,k for
@@ -184,7 +181,7 @@ class Recovery:
         self.ratio_at[robot] = (t, ratio)
         return make(
             t,
-            "exclusion_postponed",
+            Kind.EXCLUSION_POSTPONED,
             robot=robot + 1,
             reason="decaying",
             last_contact=self.last_contact[robot],
@@ -193,7 +190,7 @@ class Recovery:
             was=round(float(r0), 4),
         )
 
-    def unconfirmed(self, t: float, robot: int, phi_bar: float) -> dict[str, Any] | None:
+    def unconfirmed(self, t: float, robot: int, phi_bar: float) -> Event | None:
         """At t_r: ``robot`` is still flagged, but since its first flag its own fault estimate
         has not stayed beyond Φ̄ (``phi_bar``), nor its command beyond range, for a decision
         window (:mod:`.estimate_alarm`): its signal moved as a healthy robot's, and the flags
@@ -209,7 +206,7 @@ class Recovery:
         self.waiting.add(robot)
         return make(
             t,
-            "exclusion_postponed",
+            Kind.EXCLUSION_POSTPONED,
             robot=robot + 1,
             reason="estimate",
             t_r=t_r if np.isfinite(t_r) else None,
@@ -220,12 +217,12 @@ class Recovery:
         """Every robot that ever flagged ``robot`` (1-based, sorted)."""
         return sorted(by + 1 for by, k in self.detected if k == robot)
 
-    def cancel(self, t: float, robot: int, reason: str = "not flagged") -> dict[str, Any]:
+    def cancel(self, t: float, robot: int, reason: str = "not flagged") -> Event:
         """``robot`` stays at its t_r (no teammate flags it, or a ``systemic_anomaly`` holds),
         and its detections are forgotten."""
         event = make(
             t,
-            "exclusion_cancelled",
+            Kind.EXCLUSION_CANCELLED,
             robot=robot + 1,
             detected_by=self.detectors(robot),
             reason=reason,
@@ -236,19 +233,19 @@ class Recovery:
         self.waiting.discard(robot)
         return event
 
-    def exclusion(self, t: float, robot: int, flaggers: list[int]) -> dict[str, Any]:
+    def exclusion(self, t: float, robot: int, flaggers: list[int]) -> Event:
         """The ``exclusion`` event of ``robot``, still flagged at t_r by ``flaggers``."""
         self.waiting.discard(robot)
         return make(
             t,
-            "exclusion",
+            Kind.EXCLUSION,
             robot=robot + 1,
             flagged_by=flaggers,
             detected_by=self.detectors(robot),
         )
 
 
-def split_event(t: float, graph: Graph, members: np.ndarray) -> dict[str, Any]:
+def split_event(t: float, graph: Graph, members: np.ndarray) -> Event:
     """The ``graph_not_strongly_connected`` event: the members' strongly connected
     components and, for each, the robots it hears nothing from (directly or through
     others): its estimates of them, and the residuals and thresholds built on them, have
@@ -262,7 +259,7 @@ def split_event(t: float, graph: Graph, members: np.ndarray) -> dict[str, Any]:
         cost.append([int(k) for k in ids[lost]])
     return make(
         t,
-        "graph_not_strongly_connected",
+        Kind.GRAPH_NOT_STRONGLY_CONNECTED,
         robots=[int(k) for k in ids],
         components=[[int(k) for k in ids[g]] for g in groups],
         unheard=cost,  # per component: the robots whose estimates lost their bound

@@ -23,11 +23,27 @@ Only what robot i knows is used: its links, its range sensor, the mission and th
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
-from ..events import make
+from ..events import Event, Kind, make
+from .block import TeamConfig
+from .observer import Observer
+from .radio import Radios
+from .recovery import Recovery
+
+
+class WatchingTeam(Protocol):
+    """What the sighting reads of the team (:class:`~.team.Team` is one)."""
+
+    config: TeamConfig
+    members: np.ndarray
+    gone: np.ndarray  # the robots excluded so far
+    observer: Observer
+    radios: Radios | None  # None on the ideal network
+    recovery: Recovery
+
 
 #: [s] a silent robot keeps the wider tolerance this long after it was near something
 HOLD = 2.0
@@ -52,13 +68,13 @@ class Sighting:
         self,
         t: float,
         silent: np.ndarray,
-        listeners: Any,
+        listeners: dict[int, np.ndarray],
         members: np.ndarray,
         seen: np.ndarray,
         slots: np.ndarray,
         detour: np.ndarray,
         rows: np.ndarray | None = None,
-    ) -> tuple[list[tuple[int, int]], list[dict[str, Any]]]:
+    ) -> tuple[list[tuple[int, int]], list[Event]]:
         """One period. ``silent`` (N,) robots reported silent; ``listeners[p]`` the team
         positions that listen to the member at position ``p`` (a list, or a dict by ``p``);
         ``seen`` (N, 2) where the range sensors see every robot; ``slots`` (M, 2) the
@@ -69,7 +85,7 @@ class Sighting:
         Returns the (by, robot) pairs raised now (original axis) and their events."""
         self.judged[:] = False
         raised: list[tuple[int, int]] = []
-        events: list[dict[str, Any]] = []
+        events: list[Event] = []
         for p in range(len(members)) if rows is None else rows:
             j = members[p]
             if not silent[j]:
@@ -104,7 +120,7 @@ class Sighting:
                 events.append(
                     make(
                         t,
-                        "sighting",
+                        Kind.SIGHTING,
                         by=int(i) + 1,
                         robot=int(j) + 1,
                         distance=round(off, 4),
@@ -114,8 +130,14 @@ class Sighting:
         return raised, events
 
     def watch(
-        self, t: float, team: Any, c: np.ndarray, c_dot: np.ndarray, plan: tuple, seen: np.ndarray
-    ) -> list[dict[str, Any]]:
+        self,
+        t: float,
+        team: WatchingTeam,
+        c: np.ndarray,
+        c_dot: np.ndarray,
+        plan: tuple[np.ndarray, np.ndarray],
+        seen: np.ndarray,
+    ) -> list[Event]:
         """One period of ``team`` (:class:`~.team.Team`): its radios' silent robots, its
         links, the slots ``c`` + offsets moving at ``c_dot`` + rates (``plan``: the
         formation's offsets and rates); raises the flags that are due (they count towards

@@ -27,7 +27,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..events import make
+from ..events import Event, Kind, make
 from ..mission import FormationPlan, formation_offsets, replan
 from .applied import DriveModel
 from .block import Block, TeamConfig, shaped
@@ -60,7 +60,7 @@ from .supervisor import Supervisor, Surroundings, grid_work, obstacle_label
 from .team_axis import expand
 from .thresholds import Thresholds
 from .thresholds.delays import detection_horizon
-from .thresholds.paper import dense_thresholds
+from .thresholds.paper import ThresholdRecord, dense_thresholds
 from .thresholds.settling import refuse_bad_entry, rule_settle_time
 
 __all__ = ["PAPER_BLOCKS", "Team", "TeamConfig", "runs_compiled"]
@@ -140,7 +140,7 @@ class Team:
             config.start_accel, config.start_time,
         )  # fmt: skip
         self._reactive = np.zeros(n, bool)  # on the original axis, for switch events
-        self.events: list[dict[str, Any]] = []
+        self.events: list[Event] = []
         self.ended: str | None = None  # why the mission ended early (the team fell apart)
         self.dt_d_max, self.dt_d_max_info = detection_horizon(config, config.graph, self.thresholds)
         # the exclusion protocol (eqs. 42-43) under the fault hypothesis
@@ -160,12 +160,12 @@ class Team:
         network's rounds and radios, the sighting of silent robots, what a pass under way
         was given."""
         self._teammates = np.zeros(n, bool)  # scratch: who is flagged by a teammate
-        self._sensed = False  # the last period had range-sensor readings
+        self.sensed = False  # the last period had range-sensor readings
         # a plug-in supervisor whose step() predates teammate avoidance is called without it
         step_params = inspect.signature(self.supervisor.step).parameters
-        self._supervisor_sees_mates = "teammates" in step_params
-        self._estimator_holds = "hold" in inspect.signature(self.estimator.step).parameters
-        self._touch = np.zeros(n, bool)  # each robot's bumper, held HOLD_AFTER_CONTACT s
+        self.supervisor_sees_mates = "teammates" in step_params
+        self.estimator_holds = "hold" in inspect.signature(self.estimator.step).parameters
+        self.touch = np.zeros(n, bool)  # each robot's bumper, held HOLD_AFTER_CONTACT s
         self._untouched = np.full(n, np.inf)  # periods each robot's bumper has been off
         self._hold_periods = HOLD_AFTER_CONTACT / config.dt
         # a lagged drive's velocity is the robot's: a jam stops it while the model runs on,
@@ -225,19 +225,19 @@ class Team:
         threads = cfg.threads if self.compiled and m >= cfg.shared_from else 1
         self._sharing = Sharing(threads) if threads > 1 else None
         self._row = np.empty((threads, m * 2))
-        self._mates = np.zeros((m, 2))  # where the range sensors see the members
+        self.mates = np.zeros((m, 2))  # where the range sensors see the members
         # ‖ⁱr_k‖ (none before the first round of a network), then each thread's scratch row
         self._norms = np.zeros((m + threads, m))
-        self._raised = np.zeros((m, m), bool)
+        self.raised = np.zeros((m, m), bool)
         self.mu = np.full((m, m), np.inf)  # no thresholds before the first round
         gone = len(self.gone)
-        self._obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
-        self._gone_p = self._obs_p[len(cfg.obstacle_position.reshape(-1, 2)) :]  # a view
-        self._obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
-        self._obs_a = np.concatenate(
+        self.obs_p = np.vstack([cfg.obstacle_position.reshape(-1, 2), np.zeros((gone, 2))])
+        self._gone_p = self.obs_p[len(cfg.obstacle_position.reshape(-1, 2)) :]  # a view
+        self.obs_d = np.concatenate([cfg.obstacle_safe, np.full(gone, cfg.excluded_safe)])
+        self.obs_a = np.concatenate(
             [cfg.obstacle_activation, np.full(gone, cfg.excluded_activation)]
         )
-        self._seen = Surroundings(self._obs_p, self._obs_d, self._obs_a, self._mates)
+        self._seen = Surroundings(self.obs_p, self.obs_d, self.obs_a, self.mates)
         self._flat: list[tuple[Any, ...]] = []  # see _fields
         # the decision's scale is written each round (bound_squares)
         self._buffers = PeriodBuffers(
@@ -284,27 +284,27 @@ class Team:
         self.drive.at(t)  # the ramped start's acceleration, then the drive's own
         if touching is not None:
             # a jammed robot's bumper flickers; the estimator holds until it stayed off a while
-            touched = held(self._untouched, touching, self._hold_periods, self._touch)
+            touched = held(self._untouched, touching, self._hold_periods, self.touch)
             if self.drive.lagged:
                 slot = self._k % self._window
-                if self._k >= self._window and self._touch.any():
+                if self._k >= self._window and self.touch.any():
                     seen = (x_m - self._x_past[slot]) / (self._window * self.config.dt)
-                    self.drive.v_hat[self._touch] = seen[self._touch]
+                    self.drive.v_hat[self.touch] = seen[self.touch]
                 self._x_past[slot] = x_m
                 self._k += 1
             if touched:
                 self.recovery.contact(t, np.flatnonzero(touching & self.active))
         if self.recovery.pending:
             self._exclusions_due(t)
-        self._sensed = sensed_bodies is not None
+        self.sensed = sensed_bodies is not None
         if sensed_bodies is not None:
             if len(self.gone):
                 sensed_bodies.take(self.gone, axis=0, out=self._gone_p)  # the robots that left
             if self.config.teammate_safe > 0:
-                if len(self._mates) == self.n:  # every robot a member: a copy, not a gather
-                    self._mates[...] = sensed_bodies
+                if len(self.mates) == self.n:  # every robot a member: a copy, not a gather
+                    self.mates[...] = sensed_bodies
                 else:
-                    sensed_bodies.take(self.members, axis=0, out=self._mates)
+                    sensed_bodies.take(self.members, axis=0, out=self.mates)
         offsets, rates = self.plan.at(t)
         for b in self._timed:
             b.t = t
@@ -358,7 +358,7 @@ class Team:
         if self.sighting is not None and sensed_bodies is not None:
             self.events += self.sighting.watch(t, self, c, c_dot, (offsets, rates), sensed_bodies)
         if code & RAISED:  # the compiled period's flags are the decision's own array
-            self._report(t, self.decision.raised if self.compiled else self._raised)
+            self._report(t, self.decision.raised if self.compiled else self.raised)
         if radios is not None and self.rounds.now and self.config.fdir:
             # corrupted messages flag every column at once
             mf = admitted(self.config.max_faults, len(self.members))
@@ -382,7 +382,7 @@ class Team:
         self._th = dense_thresholds(np.ascontiguousarray(value, dtype=float))
 
     @property
-    def threshold_factors(self) -> Any:
+    def threshold_factors(self) -> ThresholdRecord | None:
         """The :class:`~.thresholds.paper.ThresholdRecord` of eq. 40's factors the compiled
         period read this round, from which :attr:`mu` is written (``Thresholds.mu``: the
         same numbers); None where the thresholds are an array (a rule's own, one set
@@ -452,7 +452,7 @@ class Team:
         exclusion (when :meth:`_resize` forgets them), but for ŷ and ŷ⁺, which swap every
         period, the range sensor's reading and the drive's acceleration after the start: a
         few are kept, each checked by the very objects it was made from."""
-        y, sensed, accel = self.observer.y_hat, self._sensed, self.drive.accel_step
+        y, sensed, accel = self.observer.y_hat, self.sensed, self.drive.accel_step
         for key_y, key_sensed, key_accel, kept in self._flat:
             if key_y is y and key_sensed == sensed and key_accel == accel:
                 return kept
@@ -462,7 +462,7 @@ class Team:
             self.supervisor.record(sensed),
             self._seen,
             self.drive.record(),
-            self.estimator.record(self._touch),
+            self.estimator.record(self.touch),
             self.alarm.record(),
             self.decision.record(),
             self._buffers,
@@ -555,13 +555,13 @@ class Team:
                 self.events.append(
                     make(
                         t,
-                        "reactive_on",
+                        Kind.REACTIVE_ON,
                         robot=int(i) + 1,
                         obstacle=obstacle_label(int(avoiding[i]), n_cyl),
                     )
                 )
             else:
-                self.events.append(make(t, "reactive_off", robot=int(i) + 1))
+                self.events.append(make(t, Kind.REACTIVE_OFF, robot=int(i) + 1))
         self._reactive = np.array(now, copy=True)
 
     def _report(self, t: float, raised: np.ndarray) -> None:
@@ -624,7 +624,7 @@ class Team:
             if last_pair:
                 left = [int(k) + 1 for k in self.members if k != robot]
                 self.ended = f"the team was reduced to robot {left[0]} alone"
-                self.events.append(make(t, "mission_ended", reason=self.ended, robots=left))
+                self.events.append(make(t, Kind.MISSION_ENDED, reason=self.ended, robots=left))
                 return
             self._after_exclusion(t)
             if not self.graph.is_strongly_connected():
@@ -649,7 +649,7 @@ class Team:
             self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
-            self.events.append(make(t, "detection_horizon", value=self.dt_d_max, before=before))
+            self.events.append(make(t, Kind.DETECTION_HORIZON, value=self.dt_d_max, before=before))
 
     def _rewire(self, t: float, p: int, gone: int) -> None:
         """The survivors' graph once robot ``gone`` (member ``p``) left: with ``rewire``
@@ -659,7 +659,7 @@ class Team:
         self.graph, added = self.graph.rewired(p) if how != "none" else (self.graph.without(p), [])
         if added:
             links = [[int(self.members[j]) + 1, int(self.members[i]) + 1] for j, i in added]
-            self.events.append(make(t, "graph_rewired", robot=gone + 1, links=links, how=how))
+            self.events.append(make(t, Kind.GRAPH_REWIRED, robot=gone + 1, links=links, how=how))
 
     def _exclude(self, t: float, p: int) -> None:
         """Resize every collective vector from M n to (M − 1) n (§5.2.2) and re-plan."""

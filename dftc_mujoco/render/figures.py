@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
 from ..atomic import atomic_write
+from ..events import Kind
 from ..record import matrix_rows
 
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
@@ -298,7 +299,7 @@ def fig_network(log: dict[str, np.ndarray], summary: dict[str, Any]):
         a1.plot(t[1:], per_s[1:].max(axis=1), lw=0.8, alpha=0.7, label="worst link")
     a1.axhline(0.0, color="k", lw=0.5)
     for e in summary.get("events", []):
-        if e["kind"] in ("radio_fault", "robot_silent"):
+        if e["kind"] in (Kind.RADIO_FAULT, Kind.ROBOT_SILENT):
             for ax in (a0, a1):
                 ax.axvline(e["t"], color="r", lw=0.8, ls=":")
     a1.set_ylabel("lost per second (1 s window)")

@@ -25,7 +25,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from ..display import LINKS, STATES, link_state, robot_state
 from ..errors import RenderError
-from ..events import describe
+from ..events import Kind, describe
 from ..scenario import Scenario
 from ..sim import fleet
 from ..sim import scene as scene_mod
@@ -382,17 +382,17 @@ def captions(summary: dict[str, Any]) -> list[tuple[float, str]]:
     """Fault injections, each robot's first detection, and exclusions, in time order, in the
     words of :func:`dftc_mujoco.events.describe`."""
     ev = [
-        (f["t"], describe({"kind": "fault", "robot": f["robot"], "fault": f["kind"]}))
+        (f["t"], describe({"kind": Kind.FAULT, "robot": f["robot"], "fault": f["kind"]}))
         for f in summary.get("faults", [])
     ]
     seen: set[int] = set()
     for d in sorted(summary.get("detections", []), key=lambda d: d["t"]):
         if d["robot"] not in seen:
             seen.add(d["robot"])
-            flag = {"kind": "detection", "by": d["by"], "robot": d["robot"]}
+            flag = {"kind": Kind.DETECTION, "by": d["by"], "robot": d["robot"]}
             ev.append((d["t"], describe(flag) + " (first detection)"))
     ev += [
-        (e["t"], describe({"kind": "exclusion", "flagged_by": [], **e}))
+        (e["t"], describe({"kind": Kind.EXCLUSION, "flagged_by": [], **e}))
         for e in summary.get("exclusions", [])
     ]
     return sorted(ev)

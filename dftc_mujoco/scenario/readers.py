@@ -22,6 +22,7 @@ from .parts import (
     Fault,
     Fdir,
     Gains,
+    Network,
     Noise,
     Obstacle,
     Onboard,
@@ -47,12 +48,12 @@ def name_problem(name: str) -> str | None:
 def _across_tables(
     doc: Doc,
     duration: float,
-    physics: Any,
-    mission: Any,
-    team: Any,
-    gains: Any,
-    network: Any,
-    all_faults: tuple[Any, ...] | None,
+    physics: Physics | None,
+    mission: Mission | None,
+    team: Team | None,
+    gains: Gains | None,
+    network: Network | None,
+    all_faults: tuple[Fault | RadioFault | None, ...] | None,
 ) -> None:
     """The checks that read several tables: the observer's stability at the control period,
     the network's and the radio faults' links against the graph, the duration, the faults'
