@@ -18,7 +18,10 @@ from typing import Any, Required, TypedDict, cast
 
 class Kind(StrEnum):
     """Every kind of event; a member equals its name as a string (``Kind.EXCLUSION ==
-    "exclusion"``), which is how ``summary.json`` stores it."""
+    "exclusion"``), which is how ``summary.json`` stores it, and shows as that string."""
+
+    def __repr__(self) -> str:
+        return repr(self.value)
 
     FAULT = "fault"
     FAULT_ENDED = "fault_ended"

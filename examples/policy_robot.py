@@ -16,6 +16,7 @@ import numpy as np
 
 from dftc_mujoco import load_scenario
 from dftc_mujoco.envs import make_gym
+from dftc_mujoco.events import Kind
 
 
 def policy(t: float, info: dict) -> np.ndarray:
@@ -34,7 +35,7 @@ def main() -> None:
         _, reward, terminated, truncated, info = env.step(policy(info["t"], info))
         total += reward
         for e in info["events"]:
-            if e["kind"] == "detection":
+            if e["kind"] == Kind.DETECTION:
                 print(f"{e['t']:6.2f} s  robot {e['by']} flags robot {e['robot']}")
     env.close()
     print(f"return {total:.2f} over {info['t']:.2f} s")
