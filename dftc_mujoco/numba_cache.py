@@ -13,8 +13,11 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -147,3 +150,75 @@ def _writable(folder: Path) -> bool:
             return True
     except OSError:
         return False
+
+
+def traced_calls(run: Callable[[], object], package: str = "dftc_mujoco") -> list[Call]:
+    """The compiled functions of ``package`` that Python code calls while ``run()`` runs,
+    each with the numba types of its arguments, in the order of their first call; every
+    such function runs as plain Python meanwhile (its ``py_func``: nothing compiles, and a
+    period takes milliseconds). Calls from one compiled function to another are not listed
+    (they compile with their caller). For :mod:`.precompile`, which compiles them in the
+    opposite order while a run compiles them in this one."""
+    from numba import typeof
+    from numba.core.registry import CPUDispatcher
+
+    calls: list[Call] = []
+    seen: set[tuple[int, tuple[Any, ...]]] = set()
+    depth = [0]
+
+    def tracer(dispatcher: Any) -> Callable[..., Any]:
+        py_func = dispatcher.py_func
+
+        def call(*args: Any) -> Any:
+            if depth[0] == 0:
+                try:
+                    types = tuple(typeof(a) for a in args)
+                except (ValueError, TypeError):  # a type numba cannot name: not listed
+                    types = None
+                if types is not None and (id(dispatcher), types) not in seen:
+                    seen.add((id(dispatcher), types))
+                    calls.append(Call(dispatcher, types))
+            depth[0] += 1
+            try:
+                return py_func(*args)
+            finally:
+                depth[0] -= 1
+
+        call.py_func = py_func  # type: ignore[attr-defined]  # read as a dispatcher's
+        return call
+
+    stand_ins: dict[int, Callable[..., Any]] = {}
+    replaced = []
+    for name, module in list(sys.modules.items()):
+        if module is None or not (name == package or name.startswith(package + ".")):
+            continue
+        for attr, value in list(vars(module).items()):
+            if isinstance(value, CPUDispatcher):
+                stand_in = stand_ins.setdefault(id(value), tracer(value))
+                replaced.append((module, attr, value))
+                setattr(module, attr, stand_in)
+    try:
+        run()
+    finally:
+        for module, attr, value in replaced:
+            setattr(module, attr, value)
+    return calls
+
+
+@dataclass(frozen=True)
+class Call:
+    """A compiled function and the numba types of the arguments it was called with."""
+
+    dispatcher: Any
+    types: tuple[Any, ...]
+
+    @property
+    def name(self) -> str:
+        """``module.qualname`` of the function."""
+        func = self.dispatcher.py_func
+        return f"{func.__module__}.{func.__qualname__}"
+
+    def compile(self) -> None:
+        """Compile it for these types (numba loads it from its cache instead where another
+        process already compiled it, and keeps what it compiles there)."""
+        self.dispatcher.compile(self.types)

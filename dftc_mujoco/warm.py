@@ -1,12 +1,15 @@
-"""Compile the one-call control period in a background process, for the runs that follow.
+"""Compile the onboard code in a background process, beside a first run and for the runs
+that follow.
 
 On a cold numba cache a small team runs the general path (:mod:`.execution`), which
 compiles in a third of the time, while :func:`start` runs ``python -m
-dftc_mujoco.precompile`` at low priority: it builds the same scenario and steps it once on
-the compiled path, so numba compiles exactly what the next run of such a team needs and
-keeps it in its cache. The run itself does not wait for it; the process outlives the run if it
-must (about half a minute on a 2-core machine) and then exits. One such process at a
-time per cache: a lock file beside numba's cache.
+dftc_mujoco.precompile``: it compiles the general path's functions from the other end
+(the run loads each one it finished from the cache), then, at low priority, builds the
+same scenario and steps it once on the compiled path, so numba compiles exactly what the
+next run of such a team needs and keeps it in its cache. The run itself does not wait
+for it; the process outlives the run if it must (about half a minute on a 2-core
+machine) and then exits. One such process at a time per cache: a lock file beside
+numba's cache.
 
 The scenario reaches the process pickled on its standard input; what it prints goes to
 ``dftc-warm.log`` beside the lock, which a failed compilation leaves for a bug report.

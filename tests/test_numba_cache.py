@@ -93,3 +93,62 @@ def test_the_background_compilation_compiles_the_types_the_run_calls_with():
         return [typeof(a) for a in team._th + team._fields()]
 
     assert period_types(s) == period_types(pickle.loads(pickle.dumps(s)))
+
+
+def test_tracing_lists_the_compiled_functions_a_period_calls_with_their_types():
+    """What the background process compiles for a first run: the functions the general path
+    calls from Python, in the run's order, with the types a run calls them with (the
+    scenario pickled to that process too); the module's functions are compiled ones again
+    afterwards."""
+    import pickle
+
+    from numba.core.registry import CPUDispatcher
+
+    from dftc_mujoco.execution import Execution
+    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.onboard import supervisor
+    from dftc_mujoco.scenario import load_scenario
+
+    s = load_scenario("paper_case", {"duration": 1.0})
+
+    def traced(scenario):
+        with Simulation(scenario, execution=Execution("general")) as sim:
+            calls = numba_cache.traced_calls(lambda: sim.step(2))
+            assert sim.k == 2  # the two periods ran, as plain Python
+        return [(c.name, c.types) for c in calls]
+
+    calls = traced(s)
+    names = [name.rsplit(".", 1)[1] for name, _ in calls]
+    assert {"supervise", "residual", "decide", "estimate_faults"} <= set(names), names
+    assert names.index("supervise") < names.index("decide")  # the order of a period
+    assert len(set(calls)) == len(calls)
+    assert calls == traced(pickle.loads(pickle.dumps(s)))
+    assert isinstance(supervisor.supervise, CPUDispatcher)
+
+
+def test_the_background_process_leaves_the_general_path_compiled(tmp_path):
+    """On an empty cache the background process compiles the general path's functions for
+    the scenario (the first run meets it half-way): a general run after it compiles
+    nothing."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    scenario = "load_scenario('paper_case', {'duration': 1.0})"
+    helper = subprocess.run(
+        [sys.executable, "-c", "from dftc_mujoco.precompile import general; "
+         f"from dftc_mujoco import load_scenario; general({scenario}, [])"],
+        env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    assert helper.returncode == 0, helper.stderr
+    assert "compiled the general path's" in helper.stdout
+    run = subprocess.run(
+        [sys.executable, "-c", "from dftc_mujoco import load_scenario, Simulation, numba_cache; "
+         "from dftc_mujoco.execution import Execution; clock = numba_cache.clock(); "
+         f"sim = Simulation({scenario}, execution=Execution('general')); sim.step(2); "
+         "print('compiled', clock.functions)"],
+        env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[-2:] == ["compiled", "0"], run.stdout
