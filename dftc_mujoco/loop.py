@@ -255,6 +255,7 @@ class Simulation:
             plant, self.team.u_bar, self.adapter, self.faults, s.physics.substeps
         )
         self._x, self._x_m = self._physics.sensed.x, self._physics.sensed.x_m
+        self._shown = _read_only(self._x), _read_only(self._x_m)  # made once: views
         self._x[:], self._x_m[:] = x0, x_m0  # what a snapshot before the first step shows
         self._build = self._build_time + self._without_compiling(wall0, compiling0)
         self._wall = self._build
@@ -396,12 +397,12 @@ class Simulation:
     @property
     def positions(self) -> np.ndarray:
         """(N, 2) the robots' true positions after the last period (read only)."""
-        return _read_only(self._x)
+        return self._shown[0]
 
     @property
     def measurements(self) -> np.ndarray:
         """(N, 2) each robot's own measured position after the last period (read only)."""
-        return _read_only(self._x_m)
+        return self._shown[1]
 
     def new_events(self) -> list[Event]:
         """The events since the last call (or snapshot), robots numbered from 1."""

@@ -87,6 +87,7 @@ class PhysicsStep:
         self.override = np.zeros((n, 2))  # Simulation.drive(): commands from outside the team
         self.driven = np.zeros(n, bool)
         self.any_driven = False  # driven.any(), kept by drive()
+        self._rows: tuple[int, ...] = ()  # the driven robots, kept by drive()
 
     def sense(self, eta: np.ndarray) -> Sensed:
         """The truth at the period's start, with the measurement noise ``eta`` (N, 2) (eq. 4)."""
@@ -105,26 +106,40 @@ class PhysicsStep:
         if velocity is None:
             self.driven[robot] = False
             self.any_driven = bool(self.driven.any())
+            self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
             return
-        try:
-            v0, v1 = (float(c) for c in np.asarray(velocity, dtype=float).reshape(2))
-        except (TypeError, ValueError):  # numpy's own words named neither argument
-            raise ValueError(
-                f"drive(velocity): expected a planar velocity of 2 numbers (m/s), got {velocity!r}"
-            ) from None
+        if (
+            type(velocity) is tuple
+            and len(velocity) == 2
+            and all(type(v) is float for v in velocity)
+        ):
+            v0, v1 = velocity  # an environment's step: two floats already
+        else:
+            try:
+                v0, v1 = (float(c) for c in np.asarray(velocity, dtype=float).reshape(2))
+            except (TypeError, ValueError):  # numpy's own words named neither argument
+                raise ValueError(
+                    "drive(velocity): expected a planar velocity of 2 numbers (m/s), got "
+                    f"{velocity!r}"
+                ) from None
         if not (math.isfinite(v0) and math.isfinite(v1)):
             raise ValueError(f"drive(velocity): expected finite numbers, got {[v0, v1]}")
         override = self.override[robot]
         override[0], override[1] = v0, v1
-        self.driven[robot] = self.any_driven = True
+        if not self.driven[robot]:
+            self.driven[robot] = self.any_driven = True
+            self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
 
     def commands(self, xi: np.ndarray) -> np.ndarray:
         """The actuator commands for the team's ū plus the drives' errors ``xi`` (eq. 2)
         (robots driven from outside: their given velocity plus ``xi``), into :attr:`cmd`."""
-        cmd, driven = self.cmd, self.driven
+        cmd = self.cmd
         np.add(self.u_bar, xi, out=cmd)
         if self.any_driven:  # robots an outside policy drives (Simulation.drive())
-            cmd[driven] = self.override[driven] + xi[driven]
+            override = self.override
+            for i in self._rows:  # (a robot or two: cheaper than a boolean index)
+                cmd[i, 0] = override[i, 0] + xi[i, 0]
+                cmd[i, 1] = override[i, 1] + xi[i, 1]
         ctrl = self.adapter.command(cmd)
         if self.faults.any_stuck:  # stuck actuators keep their command of onset
             ctrl = self.faults.hold(ctrl)

@@ -358,15 +358,18 @@ class Monitor:
             self.phi_bar, self.limit,
         )  # fmt: skip
         if hits:
-            for p, i in zip(*np.nonzero(self.value), strict=True):
+            value, planar = self.value, -1
+            rows, robots = np.nonzero(value)
+            for p, i in zip(rows.tolist(), robots.tolist(), strict=True):
                 name = _PER_PERIOD[p]
-                v = float(self.value[p, i])
+                v = float(value[p, i])
                 if name != "contact":
                     v += self.bounds[name] if name != "saturation" else self.limit
-                self._violate(name, int(i), v, t)
-            planar = np.flatnonzero(self.value[_PLANAR])
-            if len(planar):
-                i = int(planar[0])
+                self._violate(name, i, v, t)
+                if p == _PLANAR and planar < 0:
+                    planar = i
+            if planar >= 0:
+                i = planar
                 tilt = np.degrees(np.arccos(np.clip(level[i], -1.0, 1.0)))
                 self.finish(t)
                 raise SimulationError(

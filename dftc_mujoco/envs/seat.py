@@ -134,7 +134,10 @@ class Seats:
         u_bar, lim = self.sim.team.u_bar, self.limit
         for i, a in actions.items():
             try:
-                v0, v1 = (float(c) for c in np.asarray(a, dtype=float).reshape(2))
+                if type(a) is np.ndarray and a.shape == (2,) and a.dtype.kind == "f":
+                    v0, v1 = float(a[0]), float(a[1])  # a policy's own array
+                else:
+                    v0, v1 = (float(c) for c in np.asarray(a, dtype=float).reshape(2))
             except (TypeError, ValueError):
                 raise ValueError(
                     f"the action for robot {i + 1} is {a!r}: expected a planar velocity of 2 "
