@@ -101,10 +101,12 @@ def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:
     return float(g or PAPER_G) * np.eye(2)
 
 
-def compensation_bound(s: Scenario, robot: robots.RobotModel | None) -> float:
+def compensation_bound(
+    s: Scenario, robot: robots.RobotModel | None, models: tuple[robots.RobotModel, ...] = ()
+) -> float:
     """Φ̄: the bound on a healthy robot's ‖φ̂‖ (the fault estimator's ℓ1 gain from η̄ and ξ̄,
-    with the drive's lag); inf without FDIR or compensation, or where the estimator's loop is
-    unstable (refused elsewhere)."""
+    with the drive's lag, the largest of the team's ``models``' lags); inf without FDIR or
+    compensation, or where the estimator's loop is unstable (refused elsewhere)."""
     if not (s.fdir.enabled and s.fdir.compensate):
         return np.inf
     try:
@@ -114,7 +116,7 @@ def compensation_bound(s: Scenario, robot: robots.RobotModel | None) -> float:
             s.physics.control_period,
             s.noise.eta_bar,
             effective_xi_bar(s, robot),
-            lag=drive_lag(s, robot),
+            lag=drive_lag(s, robot, models),
         )
     except ScenarioError:  # an unstable estimator loop is refused elsewhere
         return np.inf
@@ -141,8 +143,10 @@ def team_config(
     robot: robots.RobotModel | None = None,
     command_limit: float = np.inf,
     initial_error_bound: float | None = None,
+    models: tuple[robots.RobotModel, ...] = (),
 ) -> TeamConfig:
-    """The onboard configuration a scenario gives every robot of model ``robot``.
+    """The onboard configuration a scenario gives every robot of model ``robot`` (the
+    team's envelope; ``models``, one per robot, where each robot's own drive lag counts).
 
     A robot too big for a safe distance d (cylinder radius + its footprint +
     2 cm > d) gets the larger value, so no hull ever reaches a cylinder or an
@@ -169,7 +173,7 @@ def team_config(
         hull = reach if robot is not None else 0.1  # without a model: the built-in disk's
         auto = 2 * hull + CLEARANCE  # two hulls apart by the clearance
         mate_safe = auto if sup.teammate_distance == "auto" else float(sup.teammate_distance)
-    phi_bar = compensation_bound(s, robot)
+    phi_bar = compensation_bound(s, robot, models)
     applied = input_limit(command_limit, phi_bar, s.fdir.input == "nominal")
     seamless = seamless_margin(s.gains.theta, applied)
     return TeamConfig(
@@ -204,7 +208,7 @@ def team_config(
         fdir=f.enabled,
         compensate=f.compensate,
         drift_bound=robot.drift_bound if robot is not None else 0.0,
-        lag=drive_lag(s, robot),
+        lag=drive_lag(s, robot, models),
         accel=drive_accel(s, robot),
         start_accel=START_ACCEL if s.fdir.start_ramp else np.inf,
         start_time=s.mission.centroid.ramp_time if s.fdir.start_ramp else 0.0,
@@ -260,9 +264,14 @@ def drive_accel(s: Scenario, robot: robots.RobotModel | None) -> float:
     return robot.accel if robot is not None else np.inf
 
 
-def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
+def drive_lag(
+    s: Scenario,
+    robot: robots.RobotModel | None,
+    models: tuple[robots.RobotModel, ...] = (),
+) -> float | np.ndarray:
     """τ of the drive lag the robots model: the scenario's ``fdir.drive_lag``, or the robot
-    file's calibrated one ("robot"; 0 for a robot without one). The drive rule, whose Φ̄
+    file's calibrated one ("robot"; 0 for a robot without one); in a team of ``models``
+    (one per robot) whose lags differ, each robot's own (N,). The drive rule, whose Φ̄
     bounds ‖φ̂‖ at every period, models the best-fitting lag where the paper's rules take
     ẋ = u (``fast_lag``): unmodelled, the drive's response to every change of command
     reaches φ̂ as a mismatch beyond ξ̄."""
@@ -270,6 +279,13 @@ def drive_lag(s: Scenario, robot: robots.RobotModel | None) -> float:
         return float(s.fdir.drive_lag)
     if robot is None:
         return 0.0
+    if models and len({_own_lag(s, m) for m in models}) > 1:
+        return np.array([_own_lag(s, m) for m in models])
+    return _own_lag(s, robot)
+
+
+def _own_lag(s: Scenario, robot: robots.RobotModel) -> float:
+    """The lag a robot of model ``robot`` models (``fdir.drive_lag = "robot"``)."""
     if robot.lag == 0.0 and s.onboard.thresholds == "drive":
         return robot.fast_lag
     return robot.lag

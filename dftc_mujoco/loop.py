@@ -215,7 +215,7 @@ class Simulation:
         self.start_bound, refusal = premises.initial_error_bound(
             s.fdir.initial_error_bound, x0, slots, s.noise.eta_bar, meaning, str(s.source)
         )
-        config = team_config(s, model, limit, self.start_bound.value)
+        config = team_config(s, model, limit, self.start_bound.value, self.fleet.models)
         s, config = self._governed(s, config)
         rule = self.block_names["thresholds"]
         path = self.path.position
@@ -273,7 +273,7 @@ class Simulation:
         self.events.add(0.0, Kind.WARNING, message=text)
         self.scenario = s = s.with_overrides(speed=flown)
         self.path = mission.centroid_table(s.mission.centroid, s.duration, self.dt)
-        return s, team_config(s, self.robot, limit, self.start_bound.value)
+        return s, team_config(s, self.robot, limit, self.start_bound.value, self.fleet.models)
 
     def _team_warnings(self, s: Scenario) -> None:
         """Warn of an unmet detection horizon and of thresholds that never flag."""

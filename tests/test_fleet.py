@@ -8,6 +8,7 @@ import pytest
 
 from dftc_mujoco import load_scenario, simulate
 from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.events import Kind
 from dftc_mujoco.sim import fleet
 
 DATA = Path(__file__).parent / "data" / "robots"
@@ -47,8 +48,41 @@ def test_the_envelope_is_the_team_s_worst_bounds():
     assert env.calibration["compensation_G"] == max(
         m.calibration.get("compensation_G", 0) for m in models
     )
-    with pytest.raises(ScenarioError, match=r"must share the drive lag they model"):
-        fleet.load((SLOW, "disk", "disk", "disk"), "team.robot_model", None)
+    slow = fleet.load((SLOW, "disk", "disk", "disk"), "team.robot_model", None)
+    assert slow.envelope.lag == max(m.lag for m in slow.models) == pytest.approx(2.503)
+
+
+def test_robots_with_different_lags_each_model_their_own():
+    """The 2.5 s base beside three disks (which answer at once) in paper_case with l1: each
+    robot's drive model has its own lag (it was refused: one lag for the team), robot 1's
+    stop is flagged by its three teammates and robot 1 alone is excluded, the slow robot's
+    bias is compensated without a flag and every premise holds; the general path computes
+    the same."""
+    import numpy as np
+
+    from dftc_mujoco import Simulation
+    from dftc_mujoco.execution import Execution
+
+    over = {"team.robot_model": ["disk", SLOW, "disk", "disk"], "onboard.thresholds": "l1"}
+    s = load_scenario("paper_case", overrides=over)
+    with Simulation(s) as sim:
+        assert np.allclose(sim.team.config.lag, [0.0, 2.503, 0.0, 0.0])
+        assert sim.team.drive.lag_b[0] == 0.0 and sim.team.drive.lag_b[1] > 0.0
+        r = sim.run(progress=False)
+    assert r.ok
+    stop = next(e["t"] for e in r.events.of_kind(Kind.FAULT) if e["robot"] == 1)
+    by = {e["by"] for e in r.events.of_kind(Kind.DETECTION) if e["robot"] == 1 and e["t"] > stop}
+    assert by >= {2, 3, 4}
+    assert [e["robot"] for e in r.events.of_kind(Kind.EXCLUSION)] == [1]
+    assert r.summary["healthy_flags"] == 0
+    assert all(p["held"] for p in r.summary["premises"].values())
+    short = load_scenario("paper_case", overrides={**over, "duration": 10.0})
+    logs = []
+    for period in ("compiled", "general"):
+        with Simulation(short, execution=Execution(period)) as sim:
+            logs.append(sim.run(progress=False).log)
+    for name in ("x", "u", "v_cmd", "phi_hat"):
+        assert np.allclose(logs[0][name], logs[1][name], atol=1e-9), name
 
 
 def test_a_mixed_team_of_three_drives_gives_the_paper_outcome():

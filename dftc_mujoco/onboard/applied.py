@@ -39,18 +39,33 @@ def lag_coefficients(lag: float, dt: float) -> tuple[float, float]:
     return a, lag * a / dt
 
 
+def lag_arrays(lag: float | np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(a, b) (N,) of :func:`lag_input` for each robot's lag (one for all, or (N,)): a robot
+    without a lag gets a = 1, b = 0, the limit τ → 0 (its velocity is its command)."""
+    lags = np.broadcast_to(np.asarray(lag, dtype=float), (n,))
+    pairs = [lag_coefficients(float(tau), dt) if tau > 0.0 else (1.0, 0.0) for tau in lags]
+    a, b = (np.array(c, dtype=float).reshape(n) for c in zip(*pairs, strict=True))
+    return a, b
+
+
+def distinct_lags(lag: float | np.ndarray) -> list[float]:
+    """The different drive lags of a team (``TeamConfig.lag``: one for all, or (N,))."""
+    return sorted({float(tau) for tau in np.atleast_1d(np.asarray(lag, dtype=float))})
+
+
 @njit(cache=True)
 def lag_input(u, v_hat, command, a, b):  # pragma: no cover - compiled
     """The drive model of every robot (N, 2), in place: the commands ``u`` are copied to
     ``command`` and replaced by the mean velocity over the period of a first-order lag
-    held at them, u + b(v̂ − u); v̂ advances to the period's end, u + (1 − a)(v̂ − u)."""
+    held at them, u + b(v̂ − u); v̂ advances to the period's end, u + (1 − a)(v̂ − u)
+    (``a``, ``b`` (N,): each robot's own lag)."""
     for r in range(u.shape[0]):
         for d in range(u.shape[1]):
             c = u[r, d]
             gap = v_hat[r, d] - c
             command[r, d] = c
-            u[r, d] = c + b * gap
-            v_hat[r, d] = c + (1.0 - a) * gap
+            u[r, d] = c + b[r] * gap
+            v_hat[r, d] = c + (1.0 - a[r]) * gap
 
 
 @njit(cache=True)
@@ -86,8 +101,9 @@ class DriveRecord(NamedTuple):
 
     input_limit: float  # [m/s] per axis, the range the compensation leaves free
     accel_step: float  # [m/s] the drive's Δu per period (inf: none)
-    lag_a: float  # a, b of :func:`lag_input` (0, 0: no lag)
-    lag_b: float
+    lagged: bool  # some robot's drive lags its command
+    lag_a: np.ndarray  # (N,) a, b of :func:`lag_input`
+    lag_b: np.ndarray
     v_hat: np.ndarray  # (N, 2) the velocity the lag delivers
     command: np.ndarray  # (N, 2) what each robot tells its drive
 
@@ -96,7 +112,8 @@ class DriveModel:
     """Each robot's model of its own drive: its range, acceleration and lag (N robots).
 
     ``command`` (N, 2) is what each robot last told its drive and ``v_hat`` (N, 2) the
-    velocity a first-order lag of ``lag`` [s] delivers (robots start at rest). Until
+    velocity a first-order lag of ``lag`` [s] delivers (one for all, or each robot's (N,);
+    robots start at rest). Until
     ``start_time`` the input changes by at most ``start_accel`` (a ramped start: from rest,
     the drives' lag against a jump to the first commands broke the premise 'mismatch' in
     the first hundredths of a second), then by the drive's own ``accel``.
@@ -108,7 +125,7 @@ class DriveModel:
         dt: float,
         input_limit: float,
         accel: float,
-        lag: float,
+        lag: float | np.ndarray,
         start_accel: float = np.inf,
         start_time: float = 0.0,
     ):
@@ -120,16 +137,12 @@ class DriveModel:
         self.start_step = min(float(start_accel), float(accel)) * dt
         self.start_time = float(start_time)
         self.accel_step = self.start_step if self.start_time > 0 else self.full_step
-        self.lag_a, self.lag_b = lag_coefficients(lag, dt)
+        self.lagged = bool((np.asarray(lag, dtype=float) > 0.0).any())
+        self.lag_a, self.lag_b = lag_arrays(lag, n, dt)
 
     def at(self, t: float) -> None:
         """The acceleration of the period at ``t``: the start's, then the drive's own."""
         self.accel_step = self.start_step if t < self.start_time else self.full_step
-
-    @property
-    def lagged(self) -> bool:
-        """The drive answers its command with a lag."""
-        return self.lag_a > 0.0
 
     def limit(self, u: np.ndarray, u_g: np.ndarray, delta_u: np.ndarray, rows: np.ndarray) -> int:
         """Saturate the members' nominal inputs in place (:func:`limit_input`)."""
@@ -146,5 +159,6 @@ class DriveModel:
     def record(self) -> DriveRecord:
         """The arrays and constants the compiled period uses."""
         return DriveRecord(
-            self.input_limit, self.accel_step, self.lag_a, self.lag_b, self.v_hat, self.command
-        )
+            self.input_limit, self.accel_step, self.lagged, self.lag_a, self.lag_b, self.v_hat,
+            self.command,
+        )  # fmt: skip

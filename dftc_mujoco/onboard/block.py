@@ -76,7 +76,9 @@ class TeamConfig:
     # after an exclusion (graph.without): "adopt" (the survivors take over the excluded
     # robot's links), "relay" (its radio forwards them) or "none" (they go with it)
     rewire: str = "none"
-    lag: float = 0.0  # [s] first-order lag of the drive the robots model (onboard/applied.py)
+    # [s] first-order lag of the drive the robots model (onboard/applied.py): one for all,
+    # or each robot's (N,) in a mixed team
+    lag: float | np.ndarray = 0.0
     # compose the paper's blocks in one compiled period when possible (DFTC_PERIOD=general in
     # the environment: never, the blocks' own methods; dftc_mujoco.execution)
     compiled: bool = field(default_factory=_compiled_by_default)

@@ -274,7 +274,7 @@ def deliver(
     for i in range(m):
         for d in range(2):
             u[rows[i], d] = u_mem[i, d]
-    if drive.lag_a > 0.0:  # the drive's lag: integrate what it delivers, command the drive
+    if drive.lagged:  # the drives' lag: integrate what they deliver, command the drives
         lag_input(u, drive.v_hat, command, drive.lag_a, drive.lag_b)
         for i in range(m):
             for d in range(2):
@@ -364,7 +364,7 @@ def team_period(
 
     ``inp.x_m``, the drive's ``v_hat`` and ``command``, the estimator's arrays and
     ``out.u``, ``out.u_bar`` are on the original robot axis (N); with a drive lag
-    (``drive.lag_a`` > 0) ``out.u`` ends as the velocity the drive model predicts and
+    (``drive.lagged``) ``out.u`` ends as the velocity the drive model predicts and
     ``drive.command`` as what the drive is told; the others on the members' axis (M).
     Robots that are not members get u = 0 and only run their fault estimator. ŷ of the
     next period goes to ``ob.y_next`` (the observer swaps it in, :meth:`.Observer.advance`).

@@ -646,7 +646,7 @@ class Team:
             self.dt_d_max_info.setdefault("settle_after_exclusions", []).append(said)
         if cfg.dt_d_max == "auto" and len(self.members) > 1:  # eq. 46 on the new graph
             before = self.dt_d_max
-            self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds)
+            self.dt_d_max, info = detection_horizon(cfg, self.graph, self.thresholds, self.members)
             self.recovery.dt_d_max = self.dt_d_max
             self.dt_d_max_info.setdefault("after_exclusions", []).append({"t": t, **info})
             self.events.append(make(t, Kind.DETECTION_HORIZON, value=self.dt_d_max, before=before))

@@ -7,9 +7,9 @@ configured for the whole team, so they take the team's **envelope** (:func:`enve
 the bounds every member satisfies — the largest ξ̄, measured mismatch, drift offset and
 footprint, the largest calibrated compensation gain G, the smallest acceleration limit and
 command range. A bound that holds for the worst robot holds for each (eq. 2's ξ̄, the
-rules' ē), at the price of wider thresholds for the better ones. The drive lag the robots
-model (``[calibration] lag``) is one team-wide model, so members must share it (refused
-otherwise).
+rules' ē), at the price of wider thresholds for the better ones. Each robot models its own
+drive lag (``[calibration] lag``, :func:`~dftc_mujoco.assembly.drive_lag`); the envelope's
+is the slowest robot's.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..errors import ScenarioError
 from ..scenario import Scenario
 from . import robots
 from .faults import ActuatorFaults
@@ -100,13 +99,6 @@ def envelope(models: tuple[RobotModel, ...], where: str = "team.robot_model") ->
     unique = list({m.path: m for m in models}.values())
     if len(unique) == 1:
         return unique[0]
-    lags = {m.lag for m in unique}
-    if len(lags) > 1:
-        listed = ", ".join(f"{m.name} {m.lag:g} s" for m in unique)
-        raise ScenarioError(
-            f"{where}: the robots of a mixed team must share the drive lag they model "
-            f"([calibration] lag: {listed}): the onboard drive model is one for the team"
-        )
     cal: dict[str, float] = {}
     team_wide = ("xi_bar", "mismatch", "drift_bound", "drift_startup", "compensation_G")
     for key in (*team_wide, "response_time"):  # the largest: the slowest robot's
@@ -116,8 +108,9 @@ def envelope(models: tuple[RobotModel, ...], where: str = "team.robot_model") ->
     accel = min(m.accel for m in unique)
     if math.isfinite(accel):
         cal["accel"] = accel
-    if unique[0].lag:
-        cal["lag"] = unique[0].lag
+    lags = [m.lag for m in unique]
+    if max(lags) > 0:  # each robot models its own (assembly.drive_lag); this: the slowest
+        cal["lag"] = max(lags)
     fast = [m.fast_lag for m in unique]
     if min(fast) > 0:  # the drive rule's model: the slowest robot's, when every robot has one
         cal["fast_lag"] = max(fast)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ScenarioError
-from ..applied import lag_coefficients
+from ..applied import distinct_lags, lag_coefficients
 
 
 def compensation_offset(G: np.ndarray, phi_bar: float, eta_bar: float) -> float:
@@ -30,9 +30,12 @@ def estimator_gain(
     eta_bar: float,
     xi_bar: float,
     steps: int = 100000,
-    lag: float = 0.0,
+    lag: float | np.ndarray = 0.0,
 ) -> float:
     """Bound of ‖φ̂‖ on a healthy robot (x_m = x + η, mismatch ‖ξ‖ ≤ ξ̄ from its drive model).
+
+    A team whose robots model different lags (``lag`` (N,)) gets the largest of its robots'
+    bounds, which holds for each.
 
     The fault estimator's closed loop (eqs. 28-31 with compensation) is linear in
     the deviation d = x − z and the integral I = ∫e: φ̂ = G⁻¹(d + η + K I),
@@ -43,6 +46,10 @@ def estimator_gain(
     (a, b of :func:`~.applied.lag_coefficients`). Returns Σ_t ‖H_η(t)‖₂ η̄ + Σ_t ‖H_ξ(t)‖₂ ξ̄
     (ℓ1 norms of its impulse responses).
     """
+    if np.ndim(lag) > 0:
+        lags = distinct_lags(lag)
+        return max(estimator_gain(K, G, h, eta_bar, xi_bar, steps, tau) for tau in lags)
+    lag = float(lag)
     K, G = np.asarray(K, float), np.asarray(G, float)
     gi = np.linalg.inv(G)
     n = len(K)

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ...graph import Graph, reaches_all, rotation_invariant
+from ..applied import distinct_lags
 from ..block import TeamConfig
 from .envelope import CHECK, MAX_PERIODS, MAX_WORK, _slack
 from .kernels import Adjacency, advance_crossing, column_of_row
@@ -26,7 +27,7 @@ def predicted_delays(
     mu_steady: np.ndarray,
     fault: float,
     max_work: float = MAX_WORK,
-    lag: float = 0.0,
+    lag: float | np.ndarray = 0.0,
 ) -> np.ndarray:
     """ⁱΔt_d (M, M) [s] for a constant, uncompensated fault of size ``fault`` [m/s] on robot k.
 
@@ -51,8 +52,17 @@ def predicted_delays(
     after onset (r = e^(−h/τ)), and the signature is h·fault·W_ik(j), W(j) = Σ_{m<j}
     (1 − r^m) A_k^(j−1−m) e_k = S(j) − E(j), E(j) = Σ_{m<j} r^(j−1−m) A_k^m e_k (monotone in
     the drift: A_k ≥ 0). Its crossings are swept as S's are, and bounded past a
-    column's certificate from the decay of R and E (:func:`_lagged_tail`).
+    column's certificate from the decay of R and E (:func:`_lagged_tail`). A team whose
+    robots model different lags (``lag`` (M,)) gets each column k with robot k's own.
     """
+    if np.ndim(lag) > 0:
+        lags = np.asarray(lag, dtype=float)
+        out = np.full((graph.n, graph.n), np.inf)
+        for tau in distinct_lags(lags):
+            mine = lags == tau
+            out[:, mine] = predicted_delays(graph, ko, h, mu_steady, fault, max_work, tau)[:, mine]
+        return out
+    lag = float(lag)
     n = graph.n
     beta = h * ko
     mass = 1.0 / beta
@@ -196,17 +206,19 @@ def _lagged_tail(
 
 
 def detection_horizon(
-    cfg: TeamConfig, graph: Graph, thresholds: Any
+    cfg: TeamConfig, graph: Graph, thresholds: Any, members: np.ndarray | None = None
 ) -> tuple[float, dict[str, Any]]:
     """Δt_d,max and how it was found: the scenario's, or (``"auto"``) eq. 46 for the
     reference fault on ``graph`` with the steady thresholds of ``thresholds`` (the team's
-    block, whatever its rule; recomputed on the new graph at each exclusion)."""
+    block, whatever its rule; recomputed on the new graph at each exclusion, whose
+    ``members`` are the robots left)."""
     if cfg.dt_d_max != "auto":
         return float(cfg.dt_d_max), {"value": float(cfg.dt_d_max), "source": "scenario"}
     # the signature of a constant fault comes from the columns A_k^j e_k alone (no tables)
     steady = np.array(thresholds.mu(1e9), dtype=float)
     # a stop of a robot whose drive lags its command reaches its velocity through the lag
-    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault, lag=cfg.lag)
+    lag = cfg.lag if np.ndim(cfg.lag) == 0 or members is None else np.asarray(cfg.lag)[members]
+    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault, lag=lag)
     # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
     # reported, not waited for (its own residual sits on its noise and drift offset)
     self_ok = bool(np.isfinite(np.diag(delays)).all())
@@ -218,8 +230,9 @@ def detection_horizon(
         "predicted_delays_max": worst if np.isfinite(worst) else None,
         "self_detection_guaranteed": self_ok,
     }
-    if cfg.lag > 0:  # the prediction's premise: a stop's velocity decays through the lag
-        info["drive_lag"] = cfg.lag
+    lags = distinct_lags(lag)
+    if max(lags) > 0:  # the prediction's premise: a stop's velocity decays through the lag
+        info["drive_lag"] = lags[0] if len(lags) == 1 else lags
     if np.isfinite(worst):
         info["value"] = worst
         return worst, info
