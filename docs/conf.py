@@ -64,9 +64,9 @@ autodoc_typehints_format = "short"
 # Type hints in the public signatures name classes that have no page here: numpy's,
 # MuJoCo's, dm_control's and the standard library's, and the package's internal classes
 # (the graph, the scenario's parts, the blocks' compiled records, ...), which change as the
-# code does; those class references are not checked. Every other reference — a :func:, :meth:, :attr:, :mod:
-# or :exc: role in a docstring, a {doc} link in a page — must resolve, except the few
-# internal names below that the public docstrings mention.
+# code does; those class references are not checked. Every other reference — a :func:,
+# :meth:, :attr:, :mod: or :exc: role in a docstring, a {doc} link in a page — must
+# resolve, except the few internal names below that the public docstrings mention.
 nitpick_ignore_regex = [
     (r"py:.*", r"(numpy|np|mujoco|collections|typing|pathlib|os|tomllib)(\..*)?"),
     (r"py:.*", r"(dm_env|dm_control)(\..*)?"),
