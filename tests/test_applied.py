@@ -15,7 +15,7 @@ from dftc_mujoco import assembly, load_scenario, loop, simulate
 from dftc_mujoco import calibrate as cal_mod
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard import team as team_mod
-from dftc_mujoco.onboard.applied import lag_coefficients, lag_input
+from dftc_mujoco.onboard.applied import lag_arrays, lag_coefficients, lag_input
 from dftc_mujoco.onboard.thresholds import estimator_gain
 from dftc_mujoco.sim import robots
 
@@ -30,7 +30,8 @@ def test_the_lag_model_integrates_what_a_first_order_lag_delivers():
     tau, periods = 0.7, 300
     rng = np.random.default_rng(3)
     commands = rng.uniform(-1, 1, (periods, 1, 2))
-    a, b = lag_coefficients(tau, H)
+    a, b = lag_arrays(tau, 1, H)  # (1,): one robot
+    assert (a[0], b[0]) == lag_coefficients(tau, H)
     v_hat, command = np.zeros((1, 2)), np.zeros((1, 2))
     position = np.zeros(2)
     state = np.zeros(4)  # exact: [x, v]
@@ -47,6 +48,12 @@ def test_the_lag_model_integrates_what_a_first_order_lag_delivers():
         assert np.allclose(v_hat[0], state[2:], atol=1e-8)
     assert np.allclose(position, state[:2], atol=1e-8)
     assert lag_coefficients(0.0, H) == (0.0, 0.0)  # no lag: the command is the velocity
+    # beside a lagging robot, one without a lag moves at its command (a = 1, b = 0)
+    a, b = lag_arrays(np.array([tau, 0.0]), 2, H)
+    u, v_hat, command = np.array([[1.0, -1.0], [0.5, 0.25]]), np.zeros((2, 2)), np.zeros((2, 2))
+    lag_input(u, v_hat, command, a, b)
+    assert np.array_equal(u[1], [0.5, 0.25]) and np.array_equal(v_hat[1], [0.5, 0.25])
+    assert 0.0 < u[0, 0] < 1.0  # the lagging one is still speeding up
 
 
 def test_calibrate_fits_the_lag_of_a_slow_base_and_none_on_the_disk():
