@@ -61,6 +61,12 @@ PAPER_XI_BAR = 0.005
 #: the paper's team: "auto" keeps eq. 40 for teams up to this size
 PAPER_TEAM = 4
 
+#: beyond this size "auto" keeps eq. 40 again: the drive and l1 rules set up an N × N
+#: threshold array from every column's envelope, which at N = 1000 on the benchmark's ring
+#: with chords took 13.5 s against eq. 40's 0.65 s, and a period 5.9 ms against 2.0 ms
+#: (``docs/performance.md``); at N = 400 the three cost about the same
+DENSE_RULES_UP_TO = 400
+
 
 def threshold_rule(s: Scenario, robot: robots.RobotModel | None) -> Scenario:
     """The scenario with ``onboard.thresholds = "auto"`` made a rule: the paper's eq. 40 for
@@ -69,10 +75,12 @@ def threshold_rule(s: Scenario, robot: robots.RobotModel | None) -> Scenario:
     drive's lag is known (calibrated, or ``fdir.drive_lag``: its Φ̄ then bounds ‖φ̂‖ at
     every period), else ``l1``; ``l1`` over a network (eq. 40 is not derived for the
     observers' rounds). Eq. 40 grows with κ/λ, which grows with the team: from 8 robots on
-    it missed stops that the other rules flag (``docs/thresholds.md``)."""
+    it missed stops that the other rules flag (``docs/thresholds.md``). A team of more than
+    :data:`DENSE_RULES_UP_TO` robots within the paper's ξ̄ keeps eq. 40 too, the one rule
+    whose set-up and period stay cheap there."""
     if s.onboard.thresholds != "auto":
         return s
-    paper_like = s.team.robots <= PAPER_TEAM
+    paper_like = not PAPER_TEAM < s.team.robots <= DENSE_RULES_UP_TO
     if not s.network.ideal:
         rule = "l1"
     elif paper_like and effective_xi_bar(s, robot) <= PAPER_XI_BAR * (1 + 1e-9):

@@ -844,3 +844,28 @@ def test_settle_time_is_the_first_instant_from_which_every_threshold_stays_near_
         assert got >= nan_until
     assert settle_time(rule(0.0), 0.01, 3.0) == float("inf")  # still outside at 3 s
     assert settle_time(lambda t: np.full((2, 2), np.inf), 0.01, 60.0) == float("inf")
+
+
+def test_auto_keeps_eq_40_for_the_paper_s_team_and_beyond_the_dense_rules_size():
+    """``onboard.thresholds = "auto"`` on disks within the paper's ξ̄: eq. 40 for 4 robots,
+    a rule of its own N × N array from 5 to 400 (eq. 40 missed stops there), eq. 40 again
+    beyond, where that array's set-up took 13.5 s at 1000 robots (eq. 40: 0.65 s) and made
+    the 1000-robot benchmark slower than real time."""
+    from dftc_mujoco import load_scenario
+    from dftc_mujoco.assembly import DENSE_RULES_UP_TO, PAPER_TEAM, threshold_rule
+    from dftc_mujoco.sim import robots
+
+    disk = robots.get("disk")
+
+    def rule(n):
+        team = {
+            "team.robots": n,
+            "team.graph": {"family": "ring_chords", "chords": [2]},
+            "team.initial_positions": {"layout": "formation"},
+            "mission.formation": {"shape": "grid", "side": 0.5},
+        }
+        return threshold_rule(load_scenario("paper_case", team), disk).onboard.thresholds
+
+    assert rule(PAPER_TEAM) == "paper"
+    assert rule(PAPER_TEAM + 1) != "paper" and rule(DENSE_RULES_UP_TO) == rule(PAPER_TEAM + 1)
+    assert rule(DENSE_RULES_UP_TO + 1) == rule(1000) == "paper"
