@@ -55,9 +55,10 @@ def test_the_envelope_is_the_team_s_worst_bounds():
 def test_robots_with_different_lags_each_model_their_own():
     """The 2.5 s base beside three disks (which answer at once) in paper_case with l1: each
     robot's drive model has its own lag (it was refused: one lag for the team), robot 1's
-    stop is flagged by its three teammates and robot 1 alone is excluded, the slow robot's
-    bias is compensated without a flag and every premise holds; the general path computes
-    the same."""
+    stop is flagged by its three teammates and robot 1 alone is excluded, no healthy robot
+    is flagged and every premise holds; the general path computes the same. (The slow
+    robot's bias drifts it 5.2 cm from its slot before its compensation, through the 2.5 s
+    lag, catches up: as in a team of four such bases.)"""
     import numpy as np
 
     from dftc_mujoco import Simulation
