@@ -287,9 +287,8 @@ def drive_lag(
         return float(s.fdir.drive_lag)
     if robot is None:
         return 0.0
-    if models and len({_own_lag(s, m) for m in models}) > 1:
-        return np.array([_own_lag(s, m) for m in models])
-    return _own_lag(s, robot)
+    each = [_own_lag(s, m) for m in models]
+    return np.array(each) if len(set(each)) > 1 else _own_lag(s, robot)
 
 
 def _own_lag(s: Scenario, robot: robots.RobotModel) -> float:

@@ -86,8 +86,7 @@ class PhysicsStep:
         self.cmd = np.empty((n, 2))  # the planar velocities asked of the drives (log: v_cmd)
         self.override = np.zeros((n, 2))  # Simulation.drive(): commands from outside the team
         self.driven = np.zeros(n, bool)
-        self.any_driven = False  # driven.any(), kept by drive()
-        self._rows: tuple[int, ...] = ()  # the driven robots, kept by drive()
+        self._rows: tuple[int, ...] = ()  # the driven robots (np.flatnonzero(driven))
 
     def sense(self, eta: np.ndarray) -> Sensed:
         """The truth at the period's start, with the measurement noise ``eta`` (N, 2) (eq. 4)."""
@@ -105,7 +104,6 @@ class PhysicsStep:
             raise ValueError(f"drive(robot): expected a robot in 0..{n - 1}, got {robot!r}")
         if velocity is None:
             self.driven[robot] = False
-            self.any_driven = bool(self.driven.any())
             self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
             return
         if (
@@ -127,7 +125,7 @@ class PhysicsStep:
         override = self.override[robot]
         override[0], override[1] = v0, v1
         if not self.driven[robot]:
-            self.driven[robot] = self.any_driven = True
+            self.driven[robot] = True
             self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
 
     def commands(self, xi: np.ndarray) -> np.ndarray:
@@ -135,7 +133,7 @@ class PhysicsStep:
         (robots driven from outside: their given velocity plus ``xi``), into :attr:`cmd`."""
         cmd = self.cmd
         np.add(self.u_bar, xi, out=cmd)
-        if self.any_driven:  # robots an outside policy drives (Simulation.drive())
+        if self._rows:  # robots an outside policy drives (Simulation.drive())
             override = self.override
             for i in self._rows:  # (a robot or two: cheaper than a boolean index)
                 cmd[i, 0] = override[i, 0] + xi[i, 0]

@@ -64,3 +64,12 @@ def test_an_event_is_made_only_with_the_fields_its_kind_declares():
         events.make(1.5, "exclusoin", robot=2)
     with pytest.raises(ValueError, match="has no field"):
         events.make(1.5, "reactive_off", robot=2, obstacle="cylinder 1")
+
+
+def test_the_event_record_types_every_field_a_kind_declares():
+    """``events.Event`` (the type checker's view) lists exactly ``t``, ``kind`` and the
+    fields of :data:`events.KINDS`: a field declared for a kind is typed, and none is typed
+    that no kind carries."""
+    declared = {f for fields in events.KINDS.values() for f in fields}
+    assert set(events.Event.__annotations__) == {"t", "kind"} | declared
+    assert set(events.KINDS) == set(events.Kind)

@@ -137,8 +137,8 @@ class DriveModel:
         self.start_step = min(float(start_accel), float(accel)) * dt
         self.start_time = float(start_time)
         self.accel_step = self.start_step if self.start_time > 0 else self.full_step
-        self.lagged = bool((np.asarray(lag, dtype=float) > 0.0).any())
         self.lag_a, self.lag_b = lag_arrays(lag, n, dt)
+        self.lagged = bool(self.lag_b.any())  # b > 0 exactly where a robot's drive lags
 
     def at(self, t: float) -> None:
         """The acceleration of the period at ``t``: the start's, then the drive's own."""
