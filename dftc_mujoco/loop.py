@@ -14,6 +14,7 @@ computed from the log after the run (:mod:`dftc_mujoco.results`).
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -434,9 +435,14 @@ class Simulation:
         wall0, compiling0 = time.perf_counter(), self._clock.total()
         failed: BaseException | None = None  # the physics step's error, raised after the period
         # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual /
-        # threshold; physics trouble is caught explicitly by the plant, not by numpy warnings
+        # threshold, which the general path computes with numpy (the compiled one warns of
+        # nothing); physics trouble is caught explicitly by the plant, not by numpy warnings
+        quiet = (
+            contextlib.nullcontext() if team.compiled
+            else np.errstate(invalid="ignore", divide="ignore")
+        )  # fmt: skip
         try:
-            with np.errstate(invalid="ignore", divide="ignore"):
+            with quiet:
                 for k in range(k0, k_end):
                     if self.stopped is not None:  # request_stop(): end before this period
                         break

@@ -186,10 +186,13 @@ _PER_PERIOD = ("noise", "mismatch", "saturation", "contact", "planar")
 @njit(cache=True)
 def _check(
     x, eta, u, u_bar, phi_hat, height, level, depth, watched, x0, int_u, slow, z0, value,
-    h, eta_bar, step, offset, phi_bar, limit,
+    h, eta_bar, step, offset, phi_bar, limit, t, spans, order, seq, last, rows, add, top,
+    top_robot,
 ):  # fmt: skip  # pragma: no cover - compiled
     """One period of the premise checks, every robot at once; ``value`` (5, N) gets each
-    premise's excess over its bound (> 0: violated). Returns how many entries are > 0.
+    premise's excess over its bound (> 0: violated), and the spans of violation are kept
+    here (:func:`_spans`). Returns (the first robot that left the plane or -1, how many
+    spans have ended and await their event).
 
     The truth of the period: positions ``x``, noise ``eta``, applied inputs ``u``, commands
     ``u_bar``, fault estimates ``phi_hat`` (N, 2); each base's ``height``, ``level`` (the
@@ -201,7 +204,6 @@ def _check(
     ``watched`` (excluded, or with an active fault) are not judged on noise, drift and
     saturation."""
     n = x.shape[0]
-    hits = 0
     for i in range(n):
         for p in range(5):
             value[p, i] = 0.0
@@ -230,11 +232,45 @@ def _check(
         up = abs(height[i] - z0[i]) - HEIGHT_TOLERANCE
         tilt = np.arccos(min(max(level[i], -1.0), 1.0)) - TILT_TOLERANCE
         value[_PLANAR, i] = max(up, tilt, 0.0)
+    return _spans(value, t, spans, order, seq, last, rows, add, top, top_robot)
+
+
+@njit(cache=True)
+def _spans(value, t, spans, order, seq, last, rows, add, top, top_robot):  # pragma: no cover
+    """The spans of the per-period premises after a period's ``value`` (5, N) at ``t``:
+    ``spans`` (3, 5, N) holds each open span's start (NaN: none open), worst value and
+    last instant violated, ``order`` (5, N) the rank it opened in (``seq`` [0]: the next
+    rank, shared with the team-wide spans, so that spans ending together are told in the
+    order they began); ``last`` (premises, N) the last instant each robot violated each
+    premise (rows ``rows``); ``top``, ``top_robot`` (5,) each premise's worst value and
+    robot (-1: none yet). A value reported is the excess plus ``add`` (the bound).
+    Returns (the first robot whose ``planar`` premise failed or -1, spans ended by ``t``)."""
+    n = value.shape[1]
+    planar = -1
     for p in range(5):
         for i in range(n):
             if value[p, i] > 0:
-                hits += 1
-    return hits
+                v = value[p, i] + add[p]
+                last[rows[p], i] = t
+                if np.isnan(spans[0, p, i]):
+                    spans[0, p, i] = t
+                    spans[1, p, i] = v
+                    order[p, i] = seq[0]
+                    seq[0] += 1
+                else:
+                    spans[1, p, i] = max(spans[1, p, i], v)
+                spans[2, p, i] = t
+                if top_robot[p] < 0 or v > top[p]:
+                    top[p] = v
+                    top_robot[p] = i
+                if p == _PLANAR and planar < 0:
+                    planar = i
+    ended = 0
+    for p in range(5):
+        for i in range(n):
+            if not np.isnan(spans[0, p, i]) and t - spans[2, p, i] >= GAP - 1e-9:
+                ended += 1
+    return planar, ended
 
 
 class Monitor:
@@ -296,11 +332,23 @@ class Monitor:
         self.split = False  # an exclusion left the graph not strongly connected
         self.last = np.full((len(PREMISES), n), -np.inf)  # last instant violated, per robot
         self.team_last = np.full(len(PREMISES), -np.inf)  # team-wide premises
-        # premise -> (value, robot 1-based)
+        # premise -> (value, robot 1-based), of the premises checked outside the period
         self.worst: dict[str, tuple[float, int | None]] = {p: (0.0, None) for p in PREMISES}
-        self.spans: dict[tuple[str, int | None], list[float]] = {}  # -> [t0, worst, last]
+        # their spans: (premise, robot) -> [t0, worst, last, rank it opened in]
+        self.spans: dict[tuple[str, int | None], list[float]] = {}
         self.count = dict.fromkeys(PREMISES, 0)
         self._index = {p: k for k, p in enumerate(PREMISES)}
+        # the per-period premises' spans, kept by the compiled check (:func:`_spans`)
+        self.period_spans = np.full((3, len(_PER_PERIOD), n), np.nan)
+        self._order = np.zeros((len(_PER_PERIOD), n), np.int64)
+        self._seq = np.zeros(1, np.int64)
+        self._rows = np.array([self._index[p] for p in _PER_PERIOD], np.int64)
+        self._add = np.array(
+            [0.0 if p == "contact" else self.limit if p == "saturation" else self.bounds[p]
+             for p in _PER_PERIOD]
+        )  # fmt: skip
+        self._top = np.zeros(len(_PER_PERIOD))
+        self._top_robot = np.full(len(_PER_PERIOD), -1, np.int64)
         self.worst["initial_error"] = (start.implied, start.robot + 1)
         if start.implied > start.value:
             self._violate("initial_error", start.robot, start.implied, 0.0)
@@ -352,34 +400,24 @@ class Monitor:
         ``x``, noise ``eta``, applied inputs ``u``, commands ``u_bar`` and fault estimates
         ``phi_hat`` (N, 2); each base's ``height``, ``level`` (cos of its tilt) and contact
         ``depth`` (N,) (:class:`~.physics_step.Sensed`)."""
-        hits = _check(
+        planar, ended = _check(
             x, eta, u, u_bar, phi_hat, height, level, depth, self.watched, self.x0, self.int_u,
             self.slow, self.z0, self.value, self.h, self.eta_bar, self.step, self.offset,
-            self.phi_bar, self.limit,
+            self.phi_bar, self.limit, t, self.period_spans, self._order, self._seq, self.last,
+            self._rows, self._add, self._top, self._top_robot,
         )  # fmt: skip
-        if hits:
-            value, planar = self.value, -1
-            rows, robots = np.nonzero(value)
-            for p, i in zip(rows.tolist(), robots.tolist(), strict=True):
-                name = _PER_PERIOD[p]
-                v = float(value[p, i])
-                if name != "contact":
-                    v += self.bounds[name] if name != "saturation" else self.limit
-                self._violate(name, i, v, t)
-                if p == _PLANAR and planar < 0:
-                    planar = i
-            if planar >= 0:
-                i = planar
-                tilt = np.degrees(np.arccos(np.clip(level[i], -1.0, 1.0)))
-                self.finish(t)
-                raise SimulationError(
-                    f"robot {i + 1} left the plane at t = {t:.2f} s: its base is at height "
-                    f"{height[i]:.3f} m (started at {self.z0[i]:.3f} m, tolerance "
-                    f"{HEIGHT_TOLERANCE:g} m) and tilted {tilt:.0f}° (tolerance "
-                    f"{np.degrees(TILT_TOLERANCE):.0f}°): the planar model of eq. 1 no longer "
-                    "describes it; the run was stopped"
-                )
-        if self.spans:
+        if planar >= 0:
+            i = planar
+            tilt = np.degrees(np.arccos(np.clip(level[i], -1.0, 1.0)))
+            self.finish(t)
+            raise SimulationError(
+                f"robot {i + 1} left the plane at t = {t:.2f} s: its base is at height "
+                f"{height[i]:.3f} m (started at {self.z0[i]:.3f} m, tolerance "
+                f"{HEIGHT_TOLERANCE:g} m) and tilted {tilt:.0f}° (tolerance "
+                f"{np.degrees(TILT_TOLERANCE):.0f}°): the planar model of eq. 1 no longer "
+                "describes it; the run was stopped"
+            )
+        if ended or self.spans:
             self._close(t, False)
 
     def graph_changed(self, t: float, strongly_connected: bool) -> None:
@@ -421,7 +459,8 @@ class Monitor:
         key = (name, robot)
         span = self.spans.get(key)
         if span is None:
-            self.spans[key] = [t, value, t]
+            self.spans[key] = [t, value, t, int(self._seq[0])]
+            self._seq[0] += 1
         else:
             span[1] = max(span[1], value)
             span[2] = t
@@ -429,8 +468,11 @@ class Monitor:
             self.worst[name] = (value, None if robot is None else robot + 1)
 
     def _close(self, t: float, final: bool) -> None:
+        """Tell the spans that ended by ``t`` (every open one if ``final``) as events, in
+        the order they began."""
+        ended = []  # (rank, premise, robot, t0, worst, last)
         for key in list(self.spans):
-            t0, worst, last = self.spans[key]
+            t0, worst, last, rank = self.spans[key]
             if final or t - last >= GAP - 1e-9:
                 name, robot = key
                 if name == "connectivity" and self.split:
@@ -438,16 +480,25 @@ class Monitor:
                         continue  # an exclusion split the graph: it lasts until the end
                     last = t
                 del self.spans[key]
-                self.count[name] += 1
-                self.events.add(
-                    t0,
-                    Kind.PREMISE_VIOLATED,
-                    premise=name,
-                    robot=None if robot is None else robot + 1,
-                    value=float(worst),
-                    bound=float(self.bounds[name]),
-                    until=round(float(last), 6),
-                )
+                ended.append((rank, name, robot, t0, worst, last))
+        spans = self.period_spans
+        open_ = ~np.isnan(spans[0])
+        due = open_ if final else open_ & (t - spans[2] >= GAP - 1e-9)
+        for p, i in zip(*np.nonzero(due), strict=True):
+            name = _PER_PERIOD[p]
+            ended.append((int(self._order[p, i]), name, int(i), *spans[:, p, i].tolist()))
+            spans[0, p, i] = np.nan
+        for _, name, robot, t0, worst, last in sorted(ended, key=lambda e: e[0]):
+            self.count[name] += 1
+            self.events.add(
+                t0,
+                Kind.PREMISE_VIOLATED,
+                premise=name,
+                robot=None if robot is None else robot + 1,
+                value=float(worst),
+                bound=float(self.bounds[name]),
+                until=round(float(last), 6),
+            )
 
     def violated(self, robot: int, t: float) -> list[str]:
         """The premises robot ``robot`` (0-based), or the team, violated within the memory of
@@ -474,6 +525,11 @@ class Monitor:
         for p, meaning in PREMISES.items():
             worst, robot = self.worst[p]
             held = self.count[p] == 0 and not any(k[0] == p for k in self.spans)
+            if p in _PER_PERIOD:
+                q = _PER_PERIOD.index(p)
+                worst = float(self._top[q])
+                robot = int(self._top_robot[q]) + 1 if self._top_robot[q] >= 0 else None
+                held = held and bool(np.isnan(self.period_spans[0, q]).all())
             if p == "initial_error":
                 held = self.start.implied <= self.start.value
             out[p] = {

@@ -291,3 +291,53 @@ def test_the_drive_rule_holds_its_premises_on_physics(robot):
     (stop,) = [f for f in r.summary["fault_outcomes"] if f["kind"] == "stop"]
     assert stop["outcome"] == "excluded" and stop["flagged_by"] == [2, 3, 4]
     assert [e["robot"] for e in r.events.of_kind("exclusion")] == [1]
+
+
+def test_spans_are_told_once_each_in_the_order_they_began():
+    """The per-period premises' spans are kept inside the compiled check, the team-wide
+    ones beside it: a span ends once its premise held for ``GAP``, and spans that end
+    together are told in the order they began, each with its worst value and last
+    instant; the summary's table reads the same spans."""
+    from dftc_mujoco.premises import GAP, Monitor, StartBound
+    from dftc_mujoco.record import Events
+
+    n, h, zeros = 2, 0.01, np.zeros((2, 2))
+    events = Events()
+    mon = Monitor(
+        n=n, dt=h, eta_bar=0.01, xi_bar=0.1, drift_bound=1.0, phi_bar=0.0, command_limit=1.0,
+        start=StartBound(1.0, 0.5, 0, 0.5, "robot", True), x0=zeros, z0=np.zeros(n),
+        events=events,
+    )  # fmt: skip
+
+    def period(k, eta=zeros, depth=(0.0, 0.0)):
+        mon.period(k * h, zeros, eta, zeros, zeros, zeros, np.zeros(n), np.ones(n),
+                   np.array(depth))  # fmt: skip
+
+    noisy = np.array([[0.0, 0.0], [0.03, 0.0]])  # robot 2's noise three times η̄
+    period(0)
+    mon.network(1 * h, 2)  # a team-wide span first, robot 2's noise in the same period
+    period(1, eta=noisy)
+    period(2, eta=2 * noisy)
+    period(3, depth=(0.004, 0.0))  # robot 1 touches something
+    k = 4
+    while not events.items:
+        period(k)
+        k += 1
+    # the network's span ended first, GAP after its last instant; the others go on
+    assert [e["premise"] for e in events.items] == ["network"]
+    assert (k - 1) * h >= 1 * h + GAP - 1e-9 > (k - 2) * h
+    mon.finish(k * h)  # the rest end together: in the order they began
+    told = [(e["premise"], e["robot"], e["t"], e["until"]) for e in events.items]
+    assert told == [
+        ("network", None, 0.01, 0.01),
+        ("noise", 2, 0.01, 0.02),
+        ("contact", 1, 0.03, 0.03),
+    ]
+    assert events.items[1]["value"] == pytest.approx(0.06)  # its worst: 2 × 0.03
+    table = mon.table()
+    assert table["noise"] | {"meaning": ""} == {
+        "held": False, "worst": pytest.approx(0.06), "robot": 2, "bound": 0.01, "spans": 1,
+        "meaning": "",
+    }  # fmt: skip
+    assert table["contact"]["robot"] == 1 and table["contact"]["spans"] == 1
+    assert table["mismatch"]["held"] and table["mismatch"]["robot"] is None

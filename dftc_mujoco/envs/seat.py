@@ -17,6 +17,7 @@ scenario's duration.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -98,6 +99,7 @@ class Seats:
         self._obs = {i: np.zeros(self.size(i), np.float32) for i in driven}
         self._heard = {i: np.array(self.heard[i], dtype=np.int64) for i in driven}
         self._rows: np.ndarray | None = None  # each robot's member position (-1: excluded)
+        self._rewarded: dict[int, tuple[int, float]] = {}  # robot -> (period, its reward)
         self._members = 0
 
     def close(self) -> None:
@@ -126,7 +128,11 @@ class Seats:
         for i in self.driven:
             self.sim.drive(i, None)
         self._rows = None
+        self._rewarded.clear()
         self._labels = [(f.robot, f.kind, f.t, f.end) for f in self.scenario.faults]
+        # the labels change only where a fault begins or ends: kept between those instants
+        self._edges = sorted({e for f in self._labels for e in f[2:] if math.isfinite(e)})
+        self._labelled: tuple[float, float, np.ndarray, list[str]] = (0.0, -1.0, np.zeros(0), [])
 
     def step(self, actions: Mapping[int, np.ndarray]) -> None:
         """One control period with each driven robot commanded ``actions[i]`` (clipped to
@@ -180,7 +186,7 @@ class Seats:
             self._members = m  # member positions change at an exclusion only
             self._rows = np.full(self.n, -1, dtype=np.int64)
             self._rows[team.members] = np.arange(m)
-        _observe(
+        reward = _observe(
             self._obs[i],
             sim.t / self.scenario.duration,
             self._rows,
@@ -197,18 +203,19 @@ class Seats:
             team.active,
             self.spacing,
             self.limit,
+            sim.positions,
         )
+        self._rewarded[i] = (sim.k, reward)
         return self._obs[i]
 
     def reward(self, i: int) -> float:
         """Minus robot ``i``'s true distance from its slot, in slots' spacings (0 once it is
         excluded)."""
-        team = self.sim.team
-        p = np.flatnonzero(team.members == i) if self._rows is None else self._rows[i : i + 1]
-        if not len(p) or p[0] < 0:
-            return 0.0
-        x, x_d = self.sim.positions[i], team.x_d[p[0]]
-        return -math.hypot(x[0] - x_d[0], x[1] - x_d[1]) / self.spacing
+        k, reward = self._rewarded.get(i, (-1, 0.0))
+        if k != self.sim.k:  # written with the observation: observed after this period
+            self.observe(i)
+            k, reward = self._rewarded[i]
+        return reward
 
     def info(self, i: int) -> dict[str, Any]:
         """The period's time, its events (robots numbered from 1), ``dftc_command`` (what the
@@ -217,32 +224,46 @@ class Seats:
         and ``fault_kind`` (N,) str ("" for none), robots on the original axis."""
         sim = self.sim
         t = sim.t - sim.dt if sim.k else 0.0
+        lo, hi, faulty, kinds = self._labelled
+        if not lo <= t < hi:
+            k = bisect.bisect_right(self._edges, t)
+            lo = self._edges[k - 1] if k else -math.inf
+            hi = self._edges[k] if k < len(self._edges) else math.inf
+            self._labelled = (lo, hi, *self._label(t))
+            faulty, kinds = self._labelled[2:]
+        return {
+            "t": t,
+            "events": sim.new_events(),
+            "dftc_command": np.array(sim.team.u_bar[i], dtype=np.float32),
+            "faulty": faulty.copy(),
+            "fault_kind": list(kinds),
+        }
+
+    def _label(self, t: float) -> tuple[np.ndarray, list[str]]:
+        """The faults in force at ``t``: ``faulty`` (N,) and ``fault_kind`` (N,)."""
         faulty = np.zeros(self.n, bool)
         kinds = [""] * self.n
         for robot, kind, start, end in self._labels:
             if start <= t < end:
                 faulty[robot] = True
                 kinds[robot] = kind if not kinds[robot] else f"{kinds[robot]}+{kind}"
-        return {
-            "t": t,
-            "events": sim.new_events(),
-            "dftc_command": np.array(sim.team.u_bar[i], dtype=np.float32),
-            "faulty": faulty,
-            "fault_kind": kinds,
-        }
+        return faulty, kinds
 
 
 @njit(cache=True)
 def _observe(
     out, time, rows, i, heard, x_m, x_d, u_bar, phi_hat, x_hat, r_norm, mu, flag, active,
-    spacing, limit,
+    spacing, limit, x,
 ):  # fmt: skip  # pragma: no cover - compiled
     """:data:`FIELDS` of robot ``i`` into ``out`` (float32): ``rows`` maps a robot to its
     member position (-1: excluded), ``heard`` its in-neighbours; the team's arrays as
     :class:`~dftc_mujoco.onboard.team.Team` keeps them (members' axis, or the robots' for
     ``u_bar``, ``phi_hat``, ``active``). Excluded robots and a robot's lost neighbours
-    read 0; every entry is clipped to ±:data:`BIG`."""
+    read 0; every entry is clipped to ±:data:`BIG`. Returns the reward: minus the robot's
+    true distance (``x`` (N, 2): the true positions) from its slot, in spacings (0 once
+    it is excluded)."""
     n = rows.shape[0]
+    reward = 0.0
     for k in range(out.shape[0]):
         out[k] = 0.0
     out[0] = time
@@ -277,8 +298,10 @@ def _observe(
         k += 2 * n
         for robot in range(n):
             out[k + robot] = 1.0 if active[robot] else 0.0
+        reward = -math.hypot(x[i, 0] - x_d[p, 0], x[i, 1] - x_d[p, 1]) / spacing
     for k in range(out.shape[0]):
         out[k] = min(max(out[k], -BIG), BIG)
+    return reward
 
 
 def _episodes(base: Scenario, vary: Mapping[str, Any]) -> Any:
