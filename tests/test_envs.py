@@ -136,6 +136,13 @@ def test_the_observation_is_the_robots_own_view_scaled_to_learn_from():
         assert np.allclose(last[5:7], info["dftc_command"] / s.limit, atol=1e-6)
         assert np.all(last[-4:] == 1.0)  # everyone in the team
         assert np.abs(seq).max() < 10.0
+        # its residual ratios, with the thresholds read from eq. 40's factors as the
+        # compiled period reads them, and the reward written with the observation
+        assert team.threshold_factors is not None
+        ratio = np.asarray(team.r_norm)[2] / np.asarray(team.mu)[2]
+        assert np.allclose(last[11:15], np.minimum(ratio, 4.0) / 4.0, atol=1e-6)
+        x, slot = s.sim.positions[2], team.x_d[2]
+        assert s.reward(2) == pytest.approx(-np.hypot(*(x - slot)) / s.spacing)
         names = [f[0] for f in FIELDS]
         assert names[:3] == ["time", "slot", "slot_error"] and names[-1] == "active"
     finally:

@@ -29,6 +29,7 @@ from numba import njit
 from ..errors import InputError
 from ..loop import Simulation
 from ..mission import slot_spacing
+from ..onboard.thresholds.paper import dense_thresholds, factored_at
 from ..scenario import Scenario, load_scenario
 
 #: the observation's entries in order: (name, size, meaning, scale). ``N`` is the team size,
@@ -141,7 +142,7 @@ class Seats:
         for i, a in actions.items():
             try:
                 if type(a) is np.ndarray and a.shape == (2,) and a.dtype.kind == "f":
-                    v0, v1 = float(a[0]), float(a[1])  # a policy's own array
+                    v0, v1 = a.tolist()  # a policy's own array
                 else:
                     v0, v1 = (float(c) for c in np.asarray(a, dtype=float).reshape(2))
             except (TypeError, ValueError):
@@ -186,6 +187,9 @@ class Seats:
             self._members = m  # member positions change at an exclusion only
             self._rows = np.full(self.n, -1, dtype=np.int64)
             self._rows[team.members] = np.arange(m)
+        th = team.threshold_factors  # eq. 40's factors where the compiled period read them
+        if th is None:
+            th = dense_thresholds(np.ascontiguousarray(team.mu, dtype=float))
         reward = _observe(
             self._obs[i],
             sim.t / self.scenario.duration,
@@ -198,7 +202,11 @@ class Seats:
             team.phi_hat,
             team.x_hat,
             np.asarray(team.r_norm),
-            np.asarray(team.mu),
+            th.dense,
+            th.coef,
+            th.bound,
+            th.finite,
+            th.eta,
             np.asarray(team.flag),
             team.active,
             self.spacing,
@@ -252,14 +260,16 @@ class Seats:
 
 @njit(cache=True)
 def _observe(
-    out, time, rows, i, heard, x_m, x_d, u_bar, phi_hat, x_hat, r_norm, mu, flag, active,
-    spacing, limit, x,
+    out, time, rows, i, heard, x_m, x_d, u_bar, phi_hat, x_hat, r_norm, dense, coef, bound,
+    finite, eta, flag, active, spacing, limit, x,
 ):  # fmt: skip  # pragma: no cover - compiled
     """:data:`FIELDS` of robot ``i`` into ``out`` (float32): ``rows`` maps a robot to its
     member position (-1: excluded), ``heard`` its in-neighbours; the team's arrays as
     :class:`~dftc_mujoco.onboard.team.Team` keeps them (members' axis, or the robots' for
-    ``u_bar``, ``phi_hat``, ``active``). Excluded robots and a robot's lost neighbours
-    read 0; every entry is clipped to ±:data:`BIG`. Returns the reward: minus the robot's
+    ``u_bar``, ``phi_hat``, ``active``); the thresholds ⁱμ_k as the compiled period reads
+    them (:class:`~dftc_mujoco.onboard.thresholds.paper.ThresholdRecord`: ``dense``, or
+    eq. 40's factors). Excluded robots and a robot's lost neighbours read 0; every entry
+    is clipped to ±:data:`BIG`. Returns the reward: minus the robot's
     true distance (``x`` (N, 2): the true positions) from its slot, in spacings (0 once
     it is excluded)."""
     n = rows.shape[0]
@@ -289,8 +299,8 @@ def _observe(
             q = rows[robot]
             if q < 0:
                 continue
-            bound = mu[p, q]
-            ratio = r_norm[p, q] / bound if bound > 0 else 0.0
+            mu = dense[p, q] if dense.shape[0] else factored_at(coef, bound, finite, eta, p, q)
+            ratio = r_norm[p, q] / mu if mu > 0 else 0.0
             if not ratio >= 0.0:  # NaN
                 ratio = 0.0
             out[k + robot] = min(ratio, RATIO_CAP) / RATIO_CAP
