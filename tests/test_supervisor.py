@@ -11,6 +11,8 @@ from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard.supervisor import grid_work, supervise
 from tests.test_premises import shuffled
 
+INF = np.inf  # no range: the drive's limit plays no part
+
 
 def test_two_robots_heading_at_each_other_are_held_at_the_safe_distance():
     """Eq. 18 with the teammate as obstacle: the radial part of the input is replaced by
@@ -21,13 +23,13 @@ def test_two_robots_heading_at_each_other_are_held_at_the_safe_distance():
     u, du = np.empty((2, 2)), np.empty((2, 2))
     theta, safe = 3.0, 0.22
     none, nothing, work = np.zeros((0, 2)), np.zeros(0), grid_work(2)
-    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.32, work)
+    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.32, work, INF)
     assert list(active) == [1, 0]  # each avoids the other (obstacle index O + j, O = 0)
     away = theta * (safe - 0.25)  # radial speed allowed: −0.09 m/s towards the teammate
     assert u[0] == pytest.approx([-away, 0.2])
     assert u[1] == pytest.approx([away, 0.0])
     np.testing.assert_allclose(du, u - u_g)
-    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, 0.0, 0.0, work)
+    supervise(x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, 0.0, 0.0, work, INF)
     assert list(active) == [-1, -1] and np.array_equal(u, u_g)  # off: the paper's behaviour
 
 
@@ -104,6 +106,7 @@ def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
                 cfg.teammate_safe,
                 activation,
                 grid_work(2),
+                INF,
             )
             jump = max(jump, abs(u[0, 0] - previous))
             previous = u[0, 0]
@@ -183,7 +186,8 @@ def test_the_grid_of_a_large_team_finds_the_teammates_a_scan_finds(seed):
     for work in (grid_work(m), dirty, dirty, np.zeros(0, np.int64)):
         chosen = active.copy()
         supervise(
-            x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, chosen, u, du, mates, 0.22, 0.6, work
+            x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, chosen, u, du, mates, 0.22, 0.6,
+            work, INF,
         )  # fmt: skip
         assert np.array_equal(chosen, expect)
     assert (expect >= 0).sum() > m // 10  # the case is not empty
@@ -207,9 +211,9 @@ def test_the_grid_of_a_large_team_allocates_nothing_in_the_teams_own_integers():
 
     def allocations(mate_safe: float, work: np.ndarray) -> int:
         args = (x, u_g, none, np.zeros(0), np.zeros(0), 3.0, 0.01, active, u, du, x)
-        supervise(*args, mate_safe, 0.6, work)  # compiled and typed before counting
+        supervise(*args, mate_safe, 0.6, work, INF)  # compiled and typed before counting
         before = rtsys.get_allocation_stats().alloc
-        supervise(*args, mate_safe, 0.6, work)
+        supervise(*args, mate_safe, 0.6, work, INF)
         return rtsys.get_allocation_stats().alloc - before
 
     was = _nrt_python.memsys_stats_enabled()
@@ -221,3 +225,76 @@ def test_the_grid_of_a_large_team_allocates_nothing_in_the_teams_own_integers():
             _nrt_python.memsys_disable_stats()
     assert (active >= 0).any()  # teammates were in reach: the grid was read
     assert on == off and own == off + 1  # without the team's integers: one array of its own
+
+
+def test_a_robot_between_two_teammates_escapes_sideways_within_its_range():
+    """Robot 1 between robots 2 (above) and 3 (below), both nearer than the safe distance:
+    its global input heads away from 2 and into 3, so only 3's task is due, and eq. 18 for
+    3 alone would push it into 2. It takes the velocity nearest its input that meets both,
+    sideways, and within the drive's range."""
+    x = np.array([[0.0, 0.0], [0.06, 0.19], [0.05, -0.19]])
+    u_g = np.array([[0.3, -0.5], [0.0, 0.0], [0.0, 0.0]])
+    active = np.full(3, -1, dtype=np.intp)
+    u, du = np.empty((3, 2)), np.empty((3, 2))
+    theta, safe, limit = 3.0, 0.24, 0.6
+    none, nothing = np.zeros((0, 2)), np.zeros(0)
+    supervise(
+        x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.5, grid_work(3),
+        limit,
+    )  # fmt: skip
+    for j in (1, 2):  # eq. 17's task for each teammate: r̂ᵀu ≥ θ(d − ‖x₁ − x_j‖)
+        gap = x[0] - x[j]
+        dist = np.hypot(*gap)
+        assert gap @ u[0] / dist >= theta * (safe - dist) - 1e-9, j
+    assert np.abs(u[0]).max() <= limit and u[0, 0] < 0  # sideways, away from both
+    np.testing.assert_allclose(du, u - u_g, atol=1e-15)
+
+
+def test_an_avoiding_robot_keeps_to_its_range_and_judges_the_input_it_can_apply():
+    """A global input far beyond the range, which clipped axis by axis (as the drive
+    applies it) heads into a teammate nearer than the safe distance, though unclipped it
+    would not: the avoidance judges the clipped input, and its answer is within range."""
+    x = np.array([[0.0, 0.0], [0.16, -0.16]])
+    u_g = np.array([[3.0, 3.3], [0.0, 0.0]])
+    active = np.full(2, -1, dtype=np.intp)
+    u, du = np.empty((2, 2)), np.empty((2, 2))
+    theta, safe, limit = 3.0, 0.24, 0.5
+    none, nothing = np.zeros((0, 2)), np.zeros(0)
+    supervise(
+        x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.5, grid_work(2),
+        limit,
+    )  # fmt: skip
+    gap = x[0] - x[1]
+    dist = np.hypot(*gap)
+    assert active[0] == 1 and np.abs(u[0]).max() <= limit + 1e-12
+    assert gap @ u[0] / dist >= theta * (safe - dist) - 1e-9
+    assert u[0] == pytest.approx([0.5 - np.sqrt(2) * theta * (safe - dist), 0.5])
+
+
+def test_a_crowd_started_at_random_crosses_to_its_slots_without_a_contact():
+    """40 hexbots started at random within 4 m cross the crowd to their slots at the edge
+    of their range: no two hulls touch, and no premise is violated (they touched 41 times
+    when a robot judged its unclipped input, clipped its avoidance axis by axis and heeded
+    only the teammates its input approached)."""
+    r = simulate(
+        load_scenario(
+            "paper_case",
+            {
+                "duration": 20.0,
+                "seed": 434340769,
+                "obstacles": [],
+                "faults": [],
+                "team.robots": 40,
+                "team.robot_model": "hexbot",
+                "team.initial_positions": {"layout": "random", "spread": 4.0, "spacing": 0.6},
+                "team.graph": {"family": "random", "in_degree": 3},
+                "mission.centroid.speed": 0.5,
+                "mission.centroid.waypoints": [[0.0, 0.0], [6.6, 0.0], [10.2, 4.8], [18.0, 4.8]],
+                "fdir.dt_d_max": "auto",
+                "fdir.initial_error_bound": "auto",
+            },
+        )
+    )
+    premises = r.summary["premises"]
+    assert premises["contact"]["held"], premises["contact"]
+    assert all(p["held"] for p in premises.values()), premises

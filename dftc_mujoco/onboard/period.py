@@ -239,6 +239,7 @@ def act(
         sup.mate_safe,
         sup.mate_act,
         out.grid,
+        sup.limit,
     ):
         code |= SWITCHED
     if limit_input(

@@ -87,11 +87,11 @@ NEAREST = 8
 
 
 @njit(inline="always")
-def _keep(cons, k, index, margin, h0, h1, barrier, radial):  # pragma: no cover - compiled
+def _keep(cons, k, index, margin, h0, h1, barrier, radial, due):  # pragma: no cover - compiled
     """Obstacle ``index`` as one of a robot's constraints (rows of ``cons``: index, margin,
-    r̂, barrier, r̂ᵀu_g,i), ``k`` kept so far: at most :data:`NEAREST`, the nearest (by margin;
-    the lower index on a tie, the choice of a scan in index order, cylinders first).
-    Returns how many are kept."""
+    r̂, barrier, r̂ᵀu_g,i, 1 where eq. 17's primary task is ``due`` for it, else 0), ``k``
+    kept so far: at most :data:`NEAREST`, the nearest (by margin; the lower index on a tie,
+    the choice of a scan in index order, cylinders first). Returns how many are kept."""
     if k < NEAREST:
         row = k
         k += 1
@@ -110,16 +110,17 @@ def _keep(cons, k, index, margin, h0, h1, barrier, radial):  # pragma: no cover 
     cons[row, 3] = h1
     cons[row, 4] = barrier
     cons[row, 5] = radial
+    cons[row, 6] = 1.0 if due else 0.0
     return k
 
 
 @njit(inline="always")
 def _mate(
-    i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe, cons, k
+    i, j, x, mates, g0, g1, theta, release, active, n_obs, reach, mate_safe, cons, k
 ):  # pragma: no cover - compiled
     """Teammate j as robot i's obstacle (eq. 17 with it as the obstacle), kept among its
-    constraints when it is in reach and eq. 17's primary task is due (:func:`_keep`);
-    returns how many are kept."""
+    constraints when it is in reach (:func:`_keep`), robot i's global input within its
+    range being (g0, g1); returns how many are kept."""
     e0 = x[i, 0] - mates[j, 0]
     e1 = x[i, 1] - mates[j, 1]
     d2 = e0 * e0 + e1 * e1
@@ -128,12 +129,12 @@ def _mate(
     dist = np.sqrt(d2)
     h0 = e0 / max(dist, 1e-9)
     h1 = e1 / max(dist, 1e-9)
-    radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]
+    radial = h0 * g0 + h1 * g1
     barrier = theta * (mate_safe - dist)
     rel = release if active[i] == n_obs + j else 0.0
-    if radial < barrier + rel:
-        return _keep(cons, k, n_obs + j, dist - mate_safe, h0, h1, barrier, radial)
-    return k
+    return _keep(
+        cons, k, n_obs + j, dist - mate_safe, h0, h1, barrier, radial, radial < barrier + rel
+    )
 
 
 @njit(inline="always")
@@ -179,8 +180,9 @@ def _several(cons, k, g0, g1):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def supervise(
-    x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act, work
-):  # pragma: no cover - compiled
+    x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act, work,
+    limit,
+):  # fmt: skip  # pragma: no cover - compiled
     """Nominal inputs uᵢ (eq. 8) and Δuᵢ = uᵢ − u_g,i (eq. 22) into ``u``, ``delta_u`` (M, n).
 
     ``x`` (M, n) are the robots' own measured positions, ``obs`` (O, n) the
@@ -189,16 +191,20 @@ def supervise(
     (row i: itself, skipped), avoided within ``mate_act`` at safe distance
     ``mate_safe`` (0: not avoided); ``active[i]`` (updated) is the obstacle robot i
     avoids (O + j for teammate j; the nearest when it avoids several) or -1; ``work``:
-    the grid's integers (:func:`grid_work`). Returns True when some robot switched
-    behaviour.
+    the grid's integers (:func:`grid_work`); ``limit``: the drive's range per axis (inf:
+    none), which an avoiding robot's input keeps to (a velocity clipped axis by axis
+    afterwards may head into the obstacle it avoids). Returns True when some robot
+    switched behaviour.
 
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
     r̂ᵀu_g,i < θ(d − ‖xᵢ − x_o‖), and off when r̂ᵀu_g,i exceeds that by
     ``release``; at the switch eq. 18 and u_g,i coincide (docs/notes.md, 12). With one
-    such obstacle uᵢ is eq. 18's; with several at once (a crowd of teammates) it is the
-    velocity nearest u_g,i that meets every one of their primary tasks (:func:`_several`),
-    where eq. 18 for the nearest alone would push the robot into another.
+    such obstacle uᵢ is eq. 18's, unless eq. 18 would break the primary task of another
+    obstacle in reach (a robot between two teammates, which u_g,i moves away from one and
+    towards the other); then, as with several obstacles due at once (a crowd of
+    teammates), uᵢ is the velocity nearest u_g,i that meets the primary task of every
+    obstacle in reach (:func:`_several`).
     """
     changed = False
     grid = mate_safe > 0.0 and mates.shape[0] >= GRID_FROM
@@ -206,8 +212,14 @@ def supervise(
         cells, start, order = _grid(mates, mate_act, work)
     else:  # no grid: nothing reads them
         cells, start, order = 1, work[:0], work[:0]
-    cons = np.empty((NEAREST, 6))  # one robot's constraints (index, margin, r̂, barrier, r̂ᵀu)
+    # a robot's constraints (index, margin, r̂, barrier, r̂ᵀu, due): the nearest obstacles,
+    # then, where avoidance is due, the drive's range ±limit per axis as four more
+    cons = np.empty((NEAREST + 4, 7))
+    box = limit < np.inf
     for i in range(x.shape[0]):
+        g0, g1 = u_g[i, 0], u_g[i, 1]  # u_g,i as the drive's range lets the robot apply it
+        if box:
+            g0, g1 = min(max(g0, -limit), limit), min(max(g1, -limit), limit)
         k = 0
         for o in range(obs.shape[0]):
             e0 = x[i, 0] - obs[o, 0]
@@ -217,11 +229,10 @@ def supervise(
                 continue
             h0 = e0 / max(dist, 1e-9)  # r̂: obstacle-to-robot unit vector, Jₗ = r̂ᵀ
             h1 = e1 / max(dist, 1e-9)
-            radial = h0 * u_g[i, 0] + h1 * u_g[i, 1]  # r̂ᵀ u_g,i
+            radial = h0 * g0 + h1 * g1  # r̂ᵀ u_g,i
             barrier = theta * (safe[o] - dist)  # θ (d − ‖xᵢ − x_o‖), eq. 17
             rel = release if active[i] == o else 0.0
-            if radial < barrier + rel:
-                k = _keep(cons, k, o, dist - safe[o], h0, h1, barrier, radial)
+            k = _keep(cons, k, o, dist - safe[o], h0, h1, barrier, radial, radial < barrier + rel)
         if mate_safe > 0.0:
             n_obs = obs.shape[0]
             reach = mate_act * mate_act
@@ -234,39 +245,59 @@ def supervise(
                     end = start[h + 3] if h + 3 <= cells else sorted_ + start[h + 3 - cells]
                     for q in range(start[h], end):
                         k = _mate(
-                            i, order[q if q < sorted_ else q - sorted_], x, mates, u_g, theta,
-                            release, active, n_obs, reach, mate_safe, cons, k,
+                            i, order[q if q < sorted_ else q - sorted_], x, mates, g0, g1,
+                            theta, release, active, n_obs, reach, mate_safe, cons, k,
                         )  # fmt: skip
             else:
                 for j in range(mates.shape[0]):
                     k = _mate(
-                        i, j, x, mates, u_g, theta, release, active, n_obs, reach, mate_safe,
-                        cons, k,
+                        i, j, x, mates, g0, g1, theta, release, active, n_obs, reach,
+                        mate_safe, cons, k,
                     )  # fmt: skip
-        best = -1
-        if k > 0:  # the nearest kept names the behaviour (α of eq. 8)
-            near = 0
-            for q in range(1, k):
-                if cons[q, 1] < cons[near, 1] or (
-                    cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0]
+        best, due = -1, 0
+        near = -1
+        for q in range(k):  # the nearest obstacle whose task is due names the behaviour
+            if cons[q, 6] > 0:
+                due += 1
+                if (
+                    near < 0
+                    or cons[q, 1] < cons[near, 1]
+                    or (cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0])
                 ):
                     near = q
+        if near >= 0:
             best = int(cons[near, 0])
         if active[i] != best:
             changed = True
         active[i] = best
-        if k == 1:
+        du0 = 0.0
+        du1 = 0.0
+        if due > 0 and box:  # the range's sides: r̂ᵀu ≥ −limit for r̂ = ±e_x, ±e_y
+            for q in range(4):
+                h0 = (1.0 if q == 0 else -1.0) if q < 2 else 0.0
+                h1 = 0.0 if q < 2 else (1.0 if q == 2 else -1.0)
+                cons[k + q, 0] = -1.0
+                cons[k + q, 1] = np.inf
+                cons[k + q, 2] = h0
+                cons[k + q, 3] = h1
+                cons[k + q, 4] = -limit
+                cons[k + q, 5] = h0 * g0 + h1 * g1
+                cons[k + q, 6] = 0.0
+            k += 4
+        if due == 1:
             # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
-            du0 = (cons[0, 4] - cons[0, 5]) * cons[0, 2]
-            du1 = (cons[0, 4] - cons[0, 5]) * cons[0, 3]
-        elif k > 1:
-            v0, v1 = _several(cons, k, u_g[i, 0], u_g[i, 1])
-            du0 = v0 - u_g[i, 0]
-            du1 = v1 - u_g[i, 1]
-        else:
-            du0 = 0.0
-            du1 = 0.0
-        delta_u[i, 0] = du0
+            du0 = (cons[near, 4] - cons[near, 5]) * cons[near, 2]
+            du1 = (cons[near, 4] - cons[near, 5]) * cons[near, 3]
+        if due > 1 or (
+            due == 1 and _violation(cons, k, g0 + du0, g1 + du1) > 1e-12
+        ):  # several tasks due, or eq. 18 for one would break another's or the range
+            v0, v1 = _several(cons, k, g0, g1)
+            du0 = v0 - g0
+            du1 = v1 - g1
+        if due > 0:  # Δu from u_g,i itself (where it is in range, the avoidance's alone)
+            du0 += g0 - u_g[i, 0]
+            du1 += g1 - u_g[i, 1]
+        delta_u[i, 0] = du0  # due == 0: u_g,i itself (the drive's range is applied later)
         delta_u[i, 1] = du1
         u[i, 0] = u_g[i, 0] + du0
         u[i, 1] = u_g[i, 1] + du1
@@ -290,6 +321,7 @@ class SupervisorRecord(NamedTuple):
     active: np.ndarray  # (M,) the obstacle each robot avoids, or -1
     mate_safe: float  # 0: teammates are not avoided this period
     mate_act: float
+    limit: float  # the drive's range per axis (inf: none)
 
 
 class Supervisor(Block):
@@ -307,6 +339,7 @@ class Supervisor(Block):
     def __init__(self, release: float = 0.01) -> None:
         self.release = float(release)
         self.active = np.zeros(0, dtype=np.intp)
+        self.limit = np.inf  # the drive's range per axis, from the team's configuration
 
     def reset(self, config: TeamConfig, x_m0: np.ndarray, prior: np.ndarray) -> None:
         """Every robot starts on the global mission."""
@@ -314,12 +347,15 @@ class Supervisor(Block):
         self.active = np.full(len(x_m0), -1, dtype=np.intp)
         self.mate_safe = float(config.teammate_safe)
         self.mate_act = float(config.teammate_activation)
+        self.limit = float(config.input_limit)  # the drive's range, per axis
 
     def record(self, sensed: bool) -> SupervisorRecord:
         """The state the compiled period updates; teammates are avoided only when the range
         sensors gave a reading (``sensed``)."""
         mate_safe = self.mate_safe if sensed else 0.0
-        return SupervisorRecord(self.theta, self.release, self.active, mate_safe, self.mate_act)
+        return SupervisorRecord(
+            self.theta, self.release, self.active, mate_safe, self.mate_act, self.limit
+        )
 
     def drop(self, p, graph, t) -> None:
         """Forget the excluded robot's behaviour."""
@@ -358,6 +394,7 @@ class Supervisor(Block):
             self.mate_safe if teammates is not None else 0.0,
             self.mate_act,
             grid_work(len(mates)),
+            self.limit,
         )
         return u, du
 
