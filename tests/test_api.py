@@ -29,7 +29,7 @@ def test_paper_case_records_match_the_stored_reference(path):
     """The records of paper_case equal the numbers stored before the platform rewrite
     (every logged field, 121 samples, within 1e-9) and the events are identical, with the
     drive's acceleration limit and the ramped start off (``fdir.drive_accel = 0``,
-    ``fdir.start_ramp = false``: the disk's calibrated 16 m/s², and 2 m/s² during the
+    ``fdir.start_ramp = false``: the disk's calibrated 16 m/s², and 1 m/s² during the
     path's ramp, round the start's first commands, by up to a few mm in the records)."""
     result = simulate(
         load_scenario("paper_case", {"fdir.drive_accel": 0, "fdir.start_ramp": False})

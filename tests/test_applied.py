@@ -215,13 +215,17 @@ def test_the_nominal_input_changes_at_most_a_max_h_per_period():
     du = np.zeros_like(u)
     previous = np.array([[0.0, 0.0], [0.0, 0.0], [9.0, 9.0], [0.0, 0.0]])
     rows = np.array([0, 1, 3])
-    hit = limit_input(u, u_g, du, 0.5, previous, rows, 0.1)  # a_max = 10 m/s², h = 0.01 s
+    calm = np.full(3, -1, np.intp)  # no robot avoids anything
+    hit = limit_input(u, u_g, du, 0.5, previous, rows, 0.1, calm, 0.1)  # a_max 10 m/s², h 0.01 s
     assert hit == 2
     assert np.allclose(u[0], [0.1, 0.0]) and np.allclose(u[1], [0.05, 0.0])  # within the step
     assert np.allclose(u[2], [-0.06, 0.08])  # 0.1 along (-3, 4)/5, from robot 3's command
     assert np.allclose(du, u - u_g)
     none = np.array([[2.0, 0.0]])
-    limit_input(none, none.copy(), np.zeros((1, 2)), 0.5, np.zeros((1, 2)), rows[:1], np.inf)
+    limit_input(
+        none, none.copy(), np.zeros((1, 2)), 0.5, np.zeros((1, 2)), rows[:1], np.inf, calm[:1],
+        np.inf,
+    )  # fmt: skip
     assert np.allclose(none, [[0.5, 0.0]])  # no acceleration limit: the range only
 
 

@@ -792,7 +792,7 @@ def test_the_drift_split_keeps_slow_drift_and_bounds_jumps():
 def test_the_disk_drifts_by_a_few_millimetres_in_paper_case():
     d = calibrate.drift("disk", runs=1)
     assert d.period_max > 0.1  # per period the drift is far beyond h ξ̄ (compensation, start-up)
-    # a bounded offset, the start-up's no larger since the start is ramped (2 m/s² during
+    # a bounded offset, the start-up's no larger since the start is ramped (1 m/s² during
     # the path's ramp: 4.4 mm with the disk's 16 m/s² acceleration from rest, 7.6 mm with
     # none)
     assert d.drift_bound < 0.003 and d.startup <= d.drift_bound + 1e-9

@@ -128,11 +128,12 @@ def closed_loop(
     lag_a, lag_b = lag_coefficients(lag, CONTROL_PERIOD)
     v_hat, command = np.zeros((1, 2)), np.zeros((1, 2))
     rows, scratch = np.zeros(1, np.int64), np.zeros((1, 2))
+    calm = np.full(1, -1, np.intp)  # avoiding nothing
     step = accel * CONTROL_PERIOD
     for k in range(steps):
         x_m = data.site_xpos[site][:2][None] + eta[k]
         u = u_all[k][None].copy()
-        limit_input(u, scratch, scratch.copy(), math.inf, command, rows, step)
+        limit_input(u, scratch, scratch.copy(), math.inf, command, rows, step, calm, step)
         if lag_a > 0.0:
             lag_input(u, v_hat, command, lag_a, lag_b)  # u: the modelled velocity
         else:

@@ -69,21 +69,26 @@ def lag_input(u, v_hat, command, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def limit_input(u, u_g, delta_u, limit, previous, rows, step):  # pragma: no cover - compiled
+def limit_input(
+    u, u_g, delta_u, limit, previous, rows, step, avoiding, full_step
+):  # pragma: no cover - compiled
     """Saturate the nominal inputs ``u`` (M, n) in place: first their change since the last
     period's command ``previous[rows[i]]`` at ``step`` = a_max h in norm (the drive's
-    acceleration, inf: none), then each axis at ±``limit``; Δuᵢ = uᵢ − u_g,i (eq. 22) for
-    the input that results. Returns the number of robots whose input was changed."""
+    acceleration, inf: none; ``full_step`` for a robot ``avoiding`` (M,) an obstacle, where
+    ``step`` is a ramped start's: its avoidance brakes as hard as its drive can), then each
+    axis at ±``limit``; Δuᵢ = uᵢ − u_g,i (eq. 22) for the input that results. Returns the
+    number of robots whose input was changed."""
     hit = 0
     for i in range(u.shape[0]):
         changed = False
-        if step < math.inf:
+        step_i = full_step if avoiding[i] >= 0 else step
+        if step_i < math.inf:
             p0, p1 = previous[rows[i], 0], previous[rows[i], 1]
             d0, d1 = u[i, 0] - p0, u[i, 1] - p1
             gap = math.sqrt(d0 * d0 + d1 * d1)
-            if gap > step:
-                u[i, 0] = p0 + d0 * step / gap
-                u[i, 1] = p1 + d1 * step / gap
+            if gap > step_i:
+                u[i, 0] = p0 + d0 * step_i / gap
+                u[i, 1] = p1 + d1 * step_i / gap
                 changed = True
         if max(abs(u[i, 0]), abs(u[i, 1])) > limit:
             changed = True
@@ -101,6 +106,7 @@ class DriveRecord(NamedTuple):
 
     input_limit: float  # [m/s] per axis, the range the compensation leaves free
     accel_step: float  # [m/s] the drive's Δu per period (inf: none)
+    full_step: float  # [m/s] the same after a ramped start (an avoiding robot's at once)
     lagged: bool  # some robot's drive lags its command
     lag_a: np.ndarray  # (N,) a, b of :func:`lag_input`
     lag_b: np.ndarray
@@ -144,9 +150,20 @@ class DriveModel:
         """The acceleration of the period at ``t``: the start's, then the drive's own."""
         self.accel_step = self.start_step if t < self.start_time else self.full_step
 
-    def limit(self, u: np.ndarray, u_g: np.ndarray, delta_u: np.ndarray, rows: np.ndarray) -> int:
-        """Saturate the members' nominal inputs in place (:func:`limit_input`)."""
-        return limit_input(u, u_g, delta_u, self.input_limit, self.command, rows, self.accel_step)
+    def limit(
+        self,
+        u: np.ndarray,
+        u_g: np.ndarray,
+        delta_u: np.ndarray,
+        rows: np.ndarray,
+        avoiding: np.ndarray,
+    ) -> int:
+        """Saturate the members' nominal inputs in place (:func:`limit_input`; ``avoiding``
+        (M,): the obstacle each avoids, or -1)."""
+        return limit_input(
+            u, u_g, delta_u, self.input_limit, self.command, rows, self.accel_step, avoiding,
+            self.full_step,
+        )  # fmt: skip
 
     def deliver(self, u: np.ndarray) -> None:
         """``u`` (N, 2) becomes the command; with a lag, ``u`` becomes what the drive
@@ -159,6 +176,6 @@ class DriveModel:
     def record(self) -> DriveRecord:
         """The arrays and constants the compiled period uses."""
         return DriveRecord(
-            self.input_limit, self.accel_step, self.lagged, self.lag_a, self.lag_b, self.v_hat,
-            self.command,
+            self.input_limit, self.accel_step, self.full_step, self.lagged, self.lag_a,
+            self.lag_b, self.v_hat, self.command,
         )  # fmt: skip

@@ -113,7 +113,8 @@ def general_period(
     # the applied input (Remark 4.1), saturated here
     u_mem = np.array(shaped(u_mem, own, sup, "step()[0]"), dtype=float)
     delta_u = np.array(shaped(delta_u, own, sup, "step()[1]"), dtype=float)
-    saturated = team.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem)
+    avoiding = np.asarray(getattr(sup, "active", np.full(len(mem), -1)), dtype=np.intp)
+    saturated = team.drive.limit(u_mem, np.ascontiguousarray(u_g, float), delta_u, mem, avoiding)
     if not whole:
         team.u[:] = 0.0  # an excluded robot is told to stay where it is
     team.u[mem] = u_mem

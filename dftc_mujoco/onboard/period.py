@@ -243,8 +243,9 @@ def act(
     ):
         code |= SWITCHED
     if limit_input(
-        out.u_mem, out.u_g, out.du, drive.input_limit, drive.command, inp.rows, drive.accel_step
-    ):
+        out.u_mem, out.u_g, out.du, drive.input_limit, drive.command, inp.rows, drive.accel_step,
+        sup.active, drive.full_step,
+    ):  # fmt: skip
         code |= SATURATED
     return code
 
