@@ -249,8 +249,9 @@ def test_an_acceleration_limit_keeps_a_healthy_diffdrive_in_the_team():
     robot 3 stops at 39.7 s. Unlimited (``drive_accel = 0``) robot 2's reversal at 11.2 s
     ran its compensation away (ū 4.8 m/s) and the healthy robot 2 was excluded; at the
     calibrated 2 m/s² only the stopped robot 3 is. Since teammates are sensed from
-    safe + ‖u‖/θ on (switches without jumps) the unlimited run keeps robot 2 too, but its
-    compensation still swings ten times as far (φ̂ 1.7 m/s against 0.16)."""
+    safe + ‖u‖/θ on (switches without jumps) the unlimited run keeps robot 2 too, and since
+    an avoiding robot keeps to its range its compensation swings less, but still more than
+    twice as far (φ̂ 0.33 m/s against 0.13; ten times, 1.7 against 0.16, before)."""
     from dftc_mujoco import scenario
     from dftc_mujoco.campaign import spec as spec_mod
 
@@ -264,7 +265,7 @@ def test_an_acceleration_limit_keeps_a_healthy_diffdrive_in_the_team():
     for r in out.values():
         assert [e["robot"] for e in r.summary["exclusions"]] == [3]
     swing = {k: np.nanmax(np.abs(r.log["phi_hat"][:, 1])) for k, r in out.items()}
-    assert swing[0.0] > 5 * swing["robot"]
+    assert swing[0.0] > 2 * swing["robot"]
 
 
 def test_a_jammed_slow_robot_reads_its_drive_state_from_its_own_motion():

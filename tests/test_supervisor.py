@@ -252,8 +252,9 @@ def test_a_robot_between_two_teammates_escapes_sideways_within_its_range():
 
 def test_an_avoiding_robot_keeps_to_its_range_and_judges_the_input_it_can_apply():
     """A global input far beyond the range, which clipped axis by axis (as the drive
-    applies it) heads into a teammate nearer than the safe distance, though unclipped it
-    would not: the avoidance judges the clipped input, and its answer is within range."""
+    applies it) heads into a teammate nearer than the safe distance, and scaled into the
+    range does not move away from it as fast as eq. 17 asks, though as given it would: the
+    avoidance judges the input as the drive can apply it, and its answer is within range."""
     x = np.array([[0.0, 0.0], [0.16, -0.16]])
     u_g = np.array([[3.0, 3.3], [0.0, 0.0]])
     active = np.full(2, -1, dtype=np.intp)

@@ -192,9 +192,13 @@ def supervise(
     ``mate_safe`` (0: not avoided); ``active[i]`` (updated) is the obstacle robot i
     avoids (O + j for teammate j; the nearest when it avoids several) or -1; ``work``:
     the grid's integers (:func:`grid_work`); ``limit``: the drive's range per axis (inf:
-    none), which an avoiding robot's input keeps to (a velocity clipped axis by axis
-    afterwards may head into the obstacle it avoids). Returns True when some robot
-    switched behaviour.
+    none). Returns True when some robot switched behaviour.
+
+    A robot judges u_g,i as its drive can apply it: scaled into the range, its direction
+    kept (clipped axis by axis it could point straight at an obstacle the input itself
+    passes by); an avoiding robot's input keeps to the range (a velocity clipped axis by
+    axis afterwards may head into the obstacle it avoids); with no task due uᵢ = u_g,i,
+    which the drive's range limits later.
 
     Within an obstacle's activation distance avoidance switches on when the
     global input would approach it faster than eq. 17's primary task allows,
@@ -217,9 +221,11 @@ def supervise(
     cons = np.empty((NEAREST + 4, 7))
     box = limit < np.inf
     for i in range(x.shape[0]):
-        g0, g1 = u_g[i, 0], u_g[i, 1]  # u_g,i as the drive's range lets the robot apply it
-        if box:
-            g0, g1 = min(max(g0, -limit), limit), min(max(g1, -limit), limit)
+        # u_g,i within the drive's range, its direction kept
+        g0, g1 = u_g[i, 0], u_g[i, 1]
+        over = max(abs(g0), abs(g1)) / limit if box else 0.0
+        if over > 1.0:
+            g0, g1 = g0 / over, g1 / over
         k = 0
         for o in range(obs.shape[0]):
             e0 = x[i, 0] - obs[o, 0]
@@ -265,6 +271,17 @@ def supervise(
                     or (cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0])
                 ):
                     near = q
+        steer = False  # no task due, but the range, clipping u_g,i axis by axis, would break one
+        if due == 0 and over > 1.0 and k > 0:
+            c0, c1 = min(max(u_g[i, 0], -limit), limit), min(max(u_g[i, 1], -limit), limit)
+            if _violation(cons, k, c0, c1) > 1e-12:
+                steer = True
+                near = 0  # the nearest obstacle in reach names the behaviour
+                for q in range(1, k):
+                    if cons[q, 1] < cons[near, 1] or (
+                        cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0]
+                    ):
+                        near = q
         if near >= 0:
             best = int(cons[near, 0])
         if active[i] != best:
@@ -272,7 +289,7 @@ def supervise(
         active[i] = best
         du0 = 0.0
         du1 = 0.0
-        if due > 0 and box:  # the range's sides: r̂ᵀu ≥ −limit for r̂ = ±e_x, ±e_y
+        if (due > 0 or steer) and box:  # the range's sides: r̂ᵀu ≥ −limit for r̂ = ±e_x, ±e_y
             for q in range(4):
                 h0 = (1.0 if q == 0 else -1.0) if q < 2 else 0.0
                 h1 = 0.0 if q < 2 else (1.0 if q == 2 else -1.0)
@@ -288,16 +305,17 @@ def supervise(
             # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
             du0 = (cons[near, 4] - cons[near, 5]) * cons[near, 2]
             du1 = (cons[near, 4] - cons[near, 5]) * cons[near, 3]
-        if due > 1 or (
-            due == 1 and _violation(cons, k, g0 + du0, g1 + du1) > 1e-12
-        ):  # several tasks due, or eq. 18 for one would break another's or the range
+        if (
+            due > 1 or steer or (due == 1 and _violation(cons, k, g0 + du0, g1 + du1) > 1e-12)
+        ):  # several tasks due, eq. 18 for one would break another's or the range, or the
+            # range would break one
             v0, v1 = _several(cons, k, g0, g1)
             du0 = v0 - g0
             du1 = v1 - g1
-        if due > 0:  # Δu from u_g,i itself (where it is in range, the avoidance's alone)
+        if due > 0 or steer:  # Δu from u_g,i itself (in range: the avoidance's alone)
             du0 += g0 - u_g[i, 0]
             du1 += g1 - u_g[i, 1]
-        delta_u[i, 0] = du0  # due == 0: u_g,i itself (the drive's range is applied later)
+        delta_u[i, 0] = du0  # no task due: u_g,i (the drive's range is applied later)
         delta_u[i, 1] = du1
         u[i, 0] = u_g[i, 0] + du0
         u[i, 1] = u_g[i, 1] + du1
