@@ -54,6 +54,8 @@ from .sim.plant import NoiseStream, Plant
 from .sim.sensors import SensorFaults
 from .snapshot import Snapshot
 
+_CALM = contextlib.nullcontext()  # numpy's error state as it is (reusable)
+
 
 def _check_seed(seed: object) -> None:
     """Refuse a seed that is not a whole number in 0..2**63 − 1 (None: keep the scenario's)."""
@@ -358,8 +360,7 @@ class Simulation:
     # ------------------------------------------------------------------ stepping
 
     def step(self, periods: int = 1) -> Snapshot:
-        """Advance ``periods`` control periods (a whole number ≥ 1) and return the state after
-        the last one."""
+        """Advance ``periods`` (a whole number ≥ 1) control periods; the state after them."""
         self._open("step()")
         if isinstance(periods, bool) or not isinstance(periods, int | np.integer) or periods < 1:
             raise ValueError(f"step(periods): expected a whole number ≥ 1, got {periods!r}")
@@ -369,11 +370,8 @@ class Simulation:
         return self.snapshot()
 
     def run(self, progress: bool | None = None) -> RunResult:
-        """Run to the end (from wherever stepping left off) and return the records.
-
-        ``progress``: show a progress bar (None: when the output is a terminal or a
-        notebook).
-        """
+        """Run to the end (from wherever stepping left off) and return the records;
+        ``progress``: show a progress bar (None: on a terminal or in a notebook)."""
         self._open("run()")
         if progress is None:
             progress = sys.stderr.isatty() or "ipykernel" in sys.modules
@@ -434,13 +432,9 @@ class Simulation:
         )  # fmt: skip
         wall0, compiling0 = time.perf_counter(), self._clock.total()
         failed: BaseException | None = None  # the physics step's error, raised after the period
-        # NaN (excluded robots) and inf (unjudgeable ones) are expected in residual /
-        # threshold, which the general path computes with numpy (the compiled one warns of
-        # nothing); physics trouble is caught explicitly by the plant, not by numpy warnings
-        quiet = (
-            contextlib.nullcontext() if team.compiled
-            else np.errstate(invalid="ignore", divide="ignore")
-        )  # fmt: skip
+        # NaN (excluded robots) and inf (unjudgeable ones) are expected in the general path's
+        # numpy (the compiled one warns of nothing); physics trouble is the plant's to catch
+        quiet = _CALM if team.compiled else np.errstate(invalid="ignore", divide="ignore")
         try:
             with quiet:
                 for k in range(k0, k_end):

@@ -178,6 +178,75 @@ def _several(cons, k, g0, g1):  # pragma: no cover - compiled
     return best0, best1
 
 
+@njit(inline="always")
+def _nearest(cons, k, due_only):  # pragma: no cover - compiled
+    """The row of the nearest kept obstacle (by margin, the lower index on a tie), among
+    those whose task is due if ``due_only``; -1: none."""
+    near = -1
+    for q in range(k):
+        if due_only and cons[q, 6] == 0:
+            continue
+        if (
+            near < 0
+            or cons[q, 1] < cons[near, 1]
+            or (cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0])
+        ):
+            near = q
+    return near
+
+
+@njit(inline="always")
+def _box(cons, k, g0, g1, limit):  # pragma: no cover - compiled
+    """The drive's range ±``limit`` per axis as four more constraints after the ``k`` kept,
+    r̂ᵀu ≥ −limit for r̂ = ±e_x, ±e_y; returns how many there are then."""
+    for q in range(4):
+        h0 = (1.0 if q == 0 else -1.0) if q < 2 else 0.0
+        h1 = 0.0 if q < 2 else (1.0 if q == 2 else -1.0)
+        cons[k + q, 0] = -1.0
+        cons[k + q, 1] = np.inf
+        cons[k + q, 2] = h0
+        cons[k + q, 3] = h1
+        cons[k + q, 4] = -limit
+        cons[k + q, 5] = h0 * g0 + h1 * g1
+        cons[k + q, 6] = 0.0
+    return k + 4
+
+
+@njit(inline="always")
+def _answer(cons, k, g0, g1, ug0, ug1, limit, over):  # pragma: no cover - compiled
+    """A robot's behaviour and Δuᵢ from its ``k`` kept constraints: its global input
+    u_g,i = (ug0, ug1), (g0, g1) within the range ±``limit`` (scaled by ``over`` > 1 where
+    it was beyond). Returns (the obstacle that names the behaviour or -1, Δuᵢ)."""
+    due = 0
+    for q in range(k):
+        if cons[q, 6] > 0:
+            due += 1
+    near = _nearest(cons, k, True)
+    # no task due, but the range, clipping u_g,i axis by axis, would break one
+    steer = False
+    if due == 0 and over > 1.0 and k > 0:
+        c0, c1 = min(max(ug0, -limit), limit), min(max(ug1, -limit), limit)
+        if _violation(cons, k, c0, c1) > 1e-12:
+            steer = True
+            near = _nearest(cons, k, False)
+    if due == 0 and not steer:
+        return -1, 0.0, 0.0  # u_g,i itself (the drive's range is applied later)
+    best = int(cons[near, 0])
+    if limit < np.inf:
+        k = _box(cons, k, g0, g1, limit)
+    du0 = du1 = 0.0
+    if due == 1:
+        # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
+        du0 = (cons[near, 4] - cons[near, 5]) * cons[near, 2]
+        du1 = (cons[near, 4] - cons[near, 5]) * cons[near, 3]
+    if due > 1 or steer or _violation(cons, k, g0 + du0, g1 + du1) > 1e-12:
+        # several tasks due, the range would break one, or eq. 18 for one would break
+        # another's or the range
+        v0, v1 = _several(cons, k, g0, g1)
+        du0, du1 = v0 - g0, v1 - g1
+    return best, du0 + (g0 - ug0), du1 + (g1 - ug1)  # Δu from u_g,i itself
+
+
 @njit(cache=True)
 def supervise(
     x, u_g, obs, safe, act, theta, release, active, u, delta_u, mates, mate_safe, mate_act, work,
@@ -260,62 +329,11 @@ def supervise(
                         i, j, x, mates, g0, g1, theta, release, active, n_obs, reach,
                         mate_safe, cons, k,
                     )  # fmt: skip
-        best, due = -1, 0
-        near = -1
-        for q in range(k):  # the nearest obstacle whose task is due names the behaviour
-            if cons[q, 6] > 0:
-                due += 1
-                if (
-                    near < 0
-                    or cons[q, 1] < cons[near, 1]
-                    or (cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0])
-                ):
-                    near = q
-        steer = False  # no task due, but the range, clipping u_g,i axis by axis, would break one
-        if due == 0 and over > 1.0 and k > 0:
-            c0, c1 = min(max(u_g[i, 0], -limit), limit), min(max(u_g[i, 1], -limit), limit)
-            if _violation(cons, k, c0, c1) > 1e-12:
-                steer = True
-                near = 0  # the nearest obstacle in reach names the behaviour
-                for q in range(1, k):
-                    if cons[q, 1] < cons[near, 1] or (
-                        cons[q, 1] == cons[near, 1] and cons[q, 0] < cons[near, 0]
-                    ):
-                        near = q
-        if near >= 0:
-            best = int(cons[near, 0])
+        best, du0, du1 = _answer(cons, k, g0, g1, u_g[i, 0], u_g[i, 1], limit, over)
         if active[i] != best:
             changed = True
         active[i] = best
-        du0 = 0.0
-        du1 = 0.0
-        if (due > 0 or steer) and box:  # the range's sides: r̂ᵀu ≥ −limit for r̂ = ±e_x, ±e_y
-            for q in range(4):
-                h0 = (1.0 if q == 0 else -1.0) if q < 2 else 0.0
-                h1 = 0.0 if q < 2 else (1.0 if q == 2 else -1.0)
-                cons[k + q, 0] = -1.0
-                cons[k + q, 1] = np.inf
-                cons[k + q, 2] = h0
-                cons[k + q, 3] = h1
-                cons[k + q, 4] = -limit
-                cons[k + q, 5] = h0 * g0 + h1 * g1
-                cons[k + q, 6] = 0.0
-            k += 4
-        if due == 1:
-            # eq. 18: Jₗ† θ (d − ‖xᵢ − x_o‖) + (I − r̂ r̂ᵀ) u_g,i = u_g,i + r̂ (θ(d − ‖·‖) − r̂ᵀu_g,i)
-            du0 = (cons[near, 4] - cons[near, 5]) * cons[near, 2]
-            du1 = (cons[near, 4] - cons[near, 5]) * cons[near, 3]
-        if (
-            due > 1 or steer or (due == 1 and _violation(cons, k, g0 + du0, g1 + du1) > 1e-12)
-        ):  # several tasks due, eq. 18 for one would break another's or the range, or the
-            # range would break one
-            v0, v1 = _several(cons, k, g0, g1)
-            du0 = v0 - g0
-            du1 = v1 - g1
-        if due > 0 or steer:  # Δu from u_g,i itself (in range: the avoidance's alone)
-            du0 += g0 - u_g[i, 0]
-            du1 += g1 - u_g[i, 1]
-        delta_u[i, 0] = du0  # no task due: u_g,i (the drive's range is applied later)
+        delta_u[i, 0] = du0
         delta_u[i, 1] = du1
         u[i, 0] = u_g[i, 0] + du0
         u[i, 1] = u_g[i, 1] + du1
