@@ -269,9 +269,8 @@ def _observe(
     ``u_bar``, ``phi_hat``, ``active``); the thresholds ⁱμ_k as the compiled period reads
     them (:class:`~dftc_mujoco.onboard.thresholds.paper.ThresholdRecord`: ``dense``, or
     eq. 40's factors). Excluded robots and a robot's lost neighbours read 0; every entry
-    is clipped to ±:data:`BIG`. Returns the reward: minus the robot's
-    true distance (``x`` (N, 2): the true positions) from its slot, in spacings (0 once
-    it is excluded)."""
+    is clipped to ±:data:`BIG`. Returns the reward: minus the robot's true distance (``x``
+    (N, 2): the true positions) from its slot, in spacings (0 once it is excluded)."""
     n = rows.shape[0]
     reward = 0.0
     for k in range(out.shape[0]):

@@ -232,7 +232,7 @@ def _answer(cons, k, g0, g1, ug0, ug1, limit, over):  # pragma: no cover - compi
     if due == 0 and not steer:
         return -1, 0.0, 0.0  # u_g,i itself (the drive's range is applied later)
     best = int(cons[near, 0])
-    if limit < np.inf:
+    if 0.0 < limit < np.inf:
         k = _box(cons, k, g0, g1, limit)
     du0 = du1 = 0.0
     if due == 1:
@@ -288,7 +288,7 @@ def supervise(
     # a robot's constraints (index, margin, r̂, barrier, r̂ᵀu, due): the nearest obstacles,
     # then, where avoidance is due, the drive's range ±limit per axis as four more
     cons = np.empty((NEAREST + 4, 7))
-    box = limit < np.inf
+    box = 0.0 < limit < np.inf
     for i in range(x.shape[0]):
         # u_g,i within the drive's range, its direction kept
         g0, g1 = u_g[i, 0], u_g[i, 1]
