@@ -104,7 +104,7 @@ class PhysicsStep:
             raise ValueError(f"drive(robot): expected a robot in 0..{n - 1}, got {robot!r}")
         if velocity is None:
             self.driven[robot] = False
-            self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
+            self._rows = self._driven_rows()
             return
         if (
             type(velocity) is tuple
@@ -126,7 +126,11 @@ class PhysicsStep:
         override[0], override[1] = v0, v1
         if not self.driven[robot]:
             self.driven[robot] = True
-            self._rows = tuple(int(i) for i in np.flatnonzero(self.driven))
+            self._rows = self._driven_rows()
+
+    def _driven_rows(self) -> tuple[int, ...]:
+        """The robots driven from outside, as Python integers (np.flatnonzero(driven))."""
+        return tuple(int(i) for i in np.flatnonzero(self.driven))
 
     def commands(self, xi: np.ndarray) -> np.ndarray:
         """The actuator commands for the team's ū plus the drives' errors ``xi`` (eq. 2)

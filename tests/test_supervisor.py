@@ -227,6 +227,21 @@ def test_the_grid_of_a_large_team_allocates_nothing_in_the_teams_own_integers():
     assert on == off and own == off + 1  # without the team's integers: one array of its own
 
 
+def _among_teammates(x, u_g, theta, safe, limit):
+    """One call of the supervisor for robots at ``x`` (M, 2) with global inputs ``u_g``,
+    teammates only (activation 0.5 m, safe distance ``safe``), within the range ±``limit``:
+    (u, Δu, active)."""
+    m = len(x)
+    active = np.full(m, -1, dtype=np.intp)
+    u, du = np.empty((m, 2)), np.empty((m, 2))
+    none, nothing = np.zeros((0, 2)), np.zeros(0)
+    supervise(
+        x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.5, grid_work(m),
+        limit,
+    )  # fmt: skip
+    return u, du, active
+
+
 def test_a_robot_between_two_teammates_escapes_sideways_within_its_range():
     """Robot 1 between robots 2 (above) and 3 (below), both nearer than the safe distance:
     its global input heads away from 2 and into 3, so only 3's task is due, and eq. 18 for
@@ -234,14 +249,8 @@ def test_a_robot_between_two_teammates_escapes_sideways_within_its_range():
     sideways, and within the drive's range."""
     x = np.array([[0.0, 0.0], [0.06, 0.19], [0.05, -0.19]])
     u_g = np.array([[0.3, -0.5], [0.0, 0.0], [0.0, 0.0]])
-    active = np.full(3, -1, dtype=np.intp)
-    u, du = np.empty((3, 2)), np.empty((3, 2))
     theta, safe, limit = 3.0, 0.24, 0.6
-    none, nothing = np.zeros((0, 2)), np.zeros(0)
-    supervise(
-        x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.5, grid_work(3),
-        limit,
-    )  # fmt: skip
+    u, du, _ = _among_teammates(x, u_g, theta, safe, limit)
     for j in (1, 2):  # eq. 17's task for each teammate: r̂ᵀu ≥ θ(d − ‖x₁ − x_j‖)
         gap = x[0] - x[j]
         dist = np.hypot(*gap)
@@ -257,14 +266,8 @@ def test_an_avoiding_robot_keeps_to_its_range_and_judges_the_input_it_can_apply(
     avoidance judges the input as the drive can apply it, and its answer is within range."""
     x = np.array([[0.0, 0.0], [0.16, -0.16]])
     u_g = np.array([[3.0, 3.3], [0.0, 0.0]])
-    active = np.full(2, -1, dtype=np.intp)
-    u, du = np.empty((2, 2)), np.empty((2, 2))
     theta, safe, limit = 3.0, 0.24, 0.5
-    none, nothing = np.zeros((0, 2)), np.zeros(0)
-    supervise(
-        x, u_g, none, nothing, nothing, theta, 0.01, active, u, du, x, safe, 0.5, grid_work(2),
-        limit,
-    )  # fmt: skip
+    u, _, active = _among_teammates(x, u_g, theta, safe, limit)
     gap = x[0] - x[1]
     dist = np.hypot(*gap)
     assert active[0] == 1 and np.abs(u[0]).max() <= limit + 1e-12
