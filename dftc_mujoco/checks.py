@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ScenarioError
-from .mission import ARENA_HALF, formation_offsets
+from .mission import ARENA_HALF, GOVERNED_SHARE, formation_offsets
 from .scenario import Scenario
 
 CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
@@ -306,7 +306,8 @@ def preflight(
         finding(
             "mission.centroid.speed",
             f"{speed:g} m/s is beyond the {name} robots' command range of "
-            f"±{command_limit:.3g} m/s per axis: the team cannot follow the path",
+            f"±{command_limit:.3g} m/s per axis: the team cannot follow the path"
+            + _flyable(input_limit, command_limit),
             refuse=True,
         )
     elif speed > input_limit:
@@ -526,3 +527,17 @@ def _closest_pair(points: np.ndarray) -> float:
 
 def _radius(points: np.ndarray) -> float:
     return float(np.linalg.norm(points, axis=1).max()) if len(points) else 0.0
+
+
+def _flyable(input_limit: float, command_limit: float) -> str:
+    """The fix for a path too fast for the drives: the fastest speed a team flies as given
+    (:func:`.mission.governed_speed`), rounded down to three significant figures."""
+    top = GOVERNED_SHARE * min(input_limit, command_limit)
+    if not 0 < top < math.inf:
+        return ""
+    digits = 2 - math.floor(math.log10(top))
+    speed = math.floor(top * 10**digits) / 10**digits
+    return (
+        f"; a speed of {speed:g} m/s or less leaves its drives room to steer "
+        f"(--set mission.centroid.speed={speed:g})"
+    )

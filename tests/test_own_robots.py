@@ -1,7 +1,8 @@
 """A user's own robot, unchanged: small models of the kinds public mobile bases are published
 as (tests/data/robots): a differential drive on coupled tendons, a four-wheel skid steer
-spawned above the floor, servos that throw their robot off the plane, a fixed-base arm
-given a planar base. Each is driven through the simulator's own drive and physics."""
+spawned above the floor, servos that throw their robot off the plane, servos that chatter
+at the scene's step, a fixed-base arm given a planar base. Each is driven through the
+simulator's own drive and physics."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import calibrate, load_scenario, simulate
+from dftc_mujoco.calibrate.command import on_plane
 from dftc_mujoco.calibrate.mismatch import LAG_CANDIDATES, Calibration, lag_choice, report
+from dftc_mujoco.calibrate.physics import CHATTER_SHARE
 from dftc_mujoco.loop import Simulation
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
@@ -110,6 +113,23 @@ def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path
     assert "calibration refused, nothing written" in line and "the base rose" in line, err
     assert "at the shorter steps tried (1, 0.5, 0.25, 0.125, 0.1 ms)" in line, err
     assert path.read_bytes() == before
+
+
+def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_shorter_steps(
+    capsys,
+):
+    """Wheel servos that chatter at the scene's 2 ms step without leaving the floor (as
+    MuJoCo Menagerie's Stretch 3 does) take most of their command range as mismatch there;
+    calibrate measures them again at shorter steps, says so, and keeps the step that calms
+    them: ξ̄ is then a small share of the range (it was 31 %, which a run cannot work in)."""
+    cal, measured = on_plane(str(DATA / "chatterbot.robot.toml"))
+    said = capsys.readouterr().out
+    assert "its servos chatter at that step" in said, said
+    share = float(said.split("mm/s, ")[1].split("%")[0]) / 100  # at the scene's step
+    assert share > CHATTER_SHARE, said
+    assert measured["timestep"] < 0.002 and cal.timestep == measured["timestep"]
+    assert cal.smooth_max < share * cal.command_limit / 2
+    assert cal.smooth_max < CHATTER_SHARE * cal.command_limit
 
 
 def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):

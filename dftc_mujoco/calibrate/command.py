@@ -11,8 +11,16 @@ from ..errors import EXIT_OK, EXIT_OUTPUT, ScenarioError
 from .compensation import acceleration, acceleration_report, compensation, compensation_report
 from .drift import REPLAN_WINDOW, drift
 from .files import Change, check_writable, values_of, write
-from .mismatch import TIMESTEP, Calibration, detectability, measure, report, robot_with
-from .physics import STEPS, OffPlane, limits
+from .mismatch import (
+    PAPER_XI_BAR,
+    TIMESTEP,
+    Calibration,
+    detectability,
+    measure,
+    report,
+    robot_with,
+)
+from .physics import CHATTER_SHARE, CHATTER_STEPS_DOWN_TO, STEPS, OffPlane, limits
 from .track import skid_track
 
 
@@ -172,19 +180,19 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
 def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
     """:func:`.mismatch.measure` at the robot's physics step, and where the robot leaves the
     plane there, at each shorter step of :data:`.physics.STEPS` until it stays on it (the
-    fix, stored as ``timestep``); with a skid steer's track measured first. Returns the
-    calibration and what it measured besides (``timestep``, ``track``); refuses in one line
-    when no step keeps the robot on the plane."""
+    fix, stored as ``timestep``); with a skid steer's track measured first. A drive that
+    stays on the plane but whose mismatch on smooth commands takes more than
+    :data:`.physics.CHATTER_SHARE` of its command range is measured at the shorter steps
+    too (:func:`_calmer`). Returns the calibration and what it measured besides
+    (``timestep``, ``track``); refuses in one line when no step keeps the robot on the
+    plane."""
     robot = robot_with(model)
     first = min(TIMESTEP, robot.timestep)
     tried = []
     for step in (first, *(s for s in STEPS if s < first)):
         measured = {"timestep": step} if step < TIMESTEP else {}
         try:
-            track = skid_track(model, measured)
-            if track is not None:
-                measured["track"] = track
-            cal = measure(model, measured)
+            cal = _measured_at(model, measured)
         except OffPlane as exc:
             tried.append((step, exc.trouble))
             continue
@@ -195,7 +203,8 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
                 f"drive runs away at that step; at {step * 1000:g} ms it stays on the plane: "
                 f"calibrated there (timestep = {step:g}: every run with this robot steps at it)"
             )
-        return cal, measured
+            return cal, measured
+        return _calmer(model, cal, measured, step)
     (step0, trouble), (last, why) = tried[0], tried[-1]
     shorter = ", ".join(f"{s * 1000:g}" for s, _ in tried[1:])
     raise ScenarioError(
@@ -205,3 +214,48 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
         "drive's commands (check its wheels' contacts, its servos' gains and the pose its "
         "other joints hold)"
     )
+
+
+def _measured_at(model: str, measured: dict[str, float]) -> Calibration:
+    """:func:`.mismatch.measure` at ``measured``'s step (a skid steer's track measured
+    first, into ``measured``)."""
+    track = skid_track(model, measured)
+    if track is not None:
+        measured["track"] = track
+    return measure(model, measured)
+
+
+def _calmer(
+    model: str, cal: Calibration, measured: dict[str, float], step: float
+) -> tuple[Calibration, dict[str, float]]:
+    """A drive that stayed on the plane at ``step`` but whose smooth mismatch takes more than
+    :data:`.physics.CHATTER_SHARE` of its range may be a servo that chatters at that step
+    (stiff velocity servos on light wheels, their force clamped: the base stays level, the
+    wheels reverse every few steps). It is measured again at the shorter steps while each
+    halves the mismatch again (and it is above the paper's ξ̄); the last that did is the
+    fix (``timestep``). Where the first does not, the drive itself is slow: ``cal``
+    stands."""
+    if not cal.smooth_max > CHATTER_SHARE * cal.command_limit:
+        return cal, measured
+    best, kept, at = cal, measured, step
+    for shorter in (s for s in STEPS if s < step and s >= CHATTER_STEPS_DOWN_TO):
+        if best.smooth_max <= PAPER_XI_BAR:
+            break  # calm enough: ξ̄ is the paper's whatever a shorter step gives
+        again = {**measured, "timestep": shorter}
+        try:
+            there = _measured_at(model, again)
+        except OffPlane:
+            continue
+        if not there.smooth_max <= best.smooth_max / 2:
+            break  # no longer the step's doing
+        best, kept, at = there, again, shorter
+    if best is not cal:
+        mm = 1000.0
+        print(
+            f"WARNING: at {step * 1000:g} ms the drive's mismatch on smooth commands reaches "
+            f"{cal.smooth_max * mm:.1f} mm/s, {cal.smooth_max / cal.command_limit:.0%} of its "
+            f"command range: its servos chatter at that step; at {at * 1000:g} ms it is "
+            f"{best.smooth_max * mm:.1f} mm/s: calibrated there (timestep = {at:g}: every run "
+            "with this robot steps at it)"
+        )
+    return best, kept

@@ -29,6 +29,12 @@ from ..sim.tree import _surface_points, subtree
 #: [s] the physics steps tried after a breach at the scene's (10 ms control period: 10, 20,
 #: 40, 80 and 100 steps a period)
 STEPS = (0.001, 0.0005, 0.00025, 0.000125, 0.0001)
+#: a drive whose mismatch on smooth commands takes more than this share of its command range
+#: is measured again at the shorter steps: its servos may chatter at the scene's step
+CHATTER_SHARE = 0.25
+#: [s] the shortest step tried for a chattering drive (a run at it costs 8 times the
+#: scene's physics)
+CHATTER_STEPS_DOWN_TO = 0.00025
 #: [m] a part this close to the floor at the start may touch it as the base pitches
 NEAR_FLOOR = 0.02
 
