@@ -346,8 +346,9 @@ def _notes(robot: RobotModel, spec: mujoco.MjSpec) -> tuple[str, ...]:
     step: tuple[str, ...] = ()
     if robot.timestep < np.inf:
         step = (
-            f"the {robot.name} drive runs away at longer steps (calibration.timestep = "
-            f"{robot.timestep:g} s): the scene steps at {spec.option.timestep:g} s",
+            f"the {robot.name} drive runs away or chatters at longer steps "
+            f"(calibration.timestep = {robot.timestep:g} s): the scene steps at "
+            f"{spec.option.timestep:g} s",
         )
     if not clash:
         return step
