@@ -133,12 +133,14 @@ def _formation_room(
         spacing = _closest_pair(formation_offsets(s.mission.formation, m))
         if spacing < need:
             which = "the formation" if m == n else f"the re-planned formation of {m} robots"
+            # the scale that makes the room, of the document as written (it may be scaled)
+            scale = math.ceil(10 * s.scale * need / max(spacing, 1e-9)) / 10
             finding(
                 "mission.formation.side",
                 f"{which} puts two slots {spacing:.3f} m apart, but two {name} robots need "
                 f"{need:.3f} m (footprint radius {reach:.3f} m each, + {CLEARANCE:g} m): use "
                 f"side >= {s.mission.formation.side * need / max(spacing, 1e-9):.3f}, or "
-                f"mission.scale = {math.ceil(10 * need / max(spacing, 1e-9)) / 10:g} (the "
+                f"mission.scale = {scale:g} (the "
                 "whole mission that much bigger: path, cylinders, starts, times)"
                 + ("" if contacts else " (robot contacts are off: hulls will pass through)"),
                 refuse=contacts,

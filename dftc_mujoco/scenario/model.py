@@ -80,6 +80,9 @@ class Scenario:
     onboard: Onboard = field(default_factory=Onboard)
     supervisor: Supervision = field(default_factory=Supervision)
     network: Network = field(default_factory=Network)
+    #: the ``mission.scale`` its document was read with (its lengths and times are already
+    #: scaled; 1: none): what a suggested scale multiplies, not part of the document
+    scale: float = field(default=1.0, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if not _TRUSTED.get():
@@ -538,7 +541,7 @@ def from_dict(data: dict[str, Any], source: str = "<memory>") -> Scenario:
 
 
 def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario:
-    problem = None
+    problem, k = None, 1.0
     if isinstance(data, dict):  # mission.scale: the document's lengths and times, scaled
         k, problem = scale_problem(data)
         data = scaled(data, k)
@@ -554,4 +557,4 @@ def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario
     doc.raise_problems()
     assert fields is not None  # every skip follows a recorded problem
     with _trusted():
-        return Scenario(**fields)
+        return Scenario(**fields, scale=k if isinstance(data, dict) else 1.0)
