@@ -132,6 +132,22 @@ def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_sho
     assert cal.smooth_max < CHATTER_SHARE * cal.command_limit
 
 
+def test_calibrate_says_when_a_robot_moves_at_a_steady_share_of_its_commands(tmp_path):
+    """A drive model that does not match the wheels (here a robot file that gives the
+    tendon-driven base wheels twice their radius; in MuJoCo Menagerie's Robot Soccer Kit,
+    omni rollers that friction loss keeps from rolling) moves the robot at a steady share
+    of its commands, which no lag and no ξ̄ describes: calibrate measures the share and
+    says what to check. The same base as published moves at its commands."""
+    path = _copy(tmp_path, "tendonbot")
+    right = calibrate.measure(str(path))
+    assert 0.95 < right.tracking < 1.05 and not any("moves at" in n for n in right.notes)
+    path.write_text(path.read_text() + "wheel_radius = 0.1\n")  # the true radius: 0.05 m
+    wrong = calibrate.measure(str(path))
+    assert 0.4 < wrong.tracking < 0.6, wrong.tracking
+    (note,) = [n for n in wrong.notes if "of its command, steadily" in n]
+    assert "check the wheels' radius" in note and note in report(wrong)
+
+
 def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):
     """[calibration] timestep (a drive that runs away at longer steps) makes the scene step at
     most that long, a whole number of steps a control period, and the run says so."""

@@ -25,6 +25,7 @@ JUMP_HOLD = 4.0  # s each command jump is held
 SETTLED_FOR = 0.2  # s the mismatch must stay low for a response to count as settled
 LAG_MIN = 0.05  # s: a faster drive is taken to move at its command (ẋ = u, the paper)
 LAG_CANDIDATES = np.geomspace(0.005, 20.0, 121)  # s, the time constants tried
+TRACKING = (0.8, 1.25)  # the shares of its commands a robot may move at unwarned (tracking)
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,7 @@ class Calibration:
     accel: float = math.inf  # a_max of the nominal input's change (inf: not limited) [m/s²]
     timestep: float = 0.0  # the shorter physics step its drive needs (0: the scene's) [s]
     track: float = 0.0  # a skid steer's effective axle width (0: not measured) [m]
+    tracking: float = 1.0  # the share of its smooth commands the robot moves at (tracking())
 
     @property
     def recommended_xi_bar(self) -> float:
@@ -219,8 +221,12 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
     if lag > 0:  # measure the rest against the drive model the robot will run
         mismatch = np.hypot(*(velocity - lag_response(prog.u, tau)).T)
     cal = _analyse(robot.name, prog, mismatch, clamped, limit)
+    share = tracking(prog, velocity, lag_response(prog.u, tau) if lag > 0 else prog.u, limit)
+    if not TRACKING[0] <= share <= TRACKING[1]:
+        cal = dataclasses.replace(cal, notes=(*cal.notes, _tracking_note(share)))
     return dataclasses.replace(
         cal,
+        tracking=share,
         lag=lag,
         lag_fit=tau,
         fast_lag=fast_lag,
@@ -228,6 +234,29 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
         rms_lag=rms_lag,
         timestep=step if step < TIMESTEP else 0.0,
         track=float(robot.calibration.get("track", 0.0)),
+    )
+
+
+def tracking(prog: Programme, velocity: np.ndarray, model: np.ndarray, limit: float) -> float:
+    """The share of its commands a robot moves at on the smooth part of the programme: the
+    least-squares k of ẋ ≈ k v̂ (v̂ the command, or the drive model's response to it) over
+    the samples whose v̂ is at least a fifth of the command range. 1 for a drive that moves
+    as the drive model assumes; a steady shortfall is no lag and no ξ̄ describes it."""
+    smooth = slice(prog.startup, prog.jumps[0])
+    v, m = velocity[smooth], model[smooth]
+    big = np.hypot(*m.T) >= 0.2 * min(limit, 1.0)
+    if not big.any():
+        return 1.0
+    return float(np.sum(v[big] * m[big]) / np.sum(m[big] * m[big]))
+
+
+def _tracking_note(share: float) -> str:
+    """The warning for a robot that moves at a steady share of its commands."""
+    return (
+        f"on smooth commands the robot moves at {share:.0%} of its command, steadily (no lag "
+        "and no ξ̄ describes that): its wheels do not move it as its drive model assumes; "
+        "check the wheels' radius and axle, friction loss or damping on its passive joints "
+        "(rollers, casters) and its servos' gains"
     )
 
 
