@@ -148,6 +148,32 @@ def test_calibrate_says_when_a_robot_moves_at_a_steady_share_of_its_commands(tmp
     assert "check the wheels' radius" in note and note in report(wrong)
 
 
+def test_a_swerve_whose_steering_is_limited_to_90_degrees_turns_within_its_range(tmp_path):
+    """Steering joints limited to ±90.5° (as ROBOTIS's AI Worker publishes its swerve base):
+    a module whose nearer angle lies past its range takes the other one and drives its wheel
+    the other way, so the base follows its commands as the unlimited one does (before, the
+    modules were sent past their range: the base moved at 78 % of its commands, its smooth
+    mismatch 0.30 m/s at the 99th percentile). Where a module swings across its range's
+    edge it turns half a circle, a transient the unlimited base does not have."""
+    base = Path(__file__).parents[1] / "models" / "robots"
+    shutil.copytree(base / "swervebase", tmp_path / "swervebase")
+    xml = tmp_path / "swervebase" / "swervebase.xml"
+    text = xml.read_text()
+    limited = text.replace(
+        '<joint type="hinge" axis="0 0 1" damping="0.02" armature="0.001"/>',
+        '<joint type="hinge" axis="0 0 1" damping="0.02" armature="0.001" range="-90.5 90.5"/>',
+    )
+    assert limited != text
+    xml.write_text(limited)
+    path = tmp_path / "limited.robot.toml"
+    lines = (base / "swerve.robot.toml").read_text().split("[calibration]")[0]
+    path.write_text(lines)
+    free = calibrate.measure("swerve")
+    cal = calibrate.measure(str(path))
+    assert abs(cal.tracking - free.tracking) < 0.02, (cal.tracking, free.tracking)
+    assert cal.smooth_p99 < 0.1, cal.smooth_p99
+
+
 def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):
     """[calibration] timestep (a drive that runs away at longer steps) makes the scene step at
     most that long, a whole number of steps a control period, and the run says so."""

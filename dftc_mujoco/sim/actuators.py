@@ -90,6 +90,8 @@ class ActuatorInfo:
     tendon: str = ""  # the fixed tendon it pulls ("" for a joint transmission)
     damping: float = 0.0  # of its joint (a tendon: the most of its joints'): losses it overcomes
     frictionloss: float = 0.0
+    # the range its (first) joint is limited to, (-inf, inf) when it is not
+    joint_range: tuple[float, float] = (-np.inf, np.inf)
 
     @property
     def velocity_limit(self) -> float:
@@ -170,6 +172,11 @@ def classify(model: mujoco.MjModel, a: int) -> ActuatorInfo | str:
         tendon=tendon,
         damping=max(float(model.dof_damping[model.jnt_dofadr[k]]) for k, _ in moment),
         frictionloss=max(float(model.dof_frictionloss[model.jnt_dofadr[k]]) for k, _ in moment),
+        joint_range=(
+            (float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1]))
+            if model.jnt_limited[j]
+            else (-np.inf, np.inf)
+        ),
     )
 
 

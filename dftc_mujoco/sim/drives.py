@@ -256,7 +256,9 @@ class Swerve(Omni):
     :class:`Omni`, the heading held). Its wheel rolls along angle α_k + s_k q_k (q_k the
     steering joint, s_k its sense about +z). It steers to the direction of v_k or its
     opposite, whichever is nearer (turning at most 90°), and drives at ±‖v_k‖/r_k times
-    the cosine of what it has still to turn (no push sideways while it turns). A position
+    the cosine of what it has still to turn (no push sideways while it turns); where the
+    nearer angle lies beyond its steering joint's range, it takes the other one and drives
+    the other way (a module limited to ±90° turns within its range). A position
     servo steers to the angle; a velocity servo at (angle error)/:data:`STEER_TIME`. A bias
     fault φ goes through the wheels as they point (the drive speed along each wheel).
     """
@@ -276,6 +278,9 @@ class Swerve(Omni):
         self.steer_cols = np.arange(0, 2 * len(self.alpha), 2)
         self.steer_adr = self.actuation.qpos_adr[:, self.steer_cols]
         self.steer_pos = self.actuation.pos[self.steer_cols]
+        steer = robot.driven_infos[0::2]  # the steering joints' ranges (±inf: unlimited)
+        self.steer_lo = np.array([i.joint_range[0] for i in steer])
+        self.steer_hi = np.array([i.joint_range[1] for i in steer])
         self._out = np.zeros((self.n, 2 * len(self.alpha)))
 
     def _planar_limit(self, joint_limit: float) -> float:
@@ -307,6 +312,12 @@ class Swerve(Omni):
         err = np.angle(np.exp(1j * (want - now)))
         back = np.abs(err) > np.pi / 2  # the opposite direction is nearer: drive backwards
         err = np.where(back, err - np.pi * np.sign(err), err)
+        other = err - np.pi * np.sign(err)  # the same line, the wheel driven the other way
+        near, far = q + self.sense * err, q + self.sense * other
+        lo, hi = self.steer_lo, self.steer_hi
+        turn_back = ((near < lo) | (near > hi)) & (lo <= far) & (far <= hi)  # past its range
+        err = np.where(turn_back, other, err)
+        back = back ^ turn_back
         speed = np.hypot(contact[..., 0], contact[..., 1]) * np.where(back, -1.0, 1.0)
         moving = np.abs(speed) > 1e-6
         err = np.where(moving, err, 0.0)  # at rest a module keeps its angle
