@@ -303,13 +303,12 @@ def preflight(
             refuse=False,
         )
     # the command range against the mission and the faults
-    speed = s.mission.centroid.speed
-    if speed > command_limit:
+    if (speed := s.mission.centroid.speed) > command_limit:
         finding(
             "mission.centroid.speed",
             f"{speed:g} m/s is beyond the {name} robots' command range of "
             f"±{command_limit:.3g} m/s per axis: the team cannot follow the path"
-            + _flyable(input_limit, command_limit),
+            f"{_flyable(input_limit, command_limit)}",
             refuse=True,
         )
     elif speed > input_limit:
