@@ -540,5 +540,5 @@ def _flyable(input_limit: float, command_limit: float) -> str:
     speed = math.floor(top * 10**digits) / 10**digits
     return (
         f"; a speed of {speed:g} m/s or less leaves its drives room to steer "
-        f"(--set mission.centroid.speed={speed:g})"
+        f"(mission.centroid.speed = {speed:g})"
     )

@@ -337,7 +337,7 @@ def test_a_path_faster_than_the_applied_range_is_flown_slower_and_said_so():
     with pytest.raises(ScenarioError, match="beyond the diffdrive robots' command range") as no:
         loop.simulate(beyond)
     # the refusal names the fix, and the speed it suggests runs as given (not governed)
-    fix = str(no.value).split("--set mission.centroid.speed=")[1].rstrip(")")
+    fix = str(no.value).split("(mission.centroid.speed = ")[1].rstrip(")")
     assert float(fix) <= 0.95 * 0.42417
     kept = scenario.load_scenario(
         "paper_case",
