@@ -394,6 +394,25 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
     return out
 
 
+def _narrow_range(name: str, limit: float, phi_bar: float, nominal: bool) -> str | None:
+    """The warning for a drive whose whole command range the compensation's headroom (Φ̄ and
+    the anti-windup's band, :func:`input_limit`) takes: nothing keeps a healthy robot's
+    compensated command ū out of the band by design."""
+    if nominal or not (np.isfinite(limit) and np.isfinite(phi_bar)):
+        return None
+    headroom = phi_bar + ANTI_WINDUP_BAND
+    if headroom < limit:
+        return None
+    return (
+        f"the {name} robots' command range of ±{limit:.3g} m/s per axis is no wider than the "
+        f"compensation's headroom ({headroom:.3g} m/s: a healthy robot's bound Φ̄ = "
+        f"{phi_bar:.3g} m/s and the anti-windup's {ANTI_WINDUP_BAND * 100:g} cm/s band): "
+        "nothing keeps a healthy robot's compensated command ū out of the band by design; "
+        "the run checks the threshold rules' premise 'saturation', and flags raised while "
+        "it is broken carry no guarantee"
+    )
+
+
 def governed_text(s: Scenario, name: str, applied: float, flown: float) -> str:
     """The warning of a path flown slower than asked (:func:`~.mission.governed_speed`)."""
     return (
@@ -438,6 +457,8 @@ def preflight(
     )
     if refusal:
         found.refusals.append(refusal)
+    narrow = _narrow_range(model.name, limit, config.phi_bar, s.fdir.input == "nominal")
+    found.warnings += [narrow] if narrow else []
     found.refusals += premises.rule_refusals(
         rule, s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
     )

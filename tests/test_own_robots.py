@@ -174,6 +174,29 @@ def test_a_swerve_whose_steering_is_limited_to_90_degrees_turns_within_its_range
     assert cal.smooth_p99 < 0.1, cal.smooth_p99
 
 
+def test_a_drive_narrower_than_the_compensations_headroom_is_said_before_the_run(tmp_path):
+    """A drive whose command range (here the built-in disk's servos limited to ±0.04 m/s, as
+    slow as MuJoCo Menagerie's Stretch 3) is no wider than the compensation's headroom has
+    no command a healthy robot is sure to keep out of the anti-windup's band: the run says
+    so before it starts, naming the premise it checks instead. The disk as built says
+    nothing of the kind."""
+    base = Path(__file__).parents[1] / "models" / "robots"
+    xml = (base / "disk.xml").read_text()
+    slow = xml.replace('ctrlrange="-1 1"', 'ctrlrange="-0.04 0.04"')
+    assert slow != xml
+    (tmp_path / "disk.xml").write_text(slow)
+    (tmp_path / "slowdisk.robot.toml").write_text((base / "disk.robot.toml").read_text())
+
+    def said(robot: str) -> list[str]:
+        s = load_scenario("paper_case", {"team.robot_model": robot, "mission.centroid.speed": 0.01})
+        with Simulation(s) as sim:
+            return [e["message"] for e in sim.events.items if e["kind"] == "warning"]
+
+    (narrow,) = [m for m in said(str(tmp_path / "slowdisk.robot.toml")) if "headroom" in m]
+    assert "±0.04 m/s" in narrow and "premise 'saturation'" in narrow
+    assert not [m for m in said("disk") if "no wider than the compensation's headroom" in m]
+
+
 def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):
     """[calibration] timestep (a drive that runs away at longer steps) makes the scene step at
     most that long, a whole number of steps a control period, and the run says so."""
