@@ -109,6 +109,7 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
         print(f"WARNING: {line}" if warn else line)
         if cal.lag > 0:  # the missions below run the drive model the robot will run
             overrides.setdefault("fdir.drive_lag", cal.lag)
+        _say("the compensation loop, closed on the robot at each gain tried")
         loop_results = compensation(
             args.model, args.scenario, overrides=overrides, lag=cal.lag, measured=measured
         )
@@ -118,6 +119,7 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
             overrides["gains.G"] = loop_results[-1].G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
         cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
+        _say("jumping commands, at each acceleration tried")
         jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag, measured=measured)
         line, warn = acceleration_report(jumps)
         print(f"WARNING: {line}" if warn else line)
@@ -135,6 +137,7 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
         if path is not None:  # the drift runs then see the robot's new mismatch
             write(path, values_of(path, cal), keep=args.keep, complete=False, say=say)
             written.append(path)
+        _say(f"the drift: {args.runs} fault-free runs of {args.scenario} with the robot")
         try:
             d = drift(args.model, args.scenario, overrides, args.runs)
         except ScenarioError as exc:  # e.g. a robot too big for the scenario as it is
@@ -191,6 +194,13 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
     tried = []
     for step in (first, *(s for s in STEPS if s < first)):
         measured = {"timestep": step} if step < TIMESTEP else {}
+        if tried:
+            _say(
+                f"it left the plane at {tried[-1][0] * 1000:g} ms: measuring at {step * 1000:g} ms"
+            )
+        else:
+            name, ms = robot.name, step * 1000
+            _say(f"measuring how {name} follows its commands (one robot, a {ms:g} ms step)")
         try:
             cal = _measured_at(model, measured)
         except OffPlane as exc:
@@ -242,6 +252,8 @@ def _calmer(
         if best.smooth_max <= PAPER_XI_BAR:
             break  # calm enough: ξ̄ is the paper's whatever a shorter step gives
         again = {**measured, "timestep": shorter}
+        share = best.smooth_max / best.command_limit
+        _say(f"its mismatch takes {share:.0%} of its range: measuring at {shorter * 1000:g} ms")
         try:
             there = _measured_at(model, again)
         except OffPlane:
@@ -259,3 +271,8 @@ def _calmer(
             "with this robot steps at it)"
         )
     return best, kept
+
+
+def _say(what: str) -> None:
+    """A line of progress before a measurement that takes a while (printed at once)."""
+    print(f"{what} ...", flush=True)
