@@ -368,8 +368,9 @@ def rewire_mode(s: Scenario) -> str:
 
 def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -> list[str]:
     """What the robot's calibration says of the scenario's noise and gains, one line each:
-    a robot never calibrated, a ξ̄ below its measured mismatch, a G below its calibrated
-    compensation gain (its compensation loop rings)."""
+    a robot never calibrated, a ξ̄ below its measured mismatch, a robot that moves at a
+    steady share of its commands, a G below its calibrated compensation gain (its
+    compensation loop rings)."""
     out = []
     if s.noise.xi_bar is None and "xi_bar" not in model.calibration:
         out.append(
@@ -382,6 +383,15 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
             f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
             f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
             f"{model.name}; recommended {model.xi_bar:g}): thresholds may raise false alarms"
+        )
+    share = model.calibration.get("tracking")
+    if share is not None and not robots.TRACKING[0] <= share <= robots.TRACKING[1]:
+        out.append(
+            f"the {model.name} robots move at {share:.0%} of their commands "
+            "(calibration.tracking): their drive model does not match their wheels, ξ̄ is "
+            "spent on that shortfall and a fault of the mission's size may go unseen; check "
+            "the wheels' radius and axle, friction loss or damping on passive joints (rollers, "
+            "casters) and the servos' gains"
         )
     need_g = model.calibration.get("compensation_G")
     g = float(np.linalg.eigvalsh(effective_G(s, model)).min())

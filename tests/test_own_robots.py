@@ -146,6 +146,13 @@ def test_calibrate_says_when_a_robot_moves_at_a_steady_share_of_its_commands(tmp
     assert 0.4 < wrong.tracking < 0.6, wrong.tracking
     (note,) = [n for n in wrong.notes if "of its command, steadily" in n]
     assert "check the wheels' radius" in note and note in report(wrong)
+    # stored, and every run with the robot says it before it starts
+    assert "tracking" not in right.table() and wrong.table()["tracking"] == round(wrong.tracking, 3)
+    path.write_text(path.read_text() + f"\n[calibration]\ntracking = {wrong.table()['tracking']}\n")
+    s = load_scenario("paper_case", {"team.robot_model": str(path), "mission.scale": 1.4})
+    with Simulation(s) as sim:
+        said = [e["message"] for e in sim.events.items if e["kind"] == "warning"]
+    assert any("of their commands (calibration.tracking)" in m for m in said), said
 
 
 def test_a_swerve_whose_steering_is_limited_to_90_degrees_turns_within_its_range(tmp_path):

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..sim.robots import TRACKING
 from .physics import OffPlane, Trouble, Watch
 
 if TYPE_CHECKING:
@@ -25,7 +26,6 @@ JUMP_HOLD = 4.0  # s each command jump is held
 SETTLED_FOR = 0.2  # s the mismatch must stay low for a response to count as settled
 LAG_MIN = 0.05  # s: a faster drive is taken to move at its command (ẋ = u, the paper)
 LAG_CANDIDATES = np.geomspace(0.005, 20.0, 121)  # s, the time constants tried
-TRACKING = (0.8, 1.25)  # the shares of its commands a robot may move at unwarned (tracking)
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,11 @@ class Calibration:
             **({"accel": self.accel} if math.isfinite(self.accel) else {}),
             **({"timestep": self.timestep} if self.timestep else {}),
             **({"track": round(self.track, 4)} if self.track else {}),
+            **(
+                {"tracking": round(self.tracking, 3)}
+                if not TRACKING[0] <= self.tracking <= TRACKING[1]
+                else {}
+            ),
             **(
                 {
                     "drift_bound": round(self.drift.drift_bound, 6),

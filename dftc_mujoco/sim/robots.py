@@ -65,7 +65,11 @@ CALIBRATION_KEYS = (
     "accel",  # a_max the robot holds its nominal input's change to (onboard/applied.py) [m/s²]
     "timestep",  # the largest physics step at which its drive does not run away [s]
     "track",  # a skid steer's effective axle width: its wheels slip when it turns [m]
+    "tracking",  # the share of its commands it moves at, stored outside TRACKING
 )
+#: the shares of its commands a robot may move at before calibrate and the run warn: a drive
+#: model that matches the wheels gives 0.98-1.0 on every built-in robot
+TRACKING = (0.8, 1.25)
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
