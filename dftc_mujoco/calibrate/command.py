@@ -20,7 +20,7 @@ from .mismatch import (
     report,
     robot_with,
 )
-from .physics import CHATTER_SHARE, CHATTER_STEPS_DOWN_TO, STEPS, OffPlane, limits
+from .physics import CHATTER_SHARE, CHATTER_STEPS_DOWN_TO, STEPS, OffPlane, Trouble, limits
 from .track import skid_track
 
 
@@ -191,7 +191,7 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
     plane."""
     robot = robot_with(model)
     first = min(TIMESTEP, robot.timestep)
-    tried = []
+    tried: list[tuple[float, Trouble]] = []  # (step, what went wrong there)
     for step in (first, *(s for s in STEPS if s < first)):
         measured = {"timestep": step} if step < TIMESTEP else {}
         if tried:
