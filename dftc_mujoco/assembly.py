@@ -142,8 +142,13 @@ def input_limit(command_limit: float, phi_bar: float, nominal: bool) -> float:
     """
     if nominal or not np.isfinite(command_limit):
         return np.inf
-    headroom = phi_bar + ANTI_WINDUP_BAND if np.isfinite(phi_bar) else 0.0
-    return max(command_limit - headroom, 0.5 * command_limit)
+    return max(command_limit - compensation_headroom(phi_bar), 0.5 * command_limit)
+
+
+def compensation_headroom(phi_bar: float) -> float:
+    """[m/s] What the compensation keeps free below a drive's per-axis range: a healthy
+    robot's bound Φ̄ and the anti-windup's band (0 where Φ̄ is unknown)."""
+    return phi_bar + ANTI_WINDUP_BAND if np.isfinite(phi_bar) else 0.0
 
 
 def team_config(
@@ -410,7 +415,7 @@ def _narrow_range(name: str, limit: float, phi_bar: float, nominal: bool) -> str
     compensated command ū out of the band by design."""
     if nominal or not (np.isfinite(limit) and np.isfinite(phi_bar)):
         return None
-    headroom = phi_bar + ANTI_WINDUP_BAND
+    headroom = compensation_headroom(phi_bar)
     if headroom < limit:
         return None
     return (

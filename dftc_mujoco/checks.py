@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import ScenarioError
-from .mission import ARENA_HALF, GOVERNED_SHARE, formation_offsets
+from .mission import ARENA_HALF, fastest_path, formation_offsets
 from .scenario import Scenario
 
 CLEARANCE = 0.02  # least gap kept between a robot's hull and a cylinder or robot [m]
@@ -532,8 +532,8 @@ def _radius(points: np.ndarray) -> float:
 
 def _flyable(input_limit: float, command_limit: float) -> str:
     """The fix for a path too fast for the drives: the fastest speed a team flies as given
-    (:func:`.mission.governed_speed`), rounded down to three significant figures."""
-    top = GOVERNED_SHARE * min(input_limit, command_limit)
+    (:func:`.mission.fastest_path`), rounded down to three significant figures."""
+    top = fastest_path(input_limit, command_limit)
     if not 0 < top < math.inf:
         return ""
     digits = 2 - math.floor(math.log10(top))

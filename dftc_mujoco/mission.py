@@ -249,6 +249,12 @@ def _eval_path(segments, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 GOVERNED_SHARE = 0.95
 
 
+def fastest_path(applied: float, command: float) -> float:
+    """[m/s] The fastest path speed a team flies as given: :data:`GOVERNED_SHARE` of its
+    drives' applied range ``applied`` (per axis), within the command range ``command``."""
+    return GOVERNED_SHARE * min(applied, command)
+
+
 def governed_speed(speed: float, applied: float, command: float) -> float | None:
     """The path speed a team flies when ``speed`` [m/s], inside its drives' command range
     ``command``, leaves them no room: the robots' commands stay within their applied range
@@ -256,10 +262,10 @@ def governed_speed(speed: float, applied: float, command: float) -> float | None
     path takes at most :data:`GOVERNED_SHARE` of it. None when ``speed`` fits, when no range
     is known, or beyond the command range (a path no robot of the team can follow: the
     checks refuse it)."""
-    limit = min(applied, command)
-    if not math.isfinite(limit) or speed <= GOVERNED_SHARE * limit or speed > command:
+    top = fastest_path(applied, command)
+    if not math.isfinite(top) or speed <= top or speed > command:
         return None
-    return GOVERNED_SHARE * limit
+    return top
 
 
 def centroid_table(path: CentroidPath, duration: float, dt: float) -> PathTable:

@@ -223,10 +223,11 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
     tau, rms_lag = fit_lag(prog.u, velocity, prog.startup)
     rms = float(np.sqrt(np.mean(mismatch[prog.startup :] ** 2)))
     lag, fast_lag = lag_choice(tau, rms_lag, rms)
+    expected = lag_response(prog.u, tau) if lag > 0 else prog.u  # the drive model's
     if lag > 0:  # measure the rest against the drive model the robot will run
-        mismatch = np.hypot(*(velocity - lag_response(prog.u, tau)).T)
+        mismatch = np.hypot(*(velocity - expected).T)
     cal = _analyse(robot.name, prog, mismatch, clamped, limit)
-    share = tracking(prog, velocity, lag_response(prog.u, tau) if lag > 0 else prog.u, limit)
+    share = tracking(prog, velocity, expected, limit)
     if not TRACKING[0] <= share <= TRACKING[1]:
         cal = dataclasses.replace(cal, notes=(*cal.notes, _tracking_note(share)))
     return dataclasses.replace(
