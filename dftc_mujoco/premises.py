@@ -300,12 +300,12 @@ class Monitor:
         x0: np.ndarray,
         z0: np.ndarray,
         events: Any,
-        memory: Callable[[], np.ndarray] | None = None,
+        memory: Callable[[int], float] | None = None,
     ) -> None:
         self.n, self.h, self.events = n, dt, events
-        # each robot's residual memory [s], computed when a flag is first labelled
+        # each robot's residual memory [s], computed when a flag about it is first labelled
         self._memory_of = memory
-        self._memory: np.ndarray | None = None
+        self._memory: dict[int, float] = {}
         self.eta_bar, self.step = eta_bar, dt * xi_bar
         self.offset, self.phi_bar = drift_bound, phi_bar
         # the anti-windup may skip ∫e from ANTI_WINDUP_BAND below the range on: from there the
@@ -381,7 +381,7 @@ class Monitor:
             x0=x0,
             z0=z0,
             events=events,
-            memory=lambda: memory(cfg.graph, cfg.ko),  # the start's graph
+            memory=lambda k: memory(cfg.graph, cfg.ko, k),  # the start's graph
         )
 
     def period(
@@ -503,9 +503,9 @@ class Monitor:
     def violated(self, robot: int, t: float) -> list[str]:
         """The premises robot ``robot`` (0-based), or the team, violated within the memory of
         its residuals before ``t``, in :data:`PREMISES` order."""
-        if self._memory is None:
-            found = self._memory_of() if self._memory_of is not None else 0.0
-            self._memory = np.maximum(np.broadcast_to(found, (self.n,)), LOOKBACK)
+        if robot not in self._memory:
+            found = self._memory_of(robot) if self._memory_of is not None else 0.0
+            self._memory[robot] = max(found, LOOKBACK)
         since = t - self._memory[robot]
         return [
             p
@@ -544,14 +544,15 @@ class Monitor:
         return out
 
 
-def memory(graph: Any, ko: float) -> np.ndarray:
-    """How long each robot k's residuals remember what happened to it [s]: the time after
+def memory(graph: Any, ko: float, robot: int) -> float:
+    """How long robot ``robot``'s residuals remember what happened to it [s]: the time after
     which κ_k e^(−λ_k t) of eq. 41 (the decay of the observer's error for k) is below
     :data:`MEMORY_FRACTION`. 8 s on the paper's graph, 210 s on a 100-robot ring with
-    chord 2, 1360 s at 400: a premise violated that long before a flag may still be in it."""
-    from .onboard.thresholds import decay_bounds
+    chord 2, 1360 s at 400: a premise violated that long before a flag may still be in it.
+    Only the robots flagged need it, so it is computed for one robot at a time."""
+    from .onboard.thresholds import decay_bound_of
 
-    kappa, lam = decay_bounds(graph, ko)
-    with np.errstate(divide="ignore"):
-        out = np.log(np.maximum(kappa, 1.0) / MEMORY_FRACTION) / np.asarray(lam, float)
-    return np.where(np.isfinite(out), out, np.inf)
+    kappa, lam = decay_bound_of(graph, ko, robot)
+    if not lam > 0.0:
+        return math.inf
+    return math.log(max(kappa, 1.0) / MEMORY_FRACTION) / lam

@@ -869,3 +869,21 @@ def test_auto_keeps_eq_40_for_the_paper_s_team_and_beyond_the_dense_rules_size()
     assert rule(PAPER_TEAM) == "paper"
     assert rule(PAPER_TEAM + 1) != "paper" and rule(DENSE_RULES_UP_TO) == rule(PAPER_TEAM + 1)
     assert rule(DENSE_RULES_UP_TO + 1) == rule(1000) == "paper"
+
+
+def test_one_robots_decay_is_its_entry_of_every_robots_and_costs_one_column():
+    """The premises' memory of a flagged robot needs its own κ, λ (eq. 41) only: on a
+    large graph that is not rotation invariant they come from that robot's column alone
+    (the whole team's are not computed), and equal its entry of the whole team's."""
+    from dftc_mujoco.onboard.thresholds import decay
+    from dftc_mujoco.premises import MEMORY_FRACTION, memory
+
+    graph = random_strongly_connected(40, 3, np.random.default_rng(7))
+    decay._cached_decay_bounds.cache_clear()
+    one = [decay.decay_bound_of(graph, 3.0, k) for k in (0, 17, 39)]
+    assert decay._cached_decay_bounds.cache_info().currsize == 0  # no whole-team sweep
+    kappa, lam = decay.decay_bounds(graph, 3.0)
+    assert one == [(kappa[k], lam[k]) for k in (0, 17, 39)]
+    assert memory(graph, 3.0, 17) == pytest.approx(
+        np.log(max(kappa[17], 1.0) / MEMORY_FRACTION) / lam[17]
+    )

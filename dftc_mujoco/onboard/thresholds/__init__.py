@@ -23,7 +23,7 @@ The registry of rule names is ``dftc_mujoco.blocks.BUILTIN``. The decision of eq
 
 from .block_row import BLOCK_ROW_MAX, BlockRow, row_envelope
 from .compensation import compensation_offset, estimator_gain
-from .decay import decay_bound, decay_bounds, observer_matrix, prefetch_decay_bounds
+from .decay import decay_bound, decay_bound_of, decay_bounds, observer_matrix, prefetch_decay_bounds
 from .delays import predicted_delays
 from .drive import Drive
 from .envelope import Envelope, Start, check_nonnegative, column_envelope, grounded_solve
@@ -42,6 +42,7 @@ __all__ = [
     "column_envelope",
     "compensation_offset",
     "decay_bound",
+    "decay_bound_of",
     "decay_bounds",
     "estimator_gain",
     "grounded_solve",

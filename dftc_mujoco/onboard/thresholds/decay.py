@@ -87,6 +87,31 @@ def decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> tuple[np.ndarra
     return kappa.copy(), lam.copy()
 
 
+def decay_bound_of(graph: Graph, ko: float, k: int, n_lambda: int = 49) -> tuple[float, float]:
+    """κ_k, λ_k (eq. 41) of one monitored robot ``k``: :func:`decay_bounds`'s entry where
+    all of them are cheap (a small graph, a rotation-invariant one) or already begun;
+    otherwise the certified sweep of that robot's column alone, so that a large team does
+    not pay for every robot when one is asked for."""
+    key = _key(graph, ko, n_lambda)
+    if key in _PENDING or _cheap(graph):
+        kappa, lam = decay_bounds(graph, ko, n_lambda)
+        return float(kappa[k]), float(lam[k])
+    return _cached_decay_bound_of(*key, k)
+
+
+def _cheap(graph: Graph) -> bool:
+    """Whether every robot's κ, λ together cost about as much as one robot's."""
+    return rotation_invariant(graph) or graph.n * graph.n**3 <= EXACT_WORK
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_decay_bound_of(
+    n: int, edges: tuple[tuple[int, int], ...], ko: float, n_lambda: int, k: int
+) -> tuple[float, float]:
+    kappa, lam = _decay_bounds_fast(Graph(n, edges), ko, n_lambda, only=np.array([k]))
+    return float(kappa[0]), float(lam[0])
+
+
 def prefetch_decay_bounds(graph: Graph, ko: float, n_lambda: int = 49) -> None:
     """Begin :func:`decay_bounds` of ``graph`` on a helper thread, for a set-up that has
     other work to do before it needs them (the simulation builds its scene meanwhile).
