@@ -421,3 +421,17 @@ def test_vary_draws_the_top_level_obstacles_and_duration(tmp_path):
     msg = _error(_spec, tmp_path, "obstacles = [[{ position = [1, 0], radius = 0.3 }]]\n")
     assert msg.endswith("c.toml (run 0): obstacles[1].safe_distance: missing key")
     assert "vary.obstacle: unknown key" in _error(_spec, tmp_path, "obstacle = [[]]\n")
+
+
+def test_a_document_built_with_numpy_values_and_tuples_reads_as_the_plain_one():
+    """A scenario built in Python may hold numpy integers, floats, arrays and tuples (an
+    edge list from ``np.argwhere``, positions from an array): it reads as the same
+    document written with plain numbers and lists."""
+    plain = scenario_dict()
+    d = scenario_dict()
+    d["team"]["graph"] = [tuple(np.int64(v) for v in e) for e in plain["team"]["graph"]]
+    d["team"]["initial_positions"] = np.array(plain["team"]["initial_positions"])
+    d["duration"] = np.float64(plain["duration"])
+    d["seed"] = np.int32(plain.get("seed", 0))
+    plain["seed"] = plain.get("seed", 0)
+    assert make(d).to_dict() == make(plain).to_dict()

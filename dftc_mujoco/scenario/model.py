@@ -543,6 +543,7 @@ def from_dict(data: dict[str, Any], source: str = "<memory>") -> Scenario:
 def _parse(data: Any, source: str, overridden: tuple[str, ...] = ()) -> Scenario:
     problem, k = None, 1.0
     if isinstance(data, dict):  # mission.scale: the document's lengths and times, scaled
+        data = _plain(data)  # a document built in Python may hold numpy values and tuples
         k, problem = scale_problem(data)
         data = scaled(data, k)
     doc = Doc(source, data, overridden)
