@@ -27,8 +27,8 @@ import time
 
 from bench_scale import scene
 
-from dftc_mujoco.execution import Execution
-from dftc_mujoco.loop import Simulation
+from dftc_mujoco.closed_loop.execution import Execution
+from dftc_mujoco.closed_loop.loop import Simulation
 
 HOG = "while True: pass"
 

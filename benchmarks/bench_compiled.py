@@ -4,7 +4,7 @@
 
 Times one control period of the team (``Team.step``, thresholds included) on
 the compiled path (the paper's blocks' compiled functions composed in one
-call, ``onboard/period.py``) and on the general path (the same blocks called
+call, ``onboard/execution/period.py``) and on the general path (the same blocks called
 one by one through their Python methods, as with a user's block), on the same
 state after 10 s of paper_case. Both compute the same numbers bit for bit.
 """
@@ -17,7 +17,7 @@ import statistics
 import time
 
 from dftc_mujoco import Simulation, load_scenario
-from dftc_mujoco.onboard import team as team_mod
+from dftc_mujoco.onboard.execution import team as team_mod
 
 
 def period_us(team: team_mod.Team, x, c, cd, reps: int) -> float:

@@ -52,7 +52,7 @@ def timings(n: int) -> dict[str, float]:
     from dm_control import mjcf
     from dm_control import mujoco as dm_mujoco
 
-    from dftc_mujoco.paths import MODELS
+    from dftc_mujoco.runtime.paths import MODELS
     from dftc_mujoco.sim import mjcf as scene_mjcf
     from dftc_mujoco.sim import robots, scene
 

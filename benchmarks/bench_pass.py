@@ -2,7 +2,7 @@
 
     python benchmarks/bench_pass.py [--n 1000] [--repeat 7] [--periods 300]
 
-The pass (``onboard/period.py``, ``team_rows``) is the part of a period that grows as N²:
+The pass (``onboard/execution/period.py``, ``team_rows``) is the part of a period that grows as N²:
 every robot estimates the whole team (the paper's design), so each period reads and writes
 N × N × 2 numbers of ŷ and of ∫ⁱû_g and writes N × N × 2 of the next ŷ. At N = 1000 it is
 what keeps the loop above twice the physics floor (docs/performance.md). On the
@@ -39,10 +39,10 @@ import time
 import numpy as np
 from bench_scale import scene
 
-from dftc_mujoco.execution import SHARED_FROM, Execution
-from dftc_mujoco.loop import Simulation
+from dftc_mujoco.closed_loop.execution import SHARED_FROM, Execution
+from dftc_mujoco.closed_loop.loop import Simulation
 from dftc_mujoco.onboard.decision import bound_squares
-from dftc_mujoco.onboard.period import PeriodInputs, team_rows
+from dftc_mujoco.onboard.execution.period import PeriodInputs, team_rows
 
 #: [s] the state the pass is timed on: after the transient's start, before the fault
 AFTER = 3.0

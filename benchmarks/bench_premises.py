@@ -13,7 +13,8 @@ import argparse
 import statistics
 import time
 
-from dftc_mujoco import Simulation, load_scenario, premises
+from dftc_mujoco import Simulation, load_scenario
+from dftc_mujoco.closed_loop import premises
 
 
 def scenario(n: int, duration: float):

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from dftc_mujoco import scenario
-from dftc_mujoco.loop import simulate
+from dftc_mujoco.closed_loop.loop import simulate
 from dftc_mujoco.render.options import VideoOptions
 from dftc_mujoco.render.video import write_video
 

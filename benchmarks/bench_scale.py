@@ -79,7 +79,7 @@ def run_peak(n: int, duration: float, log_rate: float) -> dict:
     """One run as ``python -m dftc_mujoco.run`` makes it (set-up, the whole run, the records
     and their derived fields), alone in this fresh process: its peak resident memory and
     wall time (imports excluded)."""
-    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.closed_loop.loop import Simulation
 
     s = scene(n, duration, log_rate)
     t0 = time.perf_counter()
@@ -96,7 +96,7 @@ def one(
 ) -> dict:
     from replay import measure
 
-    from dftc_mujoco.graph import ring_with_chords
+    from dftc_mujoco.core.graph import ring_with_chords
     from dftc_mujoco.onboard.thresholds import decay
 
     s = scene(n, duration, log_rate, network)

@@ -22,9 +22,9 @@ except ImportError as exc:
     sys.exit(f"bench_schema.py compares with pydantic and msgspec: pip install them ({exc})")
 
 from dftc_mujoco.errors import ScenarioError
+from dftc_mujoco.runtime.tomlcheck import Doc, Table
 from dftc_mujoco.scenario.network import read_network
 from dftc_mujoco.scenario.parts import Physics
-from dftc_mujoco.tomlcheck import Doc, Table
 
 GOOD = {
     "latency": {"mean": 0.05, "max": 0.1},

@@ -36,8 +36,8 @@ FAMILIES = ("ring_chords", "random", "knn")
 
 def graph_of(family: str, n: int):
     """The family's graph on n robots, as the scenarios generate it."""
-    from dftc_mujoco.graph import k_nearest, random_strongly_connected, ring_with_chords
-    from dftc_mujoco.mission import grid_offsets
+    from dftc_mujoco.core.graph import k_nearest, random_strongly_connected, ring_with_chords
+    from dftc_mujoco.core.mission import grid_offsets
 
     if family == "ring_chords":
         return ring_with_chords(n, tuple(c for c in (2, 5) if c < n))

@@ -3,7 +3,7 @@
 Shared by ``bench_step.py`` and ``bench_scale.py``. For one scenario, in this
 process:
 
-1. a warm-up :class:`~dftc_mujoco.loop.Simulation` of a few periods compiles
+1. a warm-up :class:`~dftc_mujoco.closed_loop.loop.Simulation` of a few periods compiles
    (or loads from numba's cache) every compiled function, so that cost is not
    counted as loop time;
 2. one recording run stores the actuator commands of every control period and the
@@ -28,7 +28,7 @@ import time
 import mujoco
 import numpy as np
 
-from dftc_mujoco.loop import Simulation
+from dftc_mujoco.closed_loop.loop import Simulation
 from dftc_mujoco.scenario import Scenario
 from dftc_mujoco.sim.plant import Plant
 

@@ -41,7 +41,7 @@ def delays(folder: Path) -> dict[tuple[str, int], list[float]]:
 def detectable(rule: str, n: int) -> tuple[float, float]:
     """(most sensitive teammate, every teammate) smallest detectable constant fault [m/s]."""
     from dftc_mujoco.blocks import create
-    from dftc_mujoco.loop import team_config
+    from dftc_mujoco.closed_loop.loop import team_config
     from dftc_mujoco.scenario import load_scenario
     from dftc_mujoco.sim import robots
 

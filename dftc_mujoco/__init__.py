@@ -26,7 +26,7 @@ __version__ = "0.2.0"
 
 # numba's cache forgets that a compiled caller holds its callees' old code: empty it when
 # any source changed (a stale cache crashed runs after an update in place)
-from . import numba_cache as _numba_cache
+from .runtime import numba_cache as _numba_cache
 
 _numba_cache.refresh(_numba_cache.Path(__file__).parent)
 _cache_note = _numba_cache.unwritable_note(_numba_cache.Path(__file__).parent)
@@ -38,12 +38,12 @@ if _cache_note is not None:  # said once, at import
 _API = {
     "load_scenario": "scenario",
     "Scenario": "scenario",
-    "Simulation": "loop",
-    "Snapshot": "loop",
-    "simulate": "loop",
-    "RunResult": "results",
-    "open_run": "results",
-    "check_locality": "onboard.locality",
+    "Simulation": "closed_loop.loop",
+    "Snapshot": "closed_loop.loop",
+    "simulate": "closed_loop.loop",
+    "RunResult": "reporting.results",
+    "open_run": "reporting.results",
+    "check_locality": "onboard.execution.locality",
 }
 
 __all__ = [*_API, "__version__"]

@@ -2,7 +2,7 @@
 
 Reads ``log.npz`` and ``summary.json`` (and, for ``--video``, the
 ``scenario.toml`` copy the run left) without re-simulating; ``--web`` replays the run in
-a web browser instead (``web.py``), until Ctrl-C (exit 0). Everything is drawn
+a web browser instead (``watch/web.py``), until Ctrl-C (exit 0). Everything is drawn
 into a private folder beside the run and moved into the run folder only when
 complete (the figures as one folder, the video, each still), so a failure or an
 interruption leaves the previous figures and video as they were. Exit codes: 0
@@ -18,7 +18,6 @@ import shutil
 import sys
 from pathlib import Path
 
-from . import cli, interrupt, output
 from .errors import (
     EXIT_INPUT,
     EXIT_OK,
@@ -30,6 +29,7 @@ from .errors import (
 )
 from .render import gl
 from .run import add_port_option, add_video_options, setup_video
+from .runtime import cli, interrupt, output
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -87,12 +87,12 @@ Documentation: the project's docs/ folder (the command line, what a run folder h
 
 def _web(args, signals: interrupt.Signals) -> int:
     """Serve the run's replay until Ctrl-C (exit 0: that is how it ends)."""
-    from .web import check, serve_replay
+    from .watch.web import check, serve_replay
 
     try:
         with signals.active():
             check(args.port)
-            from .results import open_run
+            from .reporting.results import open_run
 
             run = open_run(args.run_dir)
         serve_replay(run, args.port, stop=lambda: signals.signum is not None)
@@ -108,7 +108,7 @@ def _plot(args, signals: interrupt.Signals) -> int:
     try:
         with signals.active():
             options = setup_video(args, wants_gl)
-            from .results import open_run
+            from .reporting.results import open_run
 
             run = open_run(args.run_dir)  # log.npz, summary.json and the scenario that ran
         log, summary = run.log, run.summary

@@ -22,9 +22,10 @@ import pickle
 import sys
 import time
 
-from . import numba_cache, warm
-from .execution import Execution
-from .loop import Simulation
+from .closed_loop import warm
+from .closed_loop.execution import Execution
+from .closed_loop.loop import Simulation
+from .runtime import numba_cache
 from .scenario import Scenario
 
 

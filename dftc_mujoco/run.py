@@ -4,7 +4,7 @@ Writes ``summary.json``, ``log.npz``, the scenario that ran (``scenario.toml``,
 overrides applied), the paper's figures and (unless ``--no-video``)
 ``video.mp4`` to ``renders/<name>/`` (or ``--out``), and prints a short table
 of the run. ``--viewer`` also shows the run live in MuJoCo's viewer, ``--web`` in a web
-browser (``web.py``). Exit
+browser (``watch/web.py``). Exit
 codes: 0 success, 2 bad input (scenario file or command line), 3 the physics
 failed (the records written so far are kept and ``summary.json`` says what
 went wrong), 4 no OpenGL backend for the video, 5 an output, disk or OS problem (the
@@ -30,7 +30,6 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from . import cli, interrupt
 from .errors import (
     EXIT_BUG,
     EXIT_OK,
@@ -40,8 +39,11 @@ from .errors import (
     ServeError,
     exit_interrupted,
 )
-from .interrupt import Interrupted, Signals
-from .output import (
+from .render import gl
+from .reporting.report import report
+from .runtime import cli, interrupt
+from .runtime.interrupt import Interrupted, Signals
+from .runtime.output import (
     OutputError,
     destination,
     free_space_check,
@@ -49,11 +51,9 @@ from .output import (
     publish,
     run_folder,
 )
-from .render import gl
-from .report import report
 
 if TYPE_CHECKING:
-    from .results import RunResult
+    from .reporting.results import RunResult
 
 
 EXAMPLES = """\
@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
 def catalogue() -> str:
     """What ``--list`` prints: the built-in scenarios, robot models and threshold rules."""
     from .blocks import BUILTIN
-    from .paths import SCENARIOS
+    from .runtime.paths import SCENARIOS
     from .sim.robots import available, get
 
     lines = ["built-in scenarios (python -m dftc_mujoco.run NAME):"]
@@ -300,7 +300,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
     try:
         with signals.active():
             if args.web:  # before anything is built: the viewer is there and the port free
-                from .web import check
+                from .watch.web import check
 
                 check(args.port)
             options = setup_video(args, not args.no_video)
@@ -310,7 +310,7 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
     try:
         with signals.active():
             from . import scenario as scenario_mod
-            from .loop import Simulation
+            from .closed_loop.loop import Simulation
             from .sim import robots
 
             overrides = parse_overrides(args.overrides)
@@ -347,11 +347,11 @@ def _main(args: argparse.Namespace, signals: Signals) -> int:
                 for e in long:  # said now, not after the hours it announces
                     print(f"note: {e['message']}", file=sys.stderr)
                 if args.web:
-                    from .web import serve_live
+                    from .watch.web import serve_live
 
                     serve_live(sim, args.port)
                 elif args.viewer:
-                    from .viewer import ViewerUnavailable, watch
+                    from .watch.viewer import ViewerUnavailable, watch
 
                     try:
                         watch(sim)

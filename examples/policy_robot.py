@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from dftc_mujoco import load_scenario
+from dftc_mujoco.core.events import Kind
 from dftc_mujoco.envs import make_gym
-from dftc_mujoco.events import Kind
 
 
 def policy(t: float, info: dict) -> np.ndarray:

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 # the suite runs the compiled period wherever the blocks allow it, as it always did; the
-# "auto" choice of a cold cache (dftc_mujoco.execution) is tested on its own, in processes
-# with a cache of their own (tests/test_numba_cache.py)
+# "auto" choice of a cold cache (dftc_mujoco.closed_loop.execution) is tested on its own,
+# in processes with a cache of their own (tests/test_numba_cache.py)
 os.environ.setdefault("DFTC_PERIOD", "compiled")
 
 from dftc_mujoco import scenario
-from dftc_mujoco.loop import RunResult, simulate
-from dftc_mujoco.paths import SCENARIOS
+from dftc_mujoco.closed_loop.loop import RunResult, simulate
 from dftc_mujoco.render import gl
+from dftc_mujoco.runtime.paths import SCENARIOS
 
 try:
     gl.probe()

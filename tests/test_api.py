@@ -80,7 +80,7 @@ def test_the_set_up_takes_the_kappa_lambda_it_began_beside_the_scene(monkeypatch
     """The paper's rule needs κ, λ (eq. 41) at set-up: the simulation begins them on a helper
     thread before it builds the scene and its thresholds take them from there (the same
     numbers, nothing left pending); a set-up with another rule begins nothing."""
-    import dftc_mujoco.loop as loop_mod
+    import dftc_mujoco.closed_loop.loop as loop_mod
     from dftc_mujoco.onboard.thresholds import decay
 
     decay._cached_decay_bounds.cache_clear()
@@ -300,7 +300,7 @@ def test_figures_are_returned_as_matplotlib_objects_and_no_backend_is_forced():
     assert all(isinstance(f, Figure) for f in figs.values())
     code = (
         "import sys; import dftc_mujoco.render.figures, dftc_mujoco.campaign.report, "
-        "dftc_mujoco.loop; print('matplotlib.pyplot' in sys.modules)"
+        "dftc_mujoco.closed_loop.loop; print('matplotlib.pyplot' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"  # importing never picks a backend for the user

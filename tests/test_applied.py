@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dftc_mujoco import assembly, load_scenario, loop, simulate
 from dftc_mujoco import calibrate as cal_mod
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.closed_loop import assembly, loop
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.onboard import team as team_mod
 from dftc_mujoco.onboard.applied import lag_arrays, lag_coefficients, lag_input
+from dftc_mujoco.onboard.execution import team as team_mod
 from dftc_mujoco.onboard.thresholds import estimator_gain
 from dftc_mujoco.sim import robots
 

@@ -121,7 +121,7 @@ def test_a_signal_that_surfaces_inside_a_ctypes_call_is_still_an_interruption(tm
     script = tmp_path / "victim.py"
     script.write_text(
         "import ctypes, os, signal, sys\n"
-        "from dftc_mujoco import interrupt\n"
+        "from dftc_mujoco.runtime import interrupt\n"
         "class Arg:\n"
         "    @property\n"
         "    def _as_parameter_(self):\n"

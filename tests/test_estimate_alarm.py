@@ -64,7 +64,7 @@ def test_the_hold_is_the_window_and_twice_the_robots_response_time():
     """The robots' calibrated response time reaches the alarm: the disk's 0.06 s, the
     diffdrive's 0.52 s (their robot files), twice, past the 0.2 s window."""
     from dftc_mujoco import load_scenario
-    from dftc_mujoco.assembly import team_config
+    from dftc_mujoco.closed_loop.assembly import team_config
     from dftc_mujoco.sim import robots
 
     s = load_scenario("paper_case")

@@ -7,7 +7,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dftc_mujoco import events, load_scenario, simulate
+from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.core import events
 
 DATA = Path(__file__).parent / "data"
 

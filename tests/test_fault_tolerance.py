@@ -7,7 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-from dftc_mujoco import loop, run, scenario
+from dftc_mujoco import run, scenario
+from dftc_mujoco.closed_loop import loop
 from tests.conftest import make, ring_team, scenario_dict
 
 SLOW_SEEDS = [pytest.param(s, marks=pytest.mark.slow) for s in (4, 5, 6, 7, 8)]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from dftc_mujoco.graph import Graph
+from dftc_mujoco.core.graph import Graph
 from dftc_mujoco.onboard import decision
 from dftc_mujoco.onboard.thresholds import decay, paper
 from tests.test_onboard import _integrate, _team
@@ -152,7 +152,7 @@ def test_rotation_invariant_graphs_compute_one_robot_and_agree_with_all(n):
     """Rings with chords look the same from every robot: κ_k, λ_k are computed for k = 0
     only, and equal the full batched computation; results are cached per graph but
     handed out as copies."""
-    from dftc_mujoco.graph import ring_with_chords
+    from dftc_mujoco.core.graph import ring_with_chords
 
     g = ring_with_chords(n, (2,))
     kappa, lam = decay.decay_bounds(g, 3.0)
@@ -168,7 +168,7 @@ def test_certified_kappa_lambda_bound_the_exponential_and_stay_close_to_the_exac
     """The fast method (row and column sums of the uniformized B_k^n, no expm, no SVD):
     ‖exp(−M_k t)‖₂ ≤ κ e^{−λt} on a fine grid, 0 < λ ≤ λ_min, and κ/λ within 1.6x of the
     exact method's (√(‖·‖₁‖·‖_∞) ≥ ‖·‖₂ is the price)."""
-    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.core.graph import random_strongly_connected
 
     rng = np.random.default_rng(seed)
     n = int(rng.integers(3, 12))
@@ -191,7 +191,7 @@ def test_decay_bounds_keep_the_exact_method_where_it_is_cheap():
     """The paper's graph (and rings up to N ~ 100) keep the exact κ, λ bit for bit; a
     random graph beyond N ~ 32 gets the certified ones, fast."""
 
-    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.core.graph import random_strongly_connected
 
     decay._cached_decay_bounds.cache_clear()
     k4, l4 = decay.decay_bounds(PAPER, 6.0)
@@ -216,7 +216,7 @@ def test_one_columns_sums_are_its_column_in_a_batch_bit_for_bit(n):
     """κ, λ of a ring (one column) run entry by entry; a batch of columns runs row by row.
     The same robot's sums and maxima are the same numbers either way, so a circulant
     graph's κ, λ do not depend on the path."""
-    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.core.graph import random_strongly_connected
     from dftc_mujoco.onboard.thresholds.kernels import Adjacency, advance_sums, column_of_row
 
     g = random_strongly_connected(n, 3, np.random.default_rng(n))
@@ -244,7 +244,7 @@ def test_the_compiled_sweep_of_kappa_lambda_does_not_depend_on_its_blocks():
     """The certified κ, λ run their chunks compiled (``sweep_sums``) into blocks of rows
     handed back to Python: a block of one chunk and one of 64 chunks stop at the same step
     with the same sums, brackets, settled robots and maxima, and the sweep holds no GIL."""
-    from dftc_mujoco.graph import random_strongly_connected
+    from dftc_mujoco.core.graph import random_strongly_connected
     from dftc_mujoco.onboard.thresholds.kernels import Adjacency, column_of_row, sweep_sums
 
     n = 40
@@ -286,7 +286,7 @@ def test_the_compiled_sweep_of_kappa_lambda_does_not_depend_on_its_blocks():
 def test_kappa_lambda_begun_on_a_helper_thread_are_the_same_numbers_taken_once():
     """``prefetch_decay_bounds`` computes κ, λ on a helper thread; ``decay_bounds`` of the
     same graph takes them from it (once) and they equal the ones computed here."""
-    from dftc_mujoco.graph import ring_with_chords
+    from dftc_mujoco.core.graph import ring_with_chords
 
     g = ring_with_chords(150, (2, 5))  # beyond the exact path: the compiled sweep
     decay._cached_decay_bounds.cache_clear()

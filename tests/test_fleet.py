@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.core.events import Kind
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.events import Kind
 from dftc_mujoco.sim import fleet
 
 DATA = Path(__file__).parent / "data" / "robots"
@@ -62,7 +62,7 @@ def test_robots_with_different_lags_each_model_their_own():
     import numpy as np
 
     from dftc_mujoco import Simulation
-    from dftc_mujoco.execution import Execution
+    from dftc_mujoco.closed_loop.execution import Execution
 
     over = {"team.robot_model": ["disk", SLOW, "disk", "disk"], "onboard.thresholds": "l1"}
     s = load_scenario("paper_case", overrides=over)
@@ -107,7 +107,7 @@ def test_a_mixed_team_of_three_drives_gives_the_paper_outcome():
 def test_a_mixed_team_s_starts_are_checked_robot_by_robot():
     """Two disks 0.3 m apart overlap nobody (0.1 m footprints), though the holonomic base
     beside them has a 0.32 m one: only a pair that really overlaps is refused."""
-    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.closed_loop.loop import Simulation
 
     starts = [[-0.9, -0.9], [0.2, 0.0], [0.5, 0.0], [0.35, 0.6]]
     over = {

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from dftc_mujoco import graph, loop, mission, scenario
+from dftc_mujoco import scenario
+from dftc_mujoco.closed_loop import loop
+from dftc_mujoco.core import graph, mission
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.scenario import Formation
 from tests.conftest import make, scenario_dict
@@ -76,7 +78,7 @@ def test_large_teams_log_their_n_by_n_fields_within_a_memory_budget():
     """The N × N fields (estimates, residuals, thresholds) are logged every k-th row when
     they would not fit in the budget; everything derived from them still works."""
     from dftc_mujoco import load_scenario, simulate
-    from dftc_mujoco.record import MATRIX_LOG_BUDGET, matrix_every, matrix_rows
+    from dftc_mujoco.core.record import MATRIX_LOG_BUDGET, matrix_every, matrix_rows
 
     # paper_case fits: every row; N = 400 for 60 s at 50 Hz would take 7.7 GB: 1 row in 29
     assert matrix_every(4, 3002, 2, 0.01, "auto") == 1

@@ -1,6 +1,6 @@
 import numpy as np
 
-from dftc_mujoco.graph import Graph
+from dftc_mujoco.core.graph import Graph
 
 PAPER = Graph(4, ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1)))
 

@@ -14,12 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dftc_mujoco import Simulation, interrupt, load_scenario, open_run, plot, run, simulate
+from dftc_mujoco import Simulation, load_scenario, open_run, plot, run, simulate
 from dftc_mujoco.blocks import paper
 from dftc_mujoco.campaign import __main__ as campaign_cli
 from dftc_mujoco.errors import EXIT_INPUT, InputError, OutputError
-from dftc_mujoco.output import run_folder
 from dftc_mujoco.render.video import write_video
+from dftc_mujoco.runtime import interrupt
+from dftc_mujoco.runtime.output import run_folder
 from dftc_mujoco.scenario import SCENARIOS
 
 GOOD = (SCENARIOS / "paper_case.toml").read_text()

@@ -1,4 +1,4 @@
-"""The team's log row (onboard/log_row.py): the compiled row writes the numbers the
+"""The team's log row (onboard/execution/log_row.py): the compiled row writes the numbers the
 placement in Python writes, before and after an exclusion, on real runs."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import Simulation, load_scenario
-from dftc_mujoco.onboard.log_row import FIELDS, placed_row, write_row
+from dftc_mujoco.onboard.execution.log_row import FIELDS, placed_row, write_row
 
 
 @pytest.mark.parametrize("periods", [1950, 5200])

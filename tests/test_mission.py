@@ -3,7 +3,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dftc_mujoco import Simulation, load_scenario, mission, simulate
+from dftc_mujoco import Simulation, load_scenario, simulate
+from dftc_mujoco.core import mission
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.scenario import CentroidPath
 
@@ -113,7 +114,7 @@ def test_a_scaled_mission_still_too_small_suggests_a_scale_that_runs():
 def test_slot_spacing_is_the_smallest_distance_between_two_slots(shape, n):
     """The k-d tree's pairs give the very number the N × N distances give (measured as
     np.hypot measures them), ties of a grid included; one robot has no pair."""
-    from dftc_mujoco.mission import Formation, formation_offsets, slot_spacing
+    from dftc_mujoco.core.mission import Formation, formation_offsets, slot_spacing
 
     f = Formation(shape=shape, side=0.7071)
     spacing = slot_spacing(f, n)

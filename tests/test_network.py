@@ -1,4 +1,4 @@
-"""The network between the robots (dftc_mujoco/network.py, onboard/radio.py): the ideal
+"""The network between the robots (dftc_mujoco/closed_loop/network.py, onboard/radio.py): the ideal
 network changes nothing, messages within the declared bounds give exactly the synchronous
 observer of docs/thresholds.md ("Over a network"), the paper's outcome over a lossy,
 delayed network, radio faults diagnosed as radio faults, and the [network] table's
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import load_scenario, simulate
+from dftc_mujoco.closed_loop.network import Channel, timing
+from dftc_mujoco.core.graph import ring_with_chords
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.graph import ring_with_chords
-from dftc_mujoco.network import Channel, timing
-from dftc_mujoco.onboard.locality import check_locality, demo_team
+from dftc_mujoco.onboard.execution.locality import check_locality, demo_team
 from dftc_mujoco.onboard.observer import Observer
 from dftc_mujoco.onboard.thresholds import L1
 from dftc_mujoco.scenario import Network

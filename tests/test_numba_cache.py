@@ -3,7 +3,7 @@ code, and a stale one crashed runs (segmentation fault) after the records change
 
 from __future__ import annotations
 
-from dftc_mujoco import numba_cache
+from dftc_mujoco.runtime import numba_cache
 
 
 def test_a_changed_source_empties_the_cache_once(tmp_path):
@@ -51,7 +51,7 @@ def test_a_cold_cache_runs_at_once_and_the_next_run_is_compiled(tmp_path):
 
     import numpy as np
 
-    from dftc_mujoco import warm
+    from dftc_mujoco.closed_loop import warm
 
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "DFTC_PERIOD": "auto"}
     first, cold, out1 = _run(tmp_path, "first", env)
@@ -83,7 +83,7 @@ def test_the_background_compilation_compiles_the_types_the_run_calls_with():
 
     from numba import typeof
 
-    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.closed_loop.loop import Simulation
     from dftc_mujoco.scenario import load_scenario
 
     s = load_scenario("paper_case", {"duration": 0.1})
@@ -104,8 +104,8 @@ def test_tracing_lists_the_compiled_functions_a_period_calls_with_their_types():
 
     from numba.core.registry import CPUDispatcher
 
-    from dftc_mujoco.execution import Execution
-    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.closed_loop.execution import Execution
+    from dftc_mujoco.closed_loop.loop import Simulation
     from dftc_mujoco.onboard import supervisor
     from dftc_mujoco.scenario import load_scenario
 
@@ -144,8 +144,9 @@ def test_the_background_process_leaves_the_general_path_compiled(tmp_path):
     assert helper.returncode == 0, helper.stderr
     assert "compiled the general path's" in helper.stdout
     run = subprocess.run(
-        [sys.executable, "-c", "from dftc_mujoco import load_scenario, Simulation, numba_cache; "
-         "from dftc_mujoco.execution import Execution; clock = numba_cache.clock(); "
+        [sys.executable, "-c", "from dftc_mujoco import load_scenario, Simulation; "
+         "from dftc_mujoco.runtime import numba_cache; "
+         "from dftc_mujoco.closed_loop.execution import Execution; clock = numba_cache.clock(); "
          f"sim = Simulation({scenario}, execution=Execution('general')); sim.step(2); "
          "print('compiled', clock.functions)"],
         env=env, capture_output=True, text=True,

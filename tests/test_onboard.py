@@ -8,10 +8,10 @@ from numba import njit
 
 from dftc_mujoco import check_locality
 from dftc_mujoco.blocks import paper
-from dftc_mujoco.graph import Graph
-from dftc_mujoco.mission import polygon_offsets
+from dftc_mujoco.core.graph import Graph
+from dftc_mujoco.core.mission import polygon_offsets
 from dftc_mujoco.onboard import observer
-from dftc_mujoco.onboard.locality import deliver, demo_team, integrate
+from dftc_mujoco.onboard.execution.locality import deliver, demo_team, integrate
 from tests.conftest import ring_with_chords
 
 PAPER_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (3, 1))
@@ -235,7 +235,7 @@ def test_the_compiled_stages_of_a_shared_period_hold_no_lock_on_python():
     take their rows of the pass: both compiled calls must let go of Python's lock, or a
     helper cannot even begin its rows until the commands end (at N = 1000 it began 0.31 ms
     after it was handed them, the commands' time, instead of 0.04 ms)."""
-    from dftc_mujoco.onboard import period
+    from dftc_mujoco.onboard.execution import period
 
     for stage in (period.commands_call, period.rows_call):
         assert stage.targetoptions.get("nogil") is True, stage.py_func.__name__
@@ -308,7 +308,7 @@ def test_a_simulation_shows_the_estimates_of_its_log_rows_and_of_each_step():
     after step(7) shows the estimates of its own period, the same numbers as stepping one
     period at a time (which writes them every period), and the log has them at every row."""
     from dftc_mujoco import load_scenario
-    from dftc_mujoco.loop import Simulation
+    from dftc_mujoco.closed_loop.loop import Simulation
 
     s = load_scenario("paper_case", {"duration": 2.0})
     with Simulation(s) as sim:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from dftc_mujoco import open_run, plot, run
-from dftc_mujoco.output import OWNER
+from dftc_mujoco.runtime.output import OWNER
 from tests.conftest import needs_gl
 
 

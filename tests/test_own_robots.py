@@ -18,7 +18,7 @@ from dftc_mujoco import calibrate, load_scenario, simulate
 from dftc_mujoco.calibrate.command import on_plane
 from dftc_mujoco.calibrate.mismatch import LAG_CANDIDATES, Calibration, lag_choice, report
 from dftc_mujoco.calibrate.physics import CHATTER_SHARE
-from dftc_mujoco.loop import Simulation
+from dftc_mujoco.closed_loop.loop import Simulation
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
 

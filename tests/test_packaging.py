@@ -119,7 +119,7 @@ def test_an_installed_wheel_runs_from_an_empty_directory(wheel, tmp_path):
         )
 
     where = subprocess.run(
-        [str(python), "-c", "import dftc_mujoco.paths as p; print(p.MODELS)"],
+        [str(python), "-c", "import dftc_mujoco.runtime.paths as p; print(p.MODELS)"],
         cwd=work,
         capture_output=True,
         text=True,

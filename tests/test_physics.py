@@ -10,8 +10,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from dftc_mujoco import loop, run, scenario
-from dftc_mujoco.record import LOG_FIELDS, STATIC_FIELDS
+from dftc_mujoco import run, scenario
+from dftc_mujoco.closed_loop import loop
+from dftc_mujoco.core.record import LOG_FIELDS, STATIC_FIELDS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import NoiseStream, Plant

@@ -1,13 +1,14 @@
-"""The physics step beside a shared pass (physics_step.py, onboard/sharing.py): a team that
-shares its pass over the N × N state between threads advances MuJoCo while helper threads
-run the pass, and the run's records are the very ones of a run in one thread."""
+"""The physics step beside a shared pass (closed_loop/physics_step.py,
+onboard/execution/sharing.py): a team that shares its pass over the N × N state between
+threads advances MuJoCo while helper threads run the pass, and the run's records are the
+very ones of a run in one thread."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from dftc_mujoco import loop
-from dftc_mujoco.execution import Execution
+from dftc_mujoco.closed_loop import loop
+from dftc_mujoco.closed_loop.execution import Execution
 from tests.conftest import make, ring_team, scenario_dict
 
 N = 6

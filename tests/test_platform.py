@@ -154,7 +154,7 @@ def test_viewer_without_a_display_says_so_in_one_line(tmp_path):
 def test_viewer_shows_the_run_under_xvfb(tmp_path):
     code = (
         "from dftc_mujoco import Simulation, load_scenario\n"
-        "from dftc_mujoco.viewer import watch\n"
+        "from dftc_mujoco.watch.viewer import watch\n"
         "with Simulation(load_scenario('paper_case', {'duration': 2.0})) as sim:\n"
         "    frames = watch(sim, speed=2.0)\n"
         "    print(frames, sim.done)\n"

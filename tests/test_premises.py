@@ -65,7 +65,7 @@ def test_a_100_robot_team_started_far_from_its_slots_flags_nobody_and_then_isola
     # seconds; unlimited, a healthy residual then exceeded its threshold (robot 81's own,
     # 1.87 x at 1.2 s, while it violated a premise: its lag against the jumps). Held to the
     # disk's calibrated 16 m/s² (fdir.drive_accel), no healthy residual crosses at all
-    from dftc_mujoco.results import matrix_rows
+    from dftc_mujoco.reporting.results import matrix_rows
 
     ratio = r.log["residual"] / r.log["threshold"]
     healthy = np.ones(ratio.shape[-1], bool)
@@ -140,8 +140,8 @@ def assert_crossings_labelled(r, faulty: dict[int, float] | None = None) -> None
     """Every instant a residual on a robot k without a fault (``faulty``: robot -> fault
     time) is above its threshold lies within LOOKBACK of a span in which robot k violated a
     premise."""
-    from dftc_mujoco.premises import LOOKBACK
-    from dftc_mujoco.results import matrix_rows
+    from dftc_mujoco.closed_loop.premises import LOOKBACK
+    from dftc_mujoco.reporting.results import matrix_rows
 
     ratio = r.log["residual"] / r.log["threshold"]
     times = r.log["t"][matrix_rows(r.log)]
@@ -298,8 +298,8 @@ def test_spans_are_told_once_each_in_the_order_they_began():
     ones beside it: a span ends once its premise held for ``GAP``, and spans that end
     together are told in the order they began, each with its worst value and last
     instant; the summary's table reads the same spans."""
-    from dftc_mujoco.premises import GAP, Monitor, StartBound
-    from dftc_mujoco.record import Events
+    from dftc_mujoco.closed_loop.premises import GAP, Monitor, StartBound
+    from dftc_mujoco.core.record import Events
 
     n, h, zeros = 2, 0.01, np.zeros((2, 2))
     events = Events()

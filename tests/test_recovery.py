@@ -197,7 +197,7 @@ def test_after_an_exclusion_eq46s_domain_starts_at_the_restarted_rules_settle_ti
     T_s, and the campaign's facts leave it out (a stop in the exclusion's own period too); a
     stop after that T_s is inside."""
     from dftc_mujoco.campaign.task import fault_facts
-    from dftc_mujoco.events import describe
+    from dftc_mujoco.core.events import describe
 
     soon, later = _two_stops(18.0), _two_stops(21.0)
     gone, second = soon.summary["exclusions"]  # the second stop is excluded too, later
@@ -235,7 +235,7 @@ def test_an_exclusion_within_a_faults_window_takes_that_fault_out_of_eq46s_domai
     facts leave the fault out of the domain, the time of the cut in ``restarted_in_window``.
     Here robot 2 stops 0.3 s before robot 1's exclusion (l1, Δt_d,max ≈ 0.8 s)."""
     from dftc_mujoco.campaign.task import fault_facts
-    from dftc_mujoco.events import describe
+    from dftc_mujoco.core.events import describe
 
     alone = _two_stops(25.0, max_faults=2)  # robot 2's stop long after robot 1's exclusion
     (gone,) = alone.summary["exclusions"][:1]
@@ -303,7 +303,7 @@ def test_a_fault_too_close_to_the_end_for_eq46s_window_is_said_so():
     leaves an undetected fault unexplained unless it says so. paper_case cut to 43 s (its
     stop at 41.8 s, Δt_d,max 5 s) gets one ``detection_past_end`` event with the time left,
     in words in the event table; cut to 48 s, and in full, none."""
-    from dftc_mujoco.events import describe
+    from dftc_mujoco.core.events import describe
 
     short = simulate(load_scenario("paper_case", {"duration": 43.0}))
     (note,) = short.events.of_kind("detection_past_end")
@@ -462,7 +462,7 @@ def test_the_survivors_are_rewired_around_an_excluded_robot():
 
 
 def test_relayed_edges_join_what_the_excluded_robot_heard_to_whom_it_told():
-    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.core.graph import Graph
 
     g = Graph(4, ((0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2)))
     assert not g.without(1).is_strongly_connected()

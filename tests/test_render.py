@@ -152,7 +152,7 @@ def test_plot_command_rerenders_the_video(tmp_path):
 
 def test_figures_adapt_to_other_teams(tmp_path):
     """N = 6, two stops, no bias: every figure still draws."""
-    from dftc_mujoco.loop import simulate
+    from dftc_mujoco.closed_loop.loop import simulate
     from tests.conftest import make, ring_team, scenario_dict
 
     d = scenario_dict()
@@ -220,7 +220,7 @@ def test_large_teams_show_the_robots_worth_showing():
     and the last teammate to flag it and the healthy robots nearest a false flag; its first
     column is robot 11 (the grid used to show robots 1-6 only, never an observer that
     flagged late); the inputs figure shows robot 11 among eight robots, not all sixteen."""
-    from dftc_mujoco.loop import simulate
+    from dftc_mujoco.closed_loop.loop import simulate
     from tests.conftest import make, scenario_dict
 
     d = scenario_dict()
@@ -253,7 +253,7 @@ def test_large_teams_show_the_robots_worth_showing():
 def test_a_run_over_a_network_draws_its_links_and_its_timeline(tmp_path):
     """Over a network with robot 3 silent from 10 s: figures/network.png is drawn, the link
     3 -> 4 is dropped (red, dashed) in a frame after it and live (green) before."""
-    from dftc_mujoco.display import LINK_DROPPED, LINK_LIVE
+    from dftc_mujoco.render.display import LINK_DROPPED, LINK_LIVE
     from dftc_mujoco.render.video import FrameRenderer
 
     over = [

@@ -82,7 +82,7 @@ def test_the_compiled_derivations_give_numpys_numbers_bit_for_bit():
     # the summary's margin and estimation error are computed entry by entry after the run
     # (at N = 1000 numpy's N × N temporaries took a second); on float32 logs with NaN
     # (excluded robots) and inf (unbounded thresholds) they must be numpy's numbers
-    from dftc_mujoco.results import _estimate_sums, peak_ratio
+    from dftc_mujoco.reporting.results import _estimate_sums, peak_ratio
 
     rng = np.random.default_rng(7)
     t, n = 40, 23

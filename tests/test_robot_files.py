@@ -19,7 +19,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from dftc_mujoco import assembly, calibrate, checks, loop, run, scenario
+from dftc_mujoco import calibrate, run, scenario
+from dftc_mujoco.closed_loop import assembly, checks, loop
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene, tree

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from dftc_mujoco import assembly, calibrate, loop, run, scenario
+from dftc_mujoco import calibrate, run, scenario
+from dftc_mujoco.closed_loop import assembly, loop
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.paths import MODELS
+from dftc_mujoco.runtime.paths import MODELS
 from dftc_mujoco.sim import faults as sim_faults
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant

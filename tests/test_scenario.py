@@ -93,13 +93,13 @@ def test_paper_case_matches_the_paper():
     s = scenario.load("paper_case")
     assert (s.gains.kc, s.gains.ko) == (4.0, 6.0)
     assert (s.gains.K == 3 * np.eye(2)).all() and s.gains.G is None  # "auto": the robot's
-    from dftc_mujoco.assembly import effective_G
+    from dftc_mujoco.closed_loop.assembly import effective_G
     from dftc_mujoco.sim import robots
 
     assert (effective_G(s, robots.get("disk")) == 0.01 * np.eye(2)).all()  # the paper's G
     assert (effective_G(s, robots.get("diffdrive")) == 0.02 * np.eye(2)).all()  # calibrated
     assert (s.noise.eta_bar, s.noise.xi_bar) == (0.001, None)  # ξ̄ from the robot model
-    from dftc_mujoco.loop import effective_xi_bar
+    from dftc_mujoco.closed_loop.loop import effective_xi_bar
     from dftc_mujoco.sim import robots
 
     assert effective_xi_bar(s, robots.get("disk")) == 0.005  # the paper's value

@@ -1,4 +1,4 @@
-"""The pass shared between threads (onboard/sharing.py): real threads, real sleeps."""
+"""The pass shared between threads (onboard/execution/sharing.py): real threads, real sleeps."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from dftc_mujoco.onboard.sharing import Sharing
+from dftc_mujoco.onboard.execution.sharing import Sharing
 
 
 def _rows(per_row: dict[int, float], seen: list[int]):

@@ -61,16 +61,71 @@ def test_the_package_has_no_import_circles():
     assert not circles, f"import circles: {circles}"
 
 
+#: the package's folders (and root modules) from the bottom layer up, as the layout page
+#: draws them; names on one line are peers (none imports another)
+LAYERS = [
+    ("errors",),
+    ("runtime",),
+    ("core",),
+    ("onboard",),
+    ("onboard.execution",),
+    ("blocks",),
+    ("scenario",),
+    ("sim",),
+    ("render",),
+    ("reporting",),
+    ("closed_loop",),
+    ("watch",),
+    ("campaign",),
+    ("envs",),
+    ("run",),
+    ("calibrate", "plot", "precompile"),
+]
+
+
+def _layer_of(module: str) -> str:
+    parts = module.split(".")[1:]
+    if parts[:2] == ["onboard", "execution"]:
+        return "onboard.execution"
+    return parts[0] if parts else ""
+
+
+def test_the_folders_are_layers_each_importing_only_from_below():
+    """The package reads as its layers (docs/concepts/layout.md): a module imports only
+    from its own folder and the folders below it, never from one above (the package's
+    ``__init__``, which hands names on, aside)."""
+    mods = _modules()
+    rank = {name: k for k, names in enumerate(LAYERS) for name in names}
+    unplaced = {_layer_of(m) for m in mods} - set(rank) - {""}
+    assert not unplaced, f"folders with no layer in LAYERS: {sorted(unplaced)}"
+    upward = []
+    for name, path in mods.items():
+        mine = _layer_of(name)
+        for other in _imports(name, path, set(mods)):
+            theirs = _layer_of(other)
+            if mine and theirs and theirs != mine and rank[theirs] >= rank[mine]:
+                upward.append(f"{name} -> {other}")
+    assert not upward, upward
+    page = (PACKAGE.parent / "docs" / "concepts" / "layout.md").read_text(encoding="utf-8")
+    drawn = page[page.index("```text") : page.index("```", page.index("```text") + 7)]
+    for names in LAYERS:  # the page draws every layer
+        for name in names:
+            shown = name.split(".")[-1] + (
+                "/" if name not in ("errors", "run", "plot", "precompile") else ".py"
+            )
+            assert shown in drawn, shown
+
+
 def test_the_onboard_algorithms_stand_on_the_graph_and_the_mission_alone():
     """The layer order: the onboard blocks import, from this package, only the graph, the
     mission, the errors and the events, and never MuJoCo (or the scenario parser, the
     physics, ...)."""
     mods = _modules()
     allowed = {
-        "dftc_mujoco.graph",
-        "dftc_mujoco.mission",
+        "dftc_mujoco.core.graph",
+        "dftc_mujoco.core.mission",
         "dftc_mujoco.errors",
-        "dftc_mujoco.events",
+        "dftc_mujoco.core.events",
     }
     for name, path in mods.items():
         if not name.startswith("dftc_mujoco.onboard"):
@@ -193,12 +248,12 @@ def test_no_event_kind_is_a_string_literal_outside_the_events_module():
     """Events are typed: a kind is compared, made and filtered as ``events.Kind``, so a
     misspelt kind is an AttributeError where it is written, not a branch that never runs.
     (Before, 57 literals named kinds across 16 modules.)"""
-    from dftc_mujoco.events import KINDS
+    from dftc_mujoco.core.events import KINDS
 
     kinds = set(KINDS)
     found = []
     for name, path in _modules().items():
-        if name == "dftc_mujoco.events":
+        if name == "dftc_mujoco.core.events":
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.Compare):

@@ -75,7 +75,7 @@ def test_a_robot_closing_in_at_the_input_range_switches_without_a_jump():
     activation distance the run derives (``assembly.seamless_margin``) its command changes per
     period by no more than eq. 18's own deceleration θ‖u‖Δt (2.4 cm/s); with the former
     fixed 0.1 m margin it jumped by about 0.5 m/s."""
-    from dftc_mujoco import assembly
+    from dftc_mujoco.closed_loop import assembly
     from dftc_mujoco.sim import robots
 
     s = load_scenario("paper_case")

@@ -8,9 +8,9 @@ compared with brute-force ones on small graphs.
 import numpy as np
 import pytest
 
+from dftc_mujoco.core.graph import Graph, random_strongly_connected, ring_with_chords
 from dftc_mujoco.errors import ScenarioError
-from dftc_mujoco.graph import Graph, random_strongly_connected, ring_with_chords
-from dftc_mujoco.onboard.locality import demo_team
+from dftc_mujoco.onboard.execution.locality import demo_team
 from dftc_mujoco.onboard.thresholds import (
     BLOCK_ROW_MAX,
     L1,
@@ -643,7 +643,7 @@ def test_eq40_read_from_its_factors_is_the_array(connected):
     """The compiled period reads eq. 40 as (cᵢ + δᵢₖ) b_k + δᵢₖ η̄ (no N × N array per period):
     entry for entry the numbers of ``(√n dᵢ + δᵢₖ) b_k + δᵢₖ η̄`` over the whole array, with
     +inf where no bound exists, before and after the transient settles."""
-    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.core.graph import Graph
     from dftc_mujoco.onboard.thresholds import Thresholds
     from dftc_mujoco.onboard.thresholds.paper import bound_of, refresh_bound
 
@@ -742,7 +742,7 @@ def test_the_settled_thresholds_are_an_array_of_their_own():
     settling time T_s compares every time's thresholds with the settled ones, and with one
     array for both (an earlier version of the factored thresholds) it found every time
     settled (T_s = 0.01 s instead of 8.77 s on a 16-robot campaign run)."""
-    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.core.graph import Graph
     from dftc_mujoco.onboard.thresholds import Thresholds
 
     graph = Graph(16, (*((i, (i + 1) % 16) for i in range(16)), (0, 8), (8, 0)))
@@ -760,7 +760,7 @@ def test_settle_time_from_eq40_factors_is_the_arrays():
     the one its arrays give, on random strongly connected graphs of uneven in-degree, a ring,
     a graph with robots no bound covers (+inf columns), uneven start bounds, a restart after
     t = 0 from bounds below steady, and tolerances from 0 to 50 %."""
-    from dftc_mujoco.graph import Graph
+    from dftc_mujoco.core.graph import Graph
     from dftc_mujoco.onboard.thresholds import Thresholds
     from dftc_mujoco.onboard.thresholds.settling import settle_time
 
@@ -807,7 +807,7 @@ def _within_matches_at_every_boundary(th):
 
 
 def _team_of(graph):
-    from dftc_mujoco.onboard.locality import demo_team
+    from dftc_mujoco.onboard.execution.locality import demo_team
 
     return demo_team(graph.n, graph=graph)
 
@@ -852,7 +852,7 @@ def test_auto_keeps_eq_40_for_the_paper_s_team_and_beyond_the_dense_rules_size()
     beyond, where that array's set-up took 13.5 s at 1000 robots (eq. 40: 0.65 s) and made
     the 1000-robot benchmark slower than real time."""
     from dftc_mujoco import load_scenario
-    from dftc_mujoco.assembly import DENSE_RULES_UP_TO, PAPER_TEAM, threshold_rule
+    from dftc_mujoco.closed_loop.assembly import DENSE_RULES_UP_TO, PAPER_TEAM, threshold_rule
     from dftc_mujoco.sim import robots
 
     disk = robots.get("disk")
@@ -875,8 +875,8 @@ def test_one_robots_decay_is_its_entry_of_every_robots_and_costs_one_column():
     """The premises' memory of a flagged robot needs its own κ, λ (eq. 41) only: on a
     large graph that is not rotation invariant they come from that robot's column alone
     (the whole team's are not computed), and equal its entry of the whole team's."""
+    from dftc_mujoco.closed_loop.premises import MEMORY_FRACTION, memory
     from dftc_mujoco.onboard.thresholds import decay
-    from dftc_mujoco.premises import MEMORY_FRACTION, memory
 
     graph = random_strongly_connected(40, 3, np.random.default_rng(7))
     decay._cached_decay_bounds.cache_clear()

@@ -30,9 +30,9 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import load_scenario
-from dftc_mujoco.display import HEALTHY
+from dftc_mujoco.closed_loop.loop import simulate
 from dftc_mujoco.errors import EXIT_SERVE
-from dftc_mujoco.loop import simulate
+from dftc_mujoco.render.display import HEALTHY
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = [

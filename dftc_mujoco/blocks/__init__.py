@@ -107,7 +107,7 @@ def _import(module_name: str, search: Sequence[Path], where: str) -> Any:
 
 def base_class(block: str) -> type:
     """The class every ``block`` derives from (the paper's block of that plug-in point)."""
-    from ..onboard.team import PAPER_BLOCKS
+    from ..onboard.execution.team import PAPER_BLOCKS
 
     return PAPER_BLOCKS[block]
 

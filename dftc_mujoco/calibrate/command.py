@@ -26,7 +26,7 @@ from .track import skid_track
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
-    from .. import cli
+    from ..runtime import cli
     from ..sim import robots
 
     p = cli.parser(
@@ -70,7 +70,7 @@ Documentation: the project's docs/ folder (robots and calibration).
         "--runs", type=int, default=3, help="fault-free runs of the scenario for the drift"
     )
     args = p.parse_args(argv)
-    from .. import interrupt
+    from ..runtime import interrupt
 
     written: list[Path] = []  # the file, once a write of this command replaced it
     with interrupt.catch():  # a signal stops it at once: nothing is half written (atomic)
@@ -87,8 +87,8 @@ Documentation: the project's docs/ folder (robots and calibration).
 
 
 def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
-    from .. import cli
     from ..run import parse_overrides
+    from ..runtime import cli
     from ..sim import robots
 
     try:

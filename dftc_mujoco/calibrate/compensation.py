@@ -59,7 +59,7 @@ def compensation(
     driven by the modelled velocity, the drive by the command. ``measured``: what this
     calibration measured before (:func:`.mismatch.robot_with`).
     """
-    from ..assembly import PAPER_G
+    from ..closed_loop.assembly import PAPER_G
     from ..onboard.thresholds import estimator_gain
     from ..scenario import load_scenario
     from ..sim import scene

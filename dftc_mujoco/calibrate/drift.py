@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from ..core.events import Kind
 from ..errors import ScenarioError
-from ..events import Kind
 
 REPLAN_WINDOW = 5.0  # s after an exclusion that count as the re-plan's transient
 
@@ -59,7 +59,7 @@ def drift(
 ) -> Drift:
     """Run the scenario fault-free, noise at its bounds, with robot ``name`` (``runs`` seeds,
     every control period logged) and measure each robot's drift split (:class:`Drift`)."""
-    from ..loop import simulate
+    from ..closed_loop.loop import simulate
     from ..scenario import apply_overrides, from_dict, load_scenario
 
     base = {

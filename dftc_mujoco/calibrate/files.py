@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..atomic import write_text
 from ..errors import ScenarioError
+from ..runtime.atomic import write_text
 from .mismatch import Calibration
 
 MARK = "python -m dftc_mujoco.calibrate --write"

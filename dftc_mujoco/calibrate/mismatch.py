@@ -391,8 +391,8 @@ def detectability(
     robot's command range (a stopped robot's command grows as the team pulls away).
     Returns (the line to print, whether it is a warning).
     """
-    from ..assembly import team_config, threshold_rule
     from ..blocks import create
+    from ..closed_loop.assembly import team_config, threshold_rule
     from ..scenario import load_scenario
     from ..sim import robots
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..premises import HEIGHT_TOLERANCE, TILT_TOLERANCE
+from ..closed_loop.premises import HEIGHT_TOLERANCE, TILT_TOLERANCE
 from ..sim.tree import _surface_points, subtree
 
 #: [s] the physics steps tried after a breach at the scene's (10 ms control period: 10, 20,

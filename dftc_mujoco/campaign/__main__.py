@@ -21,9 +21,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .. import cli, interrupt, output
 from ..errors import EXIT_INPUT, EXIT_OK, EXIT_OUTPUT, EXIT_PHYSICS, OutputError, ScenarioError
-from ..interrupt import Interrupted, Signals
+from ..runtime import cli, interrupt, output
+from ..runtime.interrupt import Interrupted, Signals
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
+from ..core.record import write_text
 from ..errors import OutputError
-from ..output import os_problem, special_file
-from ..record import write_text
+from ..runtime.output import os_problem, special_file
 from .inputs import inputs
 from .spec import Spec, draw, scenario_dict
 

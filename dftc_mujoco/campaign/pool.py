@@ -31,7 +31,7 @@ from . import lifeline
 from .spec import Spec
 
 if TYPE_CHECKING:
-    from ..execution import Execution
+    from ..closed_loop.execution import Execution
 
 POLL = 0.2  # s between two looks at the stop request while waiting for rows
 GRACE = 3.0  # s a worker gets to end after SIGTERM before SIGKILL
@@ -103,7 +103,7 @@ class Pool:
         where every worker's threads have cores of their own (the cores this process may run
         on, shared by the workers; ``NUMBA_NUM_THREADS`` caps a worker's threads as it caps
         numba's); otherwise the workers share the cores between them, one thread each."""
-        from ..execution import Execution
+        from ..closed_loop.execution import Execution
 
         if hasattr(os, "sched_getaffinity"):
             cores = len(os.sched_getaffinity(0))

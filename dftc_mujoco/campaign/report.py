@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_write, write_text
 from ..render.figures import new_figure
+from ..runtime.atomic import atomic_write, write_text
 from .task import OUTCOMES
 
 
@@ -113,7 +113,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _outcomes(ok: list[dict[str, Any]]) -> dict[str, Any]:
-    """What the missions and the faults came to (outcomes.py): the share of missions
+    """What the missions and the faults came to (reporting/outcomes.py): the share of missions
     completed, each fault's outcome counted, and the stops that came after an earlier
     exclusion in their run (a later fault, judged by the team that was left)."""
     found = [(r, f) for r in ok for f in json.loads(r.get("fault_outcomes") or "[]")]

@@ -23,14 +23,14 @@ from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
-from ..atomic import atomic_write, write_text
+from ..runtime.atomic import atomic_write, write_text
 from .spec import Spec, draw
 from .task import fault_facts, run_one, spec_folders
 
 __all__ = ["Outcome", "Results", "fault_facts", "run", "run_one", "spec_folders"]
 
 if TYPE_CHECKING:
-    from ..interrupt import Signals
+    from ..runtime.interrupt import Signals
     from .cluster import Connection
 
 TIMING_COLUMNS = ("wall_time",)
@@ -144,7 +144,7 @@ def run(
     address, or a :class:`~dftc_mujoco.campaign.cluster.Connection` already made
     (left at the end either way). ``limit`` stops after that many new runs (to split a
     campaign in parts).
-    ``signals`` (:class:`dftc_mujoco.interrupt.Signals`): a signal it catches stops
+    ``signals`` (:class:`dftc_mujoco.runtime.interrupt.Signals`): a signal it catches stops
     the campaign early, keeping every finished run; ``outcome`` (an :class:`Outcome`)
     is filled in with how it ended.
     """

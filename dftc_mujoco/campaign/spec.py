@@ -53,7 +53,7 @@ import numpy as np
 
 from .. import scenario as scenario_mod
 from ..errors import ScenarioError
-from ..tomlcheck import Table, describe, read_toml
+from ..runtime.tomlcheck import Table, describe, read_toml
 
 #: the fault zoo's kinds a campaign may draw (besides stop, bias, two stops and silent radios)
 ZOO_KINDS = ("loss_of_effectiveness", "intermittent", "sensor_bias", "sensor_drift")

@@ -16,12 +16,12 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..events import Kind
+from ..core.events import Kind
 from .spec import Spec, scenario_for
 
 if TYPE_CHECKING:
-    from ..execution import Execution
-    from ..interrupt import Signals
+    from ..closed_loop.execution import Execution
+    from ..runtime.interrupt import Signals
 
 
 def run_one(
@@ -33,7 +33,7 @@ def run_one(
     """Simulate one run and reduce it to a row of facts; never raises (a signal caught by
     ``signals`` stops the simulation: the row then says "interrupted"). ``execution``: how
     its period runs (:class:`~..execution.Execution`; the default where None)."""
-    from ..loop import Simulation
+    from ..closed_loop.loop import Simulation
 
     t0 = time.perf_counter()
     row: dict[str, Any] = dict(params)
@@ -292,7 +292,7 @@ def _facts(p: dict[str, Any], summary: dict[str, Any], dt_d_max: float | str) ->
             and err["final_centroid"] < 0.05
             and err["final_formation"] < 0.05
         ),
-        # what the mission achieved, apart from who is still counted (outcomes.py)
+        # what the mission achieved, apart from who is still counted (reporting/outcomes.py)
         **_mission_facts(summary),
         "margin": summary.get("margin"),
         "min_obstacle_clearance": summary["min_obstacle_clearance"],

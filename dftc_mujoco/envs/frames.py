@@ -1,6 +1,6 @@
 """Frames of a live run for an environment's ``render()``: MuJoCo's offscreen renderer on
 the simulation's own model, an orthographic camera looking down on the team, each robot
-marked above in its state's colour (:mod:`dftc_mujoco.display`) and each desired slot on
+marked above in its state's colour (:mod:`dftc_mujoco.render.display`) and each desired slot on
 the floor, as the video and the viewer show them."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import warnings
 import mujoco
 import numpy as np
 
-from ..display import COLOURS, robot_state
-from ..loop import Simulation
+from ..closed_loop.loop import Simulation
 from ..render import gl
-from ..viewer import COMPENSATING
+from ..render.display import COLOURS, robot_state
+from ..watch.viewer import COMPENSATING
 
 #: [m] the view's least height, and the margin around the team and its slots
 VIEW_MIN, VIEW_MARGIN = 1.5, 0.6

@@ -9,7 +9,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from ..viewer import has_display
+from ..watch.viewer import has_display
 from .seat import BIG, Seats
 
 RENDER_MODES = ["rgb_array", "human"] if has_display() else ["rgb_array"]

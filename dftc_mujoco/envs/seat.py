@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..closed_loop.loop import Simulation
+from ..core.mission import slot_spacing
 from ..errors import InputError
-from ..loop import Simulation
-from ..mission import slot_spacing
 from ..onboard.thresholds.paper import dense_thresholds, factored_at
 from ..scenario import Scenario, load_scenario
 
@@ -265,7 +265,7 @@ def _observe(
 ):  # fmt: skip  # pragma: no cover - compiled
     """:data:`FIELDS` of robot ``i`` into ``out`` (float32): ``rows`` maps a robot to its
     member position (-1: excluded), ``heard`` its in-neighbours; the team's arrays as
-    :class:`~dftc_mujoco.onboard.team.Team` keeps them (members' axis, or the robots' for
+    :class:`~dftc_mujoco.onboard.execution.team.Team` keeps them (members' axis, or the robots' for
     ``u_bar``, ``phi_hat``, ``active``); the thresholds ⁱμ_k as the compiled period reads
     them (:class:`~dftc_mujoco.onboard.thresholds.paper.ThresholdRecord`: ``dense``, or
     eq. 40's factors). Excluded robots and a robot's lost neighbours read 0; every entry

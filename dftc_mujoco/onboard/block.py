@@ -6,7 +6,7 @@ its arrays carry a leading axis over the team's members, and row i is robot
 i's onboard computation. Row i may use only what robot i knows: its own
 measurement, inputs and state, the messages of its in-neighbours, what its
 own sensors see and the mission every robot is given
-(:func:`dftc_mujoco.onboard.locality.check` tests a block set for it).
+(:func:`dftc_mujoco.onboard.execution.locality.check` tests a block set for it).
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..graph import Graph
-from ..mission import Formation
+from ..core.graph import Graph
+from ..core.mission import Formation
 
 
 def _compiled_by_default() -> bool:
     """Whether a team composes the compiled period by default: unless ``DFTC_PERIOD`` says
-    ``general`` (:mod:`dftc_mujoco.execution` reads the same variable for a run)."""
+    ``general`` (:mod:`dftc_mujoco.closed_loop.execution` reads the same variable for a run)."""
     return os.environ.get("DFTC_PERIOD", "").strip().lower() != "general"
 
 
@@ -47,7 +47,7 @@ class TeamConfig:
     dt_d_max: float | str = 5.0  # or "auto": eq. 46 (onboard/thresholds/delays.py)
     isolation: str = "pairwise"  # "exclusive", "exclusive_history" (eq. 39, decision.py)
     reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
-    initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (premises.py)
+    initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (closed_loop/premises.py)
     replan_time: float = 4.0
     excluded_safe: float = 0.35  # d around a robot that was excluded (it is still a body)
     excluded_activation: float = 0.45
@@ -80,17 +80,18 @@ class TeamConfig:
     # or each robot's (N,) in a mixed team
     lag: float | np.ndarray = 0.0
     # compose the paper's blocks in one compiled period when possible (DFTC_PERIOD=general in
-    # the environment: never, the blocks' own methods; dftc_mujoco.execution)
+    # the environment: never, the blocks' own methods; dftc_mujoco.closed_loop.execution)
     compiled: bool = field(default_factory=_compiled_by_default)
     # the compiled period's pass over the N × N state runs in this many threads (sharing.py)
-    # from shared_from members on (dftc_mujoco.execution)
+    # from shared_from members on (dftc_mujoco.closed_loop.execution)
     threads: int = 1
     shared_from: int = 150
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
     compensate: bool = True  # False: φ̂ estimated but not applied (ū = u)
     drift_bound: float = 0.0  # ē [m]: bounded offset of a robot's drift (from calibration)
-    # the network (dftc_mujoco.network): the observers step in rounds of this many control
-    # periods, on the last message each link delivered; False/1: the paper's ideal network
+    # the network (dftc_mujoco.closed_loop.network): the observers step in rounds of this
+    # many control periods, on the last message each link delivered; False/1: the paper's
+    # ideal network
     networked: bool = False
     round_periods: int = 1
     # a silent robot's listeners flag it when they see it this far from its slot [m] (0: never)

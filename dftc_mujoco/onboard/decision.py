@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..graph import Graph
+from ..core.graph import Graph
 from .block import Block, TeamConfig
 from .thresholds.paper import dense_thresholds, threshold_at
 

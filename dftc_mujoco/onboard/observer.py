@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..graph import Graph
+from ..core.graph import Graph
 from .block import Block, TeamConfig
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..events import Event, Kind, make
+from ..core.events import Event, Kind, make
 from .observer import Observer
 
 #: rounds in a row without the round's message after which a robot reports a link silent

@@ -28,8 +28,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..events import Event, Kind, make
-from ..graph import Graph
+from ..core.events import Event, Kind, make
+from ..core.graph import Graph
 
 #: a flagged robot's largest residual/threshold must have fallen to this fraction of its value
 #: at the last postponement for the flags to count as a contact's decaying trace

@@ -11,7 +11,7 @@ raises a flag on j when j stays farther than ``sighting_tolerance`` from its slo
 detection window. The flag counts towards j's exclusion as a residual's flag does
 (eq. 43) and lowers when j is back within the tolerance.
 
-The rule holds under the premise ``slot`` (premises.py): a silent robot without a fault
+The rule holds under the premise ``slot`` (closed_loop/premises.py): a silent robot without a fault
 stays within the tolerance of its slot while it is judged. It is not judged before it was
 once seen within the tolerance, away from obstacles, after falling silent (the start of a
 run, a re-plan). Where eq. 18 may move it off its slot (within an obstacle's or a
@@ -27,7 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..events import Event, Kind, make
+from ..core.events import Event, Kind, make
 from .block import TeamConfig
 from .observer import Observer
 from .radio import Radios

@@ -18,9 +18,9 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from ..atomic import atomic_write
-from ..events import Kind
-from ..record import matrix_rows
+from ..core.events import Kind
+from ..core.record import matrix_rows
+from ..runtime.atomic import atomic_write
 
 SNAPSHOT_FRACTIONS = (22.8 / 60, 38 / 60, 53.2 / 60)  # paper Fig. 3
 MAX_GRID = 6  # rows and columns of the residual grid

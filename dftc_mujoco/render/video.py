@@ -23,13 +23,13 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from ..display import LINKS, STATES, link_state, robot_state
+from ..core.events import Kind, describe
 from ..errors import RenderError
-from ..events import Kind, describe
 from ..scenario import Scenario
 from ..sim import fleet
 from ..sim import scene as scene_mod
 from . import gl
+from .display import LINKS, STATES, link_state, robot_state
 from .options import VideoOptions, frame_times
 
 AVOIDING = (0.1, 0.75, 0.3, 0.55)
@@ -380,7 +380,7 @@ def _bias_start(summary: dict[str, Any], n: int) -> np.ndarray:
 
 def captions(summary: dict[str, Any]) -> list[tuple[float, str]]:
     """Fault injections, each robot's first detection, and exclusions, in time order, in the
-    words of :func:`dftc_mujoco.events.describe`."""
+    words of :func:`dftc_mujoco.core.events.describe`."""
     ev = [
         (f["t"], describe({"kind": Kind.FAULT, "robot": f["robot"], "fault": f["kind"]}))
         for f in summary.get("faults", [])

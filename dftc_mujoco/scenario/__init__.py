@@ -14,9 +14,9 @@ writes that document as text.
 
 from __future__ import annotations
 
-from ..mission import CentroidPath, Formation, Mission
-from ..paths import SCENARIOS
-from ..tomlcheck import N_DIM
+from ..core.mission import CentroidPath, Formation, Mission
+from ..runtime.paths import SCENARIOS
+from ..runtime.tomlcheck import N_DIM
 from .model import (
     Scenario,
     _trusted,

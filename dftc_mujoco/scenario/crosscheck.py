@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ..graph import Graph, k_nearest, line_with_back_links, ring_with_chords
-from ..tomlcheck import Doc
+from ..core.graph import Graph, k_nearest, line_with_back_links, ring_with_chords
+from ..runtime.tomlcheck import Doc
 from .parts import Network, Team
 
 

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..tomlcheck import N_DIM, Table, _ro
+from ..runtime.tomlcheck import N_DIM, Table, _ro
 from .parts import ACTUATOR_FAULTS, RADIO_FAULTS, SENSOR_FAULTS, Fault, RadioFault
 
 

@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..blocks import BLOCKS
+from ..core.graph import Graph
+from ..core.mission import CentroidPath, Formation, Mission
 from ..errors import ScenarioError
-from ..graph import Graph
-from ..mission import CentroidPath, Formation, Mission
-from ..paths import SCENARIOS
-from ..tomlcheck import Abort, Doc, _nested, _segments, describe, read_toml
+from ..runtime.paths import SCENARIOS
+from ..runtime.tomlcheck import Abort, Doc, _nested, _segments, describe, read_toml
 from .crosscheck import cross_problems
 from .parts import (
     Fault,
@@ -195,7 +195,7 @@ class Scenario:
         speed: float | None = None,
     ) -> Scenario:
         """A copy with CLI overrides applied and checked (``speed``: the centroid path's, as
-        the path governor sets it: ``dftc_mujoco.mission.governed_speed``).
+        the path governor sets it: ``dftc_mujoco.core.mission.governed_speed``).
 
         A shorter ``duration`` drops the faults that would start after the new
         end (they cannot happen); :func:`dropped_faults` lists them. When it is

@@ -1,11 +1,11 @@
 """Reading the ``[network]`` table (:class:`~.parts.Network`; the medium itself is
-:mod:`dftc_mujoco.network`)."""
+:mod:`dftc_mujoco.closed_loop.network`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..tomlcheck import Table, number_or_word
+from ..runtime.tomlcheck import Table, number_or_word
 from .parts import Network, Physics, RadioFault
 
 

@@ -1,5 +1,5 @@
 """The parts of a scenario: one frozen dataclass per table of the file (the mission's own types
-live in :mod:`dftc_mujoco.mission`)."""
+live in :mod:`dftc_mujoco.core.mission`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from ..graph import Graph
-from ..tomlcheck import _ro
+from ..core.graph import Graph
+from ..runtime.tomlcheck import _ro
 
 
 class _ReadOnlyMap(Mapping[str, Any]):
@@ -236,7 +236,8 @@ class Fdir:
 
     detection_window: float = 0.2
     dt_d_max: float | str = 5.0  # Δt_d,max [s], or "auto": from the analysis (eq. 46)
-    # ε̄ [m], or "auto": derived from the start positions and the planned slots (premises.py)
+    # ε̄ [m], or "auto": derived from the start positions and the planned slots
+    # (closed_loop/premises.py)
     initial_error_bound: float | str = "auto"
     replan_time: float = 4.0
     excluded_safe_distance: float = 0.35

@@ -12,10 +12,10 @@ from typing import Any, cast
 import numpy as np
 
 from ..blocks import BLOCKS, check_name
-from ..graph import Graph
-from ..mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
-from ..tomlcheck import N_DIM, Doc, Table, _ro, describe
-from ..tomlcheck import number_or_word as _number_or_word
+from ..core.graph import Graph
+from ..core.mission import ARENA_HALF, CentroidPath, Formation, Mission, formation_offsets
+from ..runtime.tomlcheck import N_DIM, Doc, Table, _ro, describe
+from ..runtime.tomlcheck import number_or_word as _number_or_word
 from .faults import read_fault, timing_problem
 from .network import read_network
 from .parts import (
@@ -420,7 +420,12 @@ def _generated_graph(
 ) -> tuple[Graph | None, str | None]:
     """{family = "ring_chords", chords = [...]}, {family = "random", in_degree = d},
     {family = "knn", k = k} or {family = "line"} (i ⇄ i + 1: every inner robot a cut)."""
-    from ..graph import k_nearest, line_with_back_links, random_strongly_connected, ring_with_chords
+    from ..core.graph import (
+        k_nearest,
+        line_with_back_links,
+        random_strongly_connected,
+        ring_with_chords,
+    )
 
     family = g.string("family", choices=("ring_chords", "random", "knn", "line"))
     if not g.ok("family"):

@@ -20,7 +20,7 @@ import copy
 import math
 from typing import Any
 
-from ..tomlcheck import describe
+from ..runtime.tomlcheck import describe
 
 #: (table path, key, default) of the lengths a scale multiplies (None: no default)
 LENGTHS: tuple[tuple[tuple[str, ...], str, float | None], ...] = (

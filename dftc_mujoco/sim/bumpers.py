@@ -3,7 +3,7 @@
 A robot knows when its hull touches something (a bumper, a contact switch, a motor-current
 spike): this is that sensor, on the simulator side. Each period :func:`contacts` says
 which robots touch a teammate, an excluded robot or a cylinder (the floor does not count),
-and how deep (``physics_step.py`` senses it with the rest of the period's truth). The
+and how deep (``closed_loop/physics_step.py`` senses it with the rest of the period's truth). The
 onboard recovery uses the bumpers to postpone an exclusion that a contact may explain
 (``onboard/recovery.py``); the premises monitor labels the same contacts with their depth.
 """

@@ -8,8 +8,8 @@ the bounds every member satisfies — the largest ξ̄, measured mismatch, drift
 footprint, the largest calibrated compensation gain G, the smallest acceleration limit and
 command range. A bound that holds for the worst robot holds for each (eq. 2's ξ̄, the
 rules' ē), at the price of wider thresholds for the better ones. Each robot models its own
-drive lag (``[calibration] lag``, :func:`~dftc_mujoco.assembly.drive_lag`); the envelope's
-is the slowest robot's.
+drive lag (``[calibration] lag``,
+:func:`~dftc_mujoco.closed_loop.assembly.drive_lag`); the envelope's is the slowest robot's.
 """
 
 from __future__ import annotations

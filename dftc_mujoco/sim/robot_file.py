@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ScenarioError
-from ..tomlcheck import Abort
+from ..runtime.tomlcheck import Abort
 from . import actuators as act
 from .planar_base import PLANAR_ACTUATORS
 
@@ -83,7 +83,7 @@ def _drive_table(
 def read(path: Path, calibration_keys: tuple[str, ...]) -> dict[str, Any]:
     """Read and check one robot file: the fields of its :class:`~.robots.RobotModel` before
     the model is inspected."""
-    from ..tomlcheck import Doc, Table, read_toml
+    from ..runtime.tomlcheck import Doc, Table, read_toml
     from .plausible import calibration_problem
 
     data = read_toml(path)

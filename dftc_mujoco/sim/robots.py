@@ -31,18 +31,12 @@ import mujoco
 import numpy as np
 
 from ..errors import ScenarioError
-from ..paths import MODELS
+from ..runtime.paths import MODELS
 from . import actuators as act
 from . import wheels
 from .actuators import ActuatorInfo
 from .robot_file import DRIVE_ROLES, ROBOT_SUFFIX, read, resolved
-from .tree import (
-    _footprint,
-    _surface_points,
-    attached_actuators,
-    qpos_addresses,
-    subtree,
-)
+from .tree import _footprint, _surface_points, attached_actuators, qpos_addresses, subtree
 
 ROBOTS = MODELS / "robots"
 CONTROL_SITE = "dftc_control_point"  # the site added (in memory) at the control point

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from ..paths import MODELS
+from ..runtime.paths import MODELS
 from ..scenario import Obstacle, Scenario
 from .fleet import Fleet, Group
 from .robots import CONTROL_SITE, OPTION_NAMES, RobotModel, option_value

@@ -12,8 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ...core.graph import Graph, reaches_all, rotation_invariant
 from ...errors import ScenarioError
-from ...graph import Graph, reaches_all, rotation_invariant
 from .envelope import (
     CHECK,
     Envelope,

@@ -15,7 +15,7 @@ from concurrent.futures import Future
 import numpy as np
 from scipy.linalg import expm
 
-from ...graph import Graph, reaches_all, rotation_invariant
+from ...core.graph import Graph, reaches_all, rotation_invariant
 from .kernels import TINY, Adjacency, best_rate, column_of_row, sweep_sums
 
 

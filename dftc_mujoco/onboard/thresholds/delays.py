@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ...graph import Graph, reaches_all, rotation_invariant
+from ...core.graph import Graph, reaches_all, rotation_invariant
 from ..applied import distinct_lags
 from ..block import TeamConfig
 from .envelope import CHECK, MAX_PERIODS, MAX_WORK, _slack

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...graph import Graph
+from ...core.graph import Graph
 from ..block import TeamConfig
 from .compensation import estimator_gain
 from .envelope import Envelope, Start, _Enveloped, column_envelope

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.graph import Graph, reaches_all, rotation_invariant
 from ...errors import ScenarioError
-from ...graph import Graph, reaches_all, rotation_invariant
 from ..block import TeamConfig
 from .compensation import compensation_offset, estimator_gain
 from .kernels import TINY, Adjacency, advance_columns, apply, column_of_row

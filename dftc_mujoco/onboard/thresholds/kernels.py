@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...graph import Graph
+from ...core.graph import Graph
 
 #: entries below this are set to 0 in the recursions: the wavefront of a column
 #: otherwise passes through subnormal numbers, 10-100x slower. The error is at most

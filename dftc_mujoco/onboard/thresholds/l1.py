@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...graph import Graph
+from ...core.graph import Graph
 from .envelope import Envelope, Start, _Enveloped, column_envelope
 
 

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...graph import Graph
+from ...core.graph import Graph
 from ..block import Block, TeamConfig
 from .decay import decay_bounds
 
@@ -136,7 +136,7 @@ class Thresholds(Block):
         """The rule on ``graph`` with ‖ỹ*_k(t0)‖ ≤ ``y0[k]``, outside any team (control
         period ``dt``, fault-estimator gains K, G as scalars times I; no compensation, so
         ē is the rule's own ``drift_bound``)."""
-        from ...mission import Formation, polygon_offsets
+        from ...core.mission import Formation, polygon_offsets
 
         config = TeamConfig(
             graph=graph,
