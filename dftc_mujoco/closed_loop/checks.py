@@ -124,13 +124,20 @@ def check_memory(s: Scenario, available: int | None = None) -> None:
 
 
 def _formation_room(
-    s: Scenario, reach: float, name: str, contacts: bool, finding: Callable[..., None]
+    s: Scenario,
+    offsets: np.ndarray,
+    reach: float,
+    name: str,
+    contacts: bool,
+    finding: Callable[..., None],
 ) -> None:
-    """The formation, and the one re-planned without a robot: hulls must not overlap."""
+    """The formation (its slots' ``offsets``), and the one re-planned without a robot: hulls
+    must not overlap."""
     need = 2 * reach + CLEARANCE
     n = s.team.robots
     for m in (n, n - 1) if s.fdir.enabled and n > 2 else (n,):
-        spacing = _closest_pair(formation_offsets(s.mission.formation, m))
+        slots = offsets if m == n else formation_offsets(s.mission.formation, m)
+        spacing = _closest_pair(slots)
         if spacing < need:
             which = "the formation" if m == n else f"the re-planned formation of {m} robots"
             # the scale that makes the room, of the document as written (it may be scaled)
@@ -274,8 +281,8 @@ def preflight(
             f"{round(periods) * s.physics.control_period:g} s",
             False,
         )
-    n = s.team.robots
-    _formation_room(s, reach, name, contacts, finding)
+    offsets = formation_offsets(s.mission.formation, s.team.robots)  # about the centroid
+    _formation_room(s, offsets, reach, name, contacts, finding)
     _starts(s, reach, safe, footprints, contacts, finding)
     # the cylinders' distances, raised for a big robot
     for k, ob in enumerate(s.obstacles):
@@ -289,8 +296,8 @@ def preflight(
             )
     # room to avoid a cylinder without running into a teammate (no teammate avoidance)
     # every formation slot's distance to every cylinder along the path (T, N, O)
-    dist = _slot_distances(s, path) if s.obstacles else None
-    squeeze = _squeeze(s, safe, reach, dist, path_dt)
+    dist = _slot_distances(s, path, offsets) if s.obstacles else None
+    squeeze = _squeeze(offsets, safe, reach, dist, path_dt)
     if squeeze is not None:
         k, t, depth, room = squeeze
         finding(
@@ -322,12 +329,12 @@ def preflight(
             refuse=False,
         )
     _fault_sizes(s, name, command_limit, finding)
-    _magnitudes(s, finding, name, command_limit, xi_bar, G)
+    _magnitudes(s, offsets, finding, name, command_limit, xi_bar, G)
     _sightings(s, finding)
     _walls(s, finding, name, safe, reach, dist, path_dt)
     # the path stays on the floor
     w = np.asarray(s.mission.centroid.waypoints)
-    far = np.abs(w).max() + _radius(formation_offsets(s.mission.formation, n)) + reach
+    far = np.abs(w).max() + _radius(offsets) + reach
     if far > ARENA_HALF:
         finding(
             "mission.centroid.waypoints",
@@ -351,9 +358,9 @@ def run_time(s: Scenario) -> float:
     return steps * (STEP_COST[0] * s.team.robots + STEP_COST[1])
 
 
-def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
+def _magnitudes(s, offsets: np.ndarray, finding, name: str, limit: float, xi_bar: float, G) -> None:
     """Numbers that pass their type and sign checks but mean nothing physically: refused or
-    warned with the unit the user probably meant."""
+    warned with the unit the user probably meant (``offsets``: the formation's slots)."""
     if math.isfinite(limit) and xi_bar >= limit:
         finding(
             "noise.xi_bar",
@@ -370,7 +377,7 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
             "undetected (ξ̄ is in m/s: 5 mm/s is 0.005)",
             refuse=False,
         )
-    spacing = _closest_pair(formation_offsets(s.mission.formation, s.team.robots))
+    spacing = _closest_pair(offsets)
     if s.noise.eta_bar > 0.5 * spacing:
         finding(
             "noise.eta_bar",
@@ -416,7 +423,7 @@ def _magnitudes(s, finding, name: str, limit: float, xi_bar: float, G) -> None:
                 refuse=True,
             )
     d = s.fdir.excluded_safe_distance
-    width = 2 * _radius(formation_offsets(s.mission.formation, s.team.robots))
+    width = 2 * _radius(offsets)
     if s.fdir.enabled and d > max(width, 1.0):
         finding(
             "fdir.excluded_safe_distance",
@@ -494,23 +501,22 @@ def _walls(s, finding, name: str, safe: np.ndarray, reach: float, dist, dt: floa
         return
 
 
-def _slot_distances(s: Scenario, path: np.ndarray) -> np.ndarray:
-    """(T, N, O): each formation slot's distance to each cylinder at each sample of the
-    desired centroid ``path`` (T, 2)."""
-    slots = path[:, None, :] + formation_offsets(s.mission.formation, s.team.robots)[None]
+def _slot_distances(s: Scenario, path: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(T, N, O): each formation slot (``offsets`` about the centroid) and its distance to
+    each cylinder at each sample of the desired centroid ``path`` (T, 2)."""
+    slots = path[:, None, :] + offsets[None]
     centres = np.array([ob.position for ob in s.obstacles])
     return np.linalg.norm(slots[:, :, None, :] - centres[None, None], axis=3)
 
 
 def _squeeze(
-    s: Scenario, safe: np.ndarray, reach: float, dist: np.ndarray | None, dt: float
+    offsets: np.ndarray, safe: np.ndarray, reach: float, dist: np.ndarray | None, dt: float
 ) -> tuple[int, float, float, float] | None:
     """The deepest pass of a formation slot inside a cylinder's safe distance that is deeper
     than the room between two robots' hulls: (cylinder, time, depth, room), or None.
     ``dist``: :func:`_slot_distances` (None: no cylinders)."""
     if dist is None:
         return None
-    offsets = formation_offsets(s.mission.formation, s.team.robots)
     room = _closest_pair(offsets) - 2 * reach - CLEARANCE
     depth = (safe[None, None, :] - dist).max(axis=1)  # (T, O)
     t, k = np.unravel_index(int(depth.argmax()), depth.shape)
