@@ -3,6 +3,12 @@
     python benchmarks/bench_scale.py [--n 4 16 64 100] [--duration 20]
     python benchmarks/bench_scale.py --n 1000 --duration 30 --repeat 1
     python benchmarks/bench_scale.py --n 100 --network     # the network's cost
+    python benchmarks/bench_scale.py --n 1000 --duration 20 --repeat 1 --sparse
+
+``--sparse``: the graph a benchmark does not choose: a ring in both directions with a
+chord into a quarter of the robots (in-degree 2-3, :func:`sparse_ring`), which mixes
+slowly and is not invariant under rotation, with the l1 rule and ``fdir.dt_d_max =
+"auto"``: every robot's columns are swept at set-up (no symmetry to share them).
 
 ``--network``: each N twice, on the ideal network and over a lossy, delayed,
 range-limited one (:data:`NETWORK`), both with the l1 rule at k_o = 2 (the round of that
@@ -44,6 +50,18 @@ NETWORK = {
 }
 
 
+def sparse_ring(n: int, seed: int = 5) -> list[list[int]]:
+    """A ring in both directions plus, into a random quarter of the robots, one chord from
+    a robot 3 to 39 places ahead: in-degree 2 or 3 (robots numbered from 1)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    edges = {(i, (i + 1) % n) for i in range(n)} | {((i + 1) % n, i) for i in range(n)}
+    for i in rng.choice(n, n // 4, replace=False):
+        edges.add(((int(i) + int(rng.integers(3, 40))) % n, int(i)))
+    return [[a + 1, b + 1] for a, b in sorted(edges)]
+
+
 def scene(n: int, duration: float, log_rate: float = 10.0, network: str = ""):
     """The benchmark's scenario for ``n`` robots (see the module docstring)."""
     from dftc_mujoco import scenario
@@ -67,7 +85,11 @@ def scene(n: int, duration: float, log_rate: float = 10.0, network: str = ""):
         },
         "faults": [{"robot": 1, "kind": "stop", "t": duration / 2}],
     }
-    if network:  # both variants with l1 at k_o = 2; "lossy" adds the network
+    if network == "sparse":  # the graph no benchmark chose, with l1 and Δt_d,max "auto"
+        d["team"]["graph"] = sparse_ring(n)
+        d["onboard"] = {"thresholds": "l1"}
+        d["fdir"] = {"dt_d_max": "auto"}
+    elif network:  # both variants with l1 at k_o = 2; "lossy" adds the network
         d["gains"]["ko"] = 2.0
         d["onboard"] = {"thresholds": "l1"}
         if network == "lossy":
@@ -75,13 +97,13 @@ def scene(n: int, duration: float, log_rate: float = 10.0, network: str = ""):
     return scenario.from_dict(d, source=f"bench N={n}")
 
 
-def run_peak(n: int, duration: float, log_rate: float) -> dict:
+def run_peak(n: int, duration: float, log_rate: float, variant: str = "") -> dict:
     """One run as ``python -m dftc_mujoco.run`` makes it (set-up, the whole run, the records
     and their derived fields), alone in this fresh process: its peak resident memory and
     wall time (imports excluded)."""
     from dftc_mujoco.closed_loop.loop import Simulation
 
-    s = scene(n, duration, log_rate)
+    s = scene(n, duration, log_rate, variant)
     t0 = time.perf_counter()
     with Simulation(s) as sim:
         sim.run(progress=False)
@@ -101,8 +123,9 @@ def one(
 
     s = scene(n, duration, log_rate, network)
     t0 = time.perf_counter()
-    decay.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
-    kappa = time.perf_counter() - t0
+    if network != "sparse":  # (l1 needs no κ/λ)
+        decay.decay_bounds(ring_with_chords(n, tuple(c for c in (2, 5) if c < n)), s.gains.ko)
+    kappa = time.perf_counter() - t0 if network != "sparse" else float("nan")
     # forget it: the cold set-up below is a fresh process's, which computes κ/λ itself
     decay._cached_decay_bounds.cache_clear()
     r = measure(s, repeat)
@@ -136,6 +159,7 @@ def main() -> None:
     p.add_argument("--log-rate", type=float, default=10.0, help="log.npz rate [Hz]")
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--network", action="store_true", help="the network's cost (see above)")
+    p.add_argument("--sparse", action="store_true", help="a ring with sparse chords (see above)")
     p.add_argument("--one", type=int, help=argparse.SUPPRESS)
     p.add_argument("--variant", default="", help=argparse.SUPPRESS)
     p.add_argument("--peak", action="store_true", help=argparse.SUPPRESS)
@@ -146,7 +170,7 @@ def main() -> None:
     )
     args = p.parse_args()
     if args.one and args.peak:
-        print(json.dumps(run_peak(args.one, args.duration, args.log_rate)))
+        print(json.dumps(run_peak(args.one, args.duration, args.log_rate, args.variant)))
         return
     if args.one:
         r = one(args.one, args.duration, args.log_rate, args.repeat, args.variant)
@@ -161,7 +185,7 @@ def main() -> None:
         f"{'ratio':>6} {'RTF':>7} {'RTF+setup':>10} {'peak':>8} {'process':>8} exact "
         f"{'run peak':>9}"
     )
-    variants = ["ideal", "lossy"] if args.network else [""]
+    variants = ["ideal", "lossy"] if args.network else ["sparse"] if args.sparse else [""]
     runs = [(n, v) for n in args.n for v in variants]
     loops: dict[tuple[int, str], float] = {}
     for n, variant in runs:
@@ -202,6 +226,8 @@ def main() -> None:
                     str(peak_s),
                     "--log-rate",
                     str(args.log_rate),
+                    "--variant",
+                    variant,
                 ],
                 capture_output=True,
                 text=True,
