@@ -57,9 +57,13 @@ def sparse_ring(n: int, seed: int = 5) -> list[list[int]]:
 
     rng = np.random.default_rng(seed)
     edges = {(i, (i + 1) % n) for i in range(n)} | {((i + 1) % n, i) for i in range(n)}
-    for i in rng.choice(n, n // 4, replace=False):
-        edges.add(((int(i) + int(rng.integers(3, 40))) % n, int(i)))
+    for i in rng.choice(n, n // 4, replace=False) if n > 4 else ():
+        edges.add(((int(i) + int(rng.integers(3, min(40, n - 1)))) % n, int(i)))
     return [[a + 1, b + 1] for a, b in sorted(edges)]
+
+
+def _seconds(x: float) -> str:
+    return "-" if x != x else f"{x:.2f}s"  # NaN: not measured
 
 
 def scene(n: int, duration: float, log_rate: float = 10.0, network: str = ""):
@@ -238,7 +242,7 @@ def main() -> None:
         if variant == "lossy":
             cost = f"  network: loop x{r['loop_us'] / loops[(n, 'ideal')]:.3f} of the ideal one"
         print(
-            f"{variant:<6}" * bool(variant) + f"{r['n']:>4} {r['kappa_lambda_s']:>7.2f}s "
+            f"{variant:<6}" * bool(variant) + f"{r['n']:>4} {_seconds(r['kappa_lambda_s']):>8} "
             f"{r['setup_s']:>7.2f}s {r['cold_setup_s']:>7.2f}s "
             f"{r['bare_us']:>8.1f}us {r['loop_us']:>8.1f}us "
             f"{r['ratio']:>6.2f} {r['rtf']:>6.1f}x {r['rtf_with_setup']:>9.1f}x "

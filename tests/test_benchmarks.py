@@ -75,6 +75,27 @@ def test_the_pass_benchmark_times_each_stage_and_the_shared_period():
     assert shared > 0 and one > 0 and 0 <= mine <= chunks and chunks >= 20, loop.groups()
 
 
+def test_the_scale_benchmark_runs_on_a_ring_with_sparse_chords():
+    """``bench_scale.py --sparse``: the graph is the sparse ring (in-degree 2 or 3, not the
+    same from every robot), the run's replay ends in its final state bit for bit, and the
+    row reads a set-up, a loop and a ratio."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from bench_scale import sparse_ring
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    from dftc_mujoco.core.graph import Graph, rotation_invariant
+
+    edges = sparse_ring(40)
+    graph = Graph(40, [(a - 1, b - 1) for a, b in edges])
+    assert set(graph.in_degree()) == {2, 3} and not rotation_invariant(graph)
+    out = _bench("bench_scale.py", "--n", "8", "--duration", "2.5", "--repeat", "1", "--sparse")
+    row = [line for line in out.splitlines() if line.startswith("sparse")]
+    assert len(row) == 1 and " yes " in row[0], out
+    setup, ratio = re.search(r"\s([\d.]+)s\s.*?us\s+([\d.]+)\s", row[0]).groups()
+    assert float(setup) >= 0 and float(ratio) > 1, row
+
+
 def test_the_busy_machine_benchmark_compares_the_shared_pass_with_its_fair_share():
     """``bench_busy.py`` at N = 160 beside one CPU-bound process: both ways timed alone and
     beside it, and the shared pass's time set against its fair share."""
