@@ -106,7 +106,7 @@ def _robot_file_text(
     path: Path, text: str, values: dict[str, float], keep: bool, complete: bool
 ) -> tuple[str, list[Change]]:
     import tomlkit
-    from tomlkit.items import Comment, Item, Table, Whitespace
+    from tomlkit.items import Item, Table
 
     from ..sim.robots import CALIBRATION_KEYS
 
@@ -125,6 +125,7 @@ def _robot_file_text(
             "keys of a [calibration] table: move those keys into one and run again"
         )
     changes: list[Change] = []
+    added: list[str] = []  # new keys: written after the table's last key, below
     container = table.value
 
     def item(key: str) -> Item:
@@ -145,22 +146,45 @@ def _robot_file_text(
             fresh.trivia.comment = ""  # the old value's comment described the old value
             fresh.trivia.comment_ws = ""
         else:
-            # after the table's last key: a comment or blank line that ends the table
-            # belongs to what follows it (the next table's own comment)
-            at = 0
-            for k, (name, entry) in enumerate(container.body):
-                if name is not None and not isinstance(entry, Comment | Whitespace):
-                    at = k + 1
-            if at < len(container.body):
-                container._insert_at(at, key, new)
-            else:
-                container.append(key, new)
+            added.append(f"{key} = {new.as_string()}\n")
     if complete and not keep:
         for key in [k for k in CALIBRATION_KEYS if k in container and k not in values]:
             old = item(key)
             changes.append(Change(key, old.unwrap(), None, old.trivia.comment))
             del container[key]
-    return doc.as_string(), changes
+    return _after_last_key(path, doc.as_string(), "".join(added)), changes
+
+
+#: the header of the robot file's [calibration] table, and of any table
+_CALIBRATION_HEADER = re.compile(r"^[ \t]*\[[ \t]*([\"']?)calibration\1[ \t]*\][^\n]*(\n|$)", re.M)
+_ANY_HEADER = re.compile(r"^[ \t]*\[")
+
+
+def _after_last_key(path: Path, text: str, lines: str) -> str:
+    """``text`` with ``lines`` inserted after the last key of its [calibration] table: a
+    comment or blank line that ends the table belongs to what follows it (the next
+    table's own comment), so it stays below them."""
+    if not lines:
+        return text
+    header = _CALIBRATION_HEADER.search(text)
+    if header is None:  # a header tomlkit reads that this does not (a unicode escape)
+        raise ScenarioError(
+            f"{path}: calibration: its table header is not written [calibration]; write it "
+            "so and run again"
+        )
+    at = pos = header.end()
+    if not header.group(2):  # the header is the file's last line
+        text, lines = text + "\n", lines
+        at = pos = len(text)
+    for line in text[pos:].splitlines(keepends=True):
+        if _ANY_HEADER.match(line):
+            break
+        pos += len(line)
+        if line.strip() and not line.lstrip().startswith("#"):
+            at = pos  # a key's line (or a multi-line value's)
+    if at == len(text) and not text.endswith("\n"):
+        lines = "\n" + lines
+    return text[:at] + lines + text[at:]
 
 
 # --------------------------------------------------------------------------- MJCF
