@@ -546,6 +546,31 @@ def test_calibrate_keep_keeps_the_values_the_file_has(tmp_path, capsys):
     assert "--keep" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("table", "after"),
+    [
+        ("[calibration]", ""),  # the file's last line, no newline
+        ("[ 'calibration' ]  # mine\n", "\n# the motors\n[motor]\ntime_constant = 0.05\n"),
+        ("[calibration]\nlag = 0.08\n\n", "# the motors\n[motor]\ntime_constant = 0.05\n"),
+    ],
+)
+def test_a_new_calibration_key_goes_after_the_tables_last_key(tmp_path, table, after):
+    """--write adds a key the file lacks inside its [calibration] table, after its last
+    key: the blank line and the comment that lead to the next table stay with it."""
+    import tomllib
+
+    from dftc_mujoco.calibrate import files
+
+    head = 'mjcf = "bot.xml"\nbase = "base"\n'
+    path = robot_file(tmp_path, head + table + after)
+    files.write(path, {"mismatch": 0.002}, keep=True)
+    text = path.read_text()
+    assert text.startswith(head) and text.endswith(after), text
+    assert tomllib.loads(text)["calibration"]["mismatch"] == 0.002
+    keys = text.index("mismatch = 0.002\n")
+    assert text.index("calibration") < keys < len(text) - len(after)
+
+
 INCLUDED_BOX = """<mujoco model="boxbot">
   <!-- the parts are shared with the lab's other models -->
   <include file="parts.xml"/>

@@ -174,7 +174,7 @@ def _after_last_key(path: Path, text: str, lines: str) -> str:
         )
     at = pos = header.end()
     if not header.group(2):  # the header is the file's last line
-        text, lines = text + "\n", lines
+        text += "\n"
         at = pos = len(text)
     for line in text[pos:].splitlines(keepends=True):
         if _ANY_HEADER.match(line):
