@@ -82,8 +82,8 @@ class TeamConfig:
     # compose the paper's blocks in one compiled period when possible (DFTC_PERIOD=general in
     # the environment: never, the blocks' own methods; dftc_mujoco.closed_loop.execution)
     compiled: bool = field(default_factory=_compiled_by_default)
-    # the compiled period's pass over the N × N state runs in this many threads (sharing.py)
-    # from shared_from members on (dftc_mujoco.closed_loop.execution)
+    # the compiled period's pass over the N × N state runs in this many threads
+    # (execution/sharing.py) from shared_from members on (dftc_mujoco.closed_loop.execution)
     threads: int = 1
     shared_from: int = 150
     fdir: bool = True  # False: nominal DFTC only (no compensation, no decisions)
