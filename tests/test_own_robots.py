@@ -1,8 +1,8 @@
 """A user's own robot, unchanged: small models of the kinds public mobile bases are published
 as (tests/data/robots): a differential drive on coupled tendons, a four-wheel skid steer
 spawned above the floor, servos that throw their robot off the plane, servos that chatter
-at the scene's step, a fixed-base arm given a planar base. Each is driven through the
-simulator's own drive and physics."""
+at the scene's step (or at the step that keeps them on the plane), a fixed-base arm given
+a planar base. Each is driven through the simulator's own drive and physics."""
 
 from __future__ import annotations
 
@@ -129,6 +129,22 @@ def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_sho
     assert share > CHATTER_SHARE, said
     assert measured["timestep"] < 0.002 and cal.timestep == measured["timestep"]
     assert cal.smooth_max < share * cal.command_limit / 2
+    assert cal.smooth_max < CHATTER_SHARE * cal.command_limit
+
+
+def test_a_drive_that_runs_away_at_the_scene_step_and_chatters_at_the_next_is_calmed_too(
+    capsys,
+):
+    """Wheel servos that rock the base past the plane's limits at the scene's 2 ms step and,
+    at 1 ms, keep it on the floor but chatter (a third of their range as mismatch): the
+    step that kept the robot on the plane is checked for chatter as the scene's step is,
+    and calibrate goes on to a step that calms the servos."""
+    cal, measured = on_plane(str(DATA / "jumpbot.robot.toml"))
+    said = capsys.readouterr().out
+    assert "it left the plane at 2 ms: measuring at 1 ms" in said, said
+    assert "at 1 ms the drive's mismatch on smooth commands" in said, said
+    assert "its servos chatter at that step" in said, said
+    assert measured["timestep"] < 0.001 and cal.timestep == measured["timestep"]
     assert cal.smooth_max < CHATTER_SHARE * cal.command_limit
 
 

@@ -184,11 +184,11 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
     """:func:`.mismatch.measure` at the robot's physics step, and where the robot leaves the
     plane there, at each shorter step of :data:`.physics.STEPS` until it stays on it (the
     fix, stored as ``timestep``); with a skid steer's track measured first. A drive that
-    stays on the plane but whose mismatch on smooth commands takes more than
-    :data:`.physics.CHATTER_SHARE` of its command range is measured at the shorter steps
-    too (:func:`_calmer`). Returns the calibration and what it measured besides
-    (``timestep``, ``track``); refuses in one line when no step keeps the robot on the
-    plane."""
+    stays on the plane (at the first step or at the one that kept it there) but whose
+    mismatch on smooth commands takes more than :data:`.physics.CHATTER_SHARE` of its
+    command range is measured at the shorter steps too (:func:`_calmer`). Returns the
+    calibration and what it measured besides (``timestep``, ``track``); refuses in one
+    line when no step keeps the robot on the plane."""
     robot = robot_with(model)
     first = min(TIMESTEP, robot.timestep)
     tried: list[tuple[float, Trouble]] = []  # (step, what went wrong there)
@@ -210,11 +210,15 @@ def on_plane(model: str) -> tuple[Calibration, dict[str, float]]:
             step0, trouble = tried[0]
             print(
                 f"WARNING: {trouble.line(step0)}, beyond what a run allows ({limits()}): its "
-                f"drive runs away at that step; at {step * 1000:g} ms it stays on the plane: "
-                f"calibrated there (timestep = {step:g}: every run with this robot steps at it)"
+                f"drive runs away at that step; at {step * 1000:g} ms it stays on the plane"
             )
-            return cal, measured
-        return _calmer(model, cal, measured, step)
+        cal, measured = _calmer(model, cal, measured, step)
+        if tried and cal.timestep == step:  # else _calmer said where it calibrated
+            print(
+                f"calibrated at {step * 1000:g} ms (timestep = {step:g}: every run with this "
+                "robot steps at it)"
+            )
+        return cal, measured
     (step0, trouble), (last, why) = tried[0], tried[-1]
     shorter = ", ".join(f"{s * 1000:g}" for s, _ in tried[1:])
     raise ScenarioError(
