@@ -340,6 +340,52 @@ def test_delays_agree_with_the_first_crossing_of_the_signature():
     ).all()
 
 
+def test_delays_are_sought_no_further_than_the_run_lasts():
+    """A slow ring (a chord into a quarter of its robots): its farthest pairs cross after
+    more than a minute. With ``limit`` the sweep stops past it: the delays within it are
+    the same, every later one reads a lower bound past the limit, and a pair that never
+    crosses still reads +inf; a run shorter than the delays says its Δt_d,max is longer
+    than the run, where eq. 46 sought it no further."""
+    import sys
+
+    from dftc_mujoco import load_scenario, simulate
+    from dftc_mujoco.runtime.paths import PACKAGE
+
+    sys.path.insert(0, str(PACKAGE.parent / "benchmarks"))
+    try:
+        from bench_scale import sparse_ring
+    finally:
+        sys.path.pop(0)
+    n, ko, fault, limit = 30, 3.0, 0.1, 5.0
+    edges = sparse_ring(n)
+    graph = Graph(n, [(a - 1, b - 1) for a, b in edges])
+    mu = np.full((n, n), 0.002)
+    mu[0, 1] = fault / ko  # never crossed
+    full = predicted_delays(graph, ko, H, mu, fault)
+    cut = predicted_delays(graph, ko, H, mu, fault, limit=limit)
+    finite = np.isfinite(full)
+    assert full[finite].max() > 60.0 and (full[finite] > limit).any()
+    within = full <= limit
+    np.testing.assert_array_equal(cut[within], full[within])
+    later = finite & ~within
+    assert (cut[later] > limit).all() and (cut[later] <= full[later]).all()
+    assert np.isinf(cut[~finite]).all() and np.isinf(cut[0, 1])
+    # a run of 6 s on that graph: its horizon is longer than the run
+    s = load_scenario(
+        "paper_case",
+        {
+            "duration": 6.0, "obstacles": [], "faults": [],
+            "team.robots": n, "team.graph": edges,
+            "team.initial_positions": {"layout": "formation", "jitter": 0.05},
+            "mission.formation": {"shape": "grid", "side": 0.5},
+            "onboard.thresholds": "l1", "fdir.dt_d_max": "auto",
+        },
+    )  # fmt: skip
+    info = simulate(s, progress=False).summary["dt_d_max"]
+    assert info["longer_than_the_run"] is True and info["value"] > 6.0
+    assert info["predicted_delays_max"] is None and "warning" not in info
+
+
 def test_delays_of_a_lagged_drive_follow_the_signature_of_its_decaying_velocity():
     """A stop on a drive with a first-order lag τ: the robot's velocity decays through the
     lag, so y_m,k drifts by h φ (1 − e^(−mh/τ)) in period m, not h φ from the first period

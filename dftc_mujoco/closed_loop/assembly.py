@@ -205,6 +205,7 @@ def team_config(
         obstacle_activation=activation,
         detection_window=f.detection_window,
         dt_d_max=f.dt_d_max,
+        run_length=s.duration,
         isolation=f.isolation,
         reference_fault=f.reference_fault or s.mission.centroid.speed,
         initial_error_bound=(

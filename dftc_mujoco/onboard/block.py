@@ -45,6 +45,9 @@ class TeamConfig:
     obstacle_activation: np.ndarray  # (O,)
     detection_window: float = 0.2
     dt_d_max: float | str = 5.0  # or "auto": eq. 46 (onboard/thresholds/delays.py)
+    # [s] how long the run lasts: "auto" seeks eq. 46's delays no further (a Δt_d,max
+    # longer than the run changes nothing in it: no exclusion can follow a flag)
+    run_length: float = np.inf
     isolation: str = "pairwise"  # "exclusive", "exclusive_history" (eq. 39, decision.py)
     reference_fault: float = 0.1  # [m/s] constant fault size "auto" sizes Δt_d,max for
     initial_error_bound: float = 1.0  # ε̄ [m] in the rule's own meaning (closed_loop/premises.py)

@@ -6,6 +6,7 @@ twice the steady threshold of any rule; :func:`detection_horizon` makes Δt_d,ma
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,7 @@ def predicted_delays(
     fault: float,
     max_work: float = MAX_WORK,
     lag: float | np.ndarray = 0.0,
+    limit: float = np.inf,
 ) -> np.ndarray:
     """ⁱΔt_d (M, M) [s] for a constant, uncompensated fault of size ``fault`` [m/s] on robot k.
 
@@ -54,17 +56,22 @@ def predicted_delays(
     the drift: A_k ≥ 0). Its crossings are swept as S's are, and bounded past a
     column's certificate from the decay of R and E (:func:`_lagged_tail`). A team whose
     robots model different lags (``lag`` (M,)) gets each column k with robot k's own.
+
+    ``limit`` [s]: the sweep goes no further; a pair that has not crossed by then (and whose
+    crossing is not bounded yet) reads the first period past it, a lower bound of its delay.
     """
     if np.ndim(lag) > 0:
         lags = np.asarray(lag, dtype=float)
         out = np.full((graph.n, graph.n), np.inf)
         for tau in distinct_lags(lags):
             mine = lags == tau
-            out[:, mine] = predicted_delays(graph, ko, h, mu_steady, fault, max_work, tau)[:, mine]
+            delays = predicted_delays(graph, ko, h, mu_steady, fault, max_work, tau, limit)
+            out[:, mine] = delays[:, mine]
         return out
     lag = float(lag)
     n = graph.n
     beta = h * ko
+    last = MAX_PERIODS if not np.isfinite(limit) else min(MAX_PERIODS, math.floor(limit / h) + 1)
     mass = 1.0 / beta
     need = 2.0 * np.asarray(mu_steady, float) / (h * fault)  # [i, k], in units of S
     adj = Adjacency.of(graph)
@@ -77,14 +84,14 @@ def predicted_delays(
         rot = need[(np.arange(n)[:, None] + np.arange(n)[None, :]) % n, np.arange(n)[None, :]]
         need0 = rot.max(axis=1, keepdims=True)
         ok0 = np.isfinite(need0) & (need0 < mass * (1.0 - 1e-12))
-        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work, h, lag)
+        periods = _crossing_periods(adj, beta, np.array([0]), need0, ok0, max_work, h, lag, last)
         idx = (np.arange(n)[:, None] - np.arange(n)[None, :]) % n
         return periods[:, 0][idx] * h
     out = np.full((n, n), np.inf)
     ks = np.flatnonzero(crossable.any(axis=0))
     if len(ks):
         out[:, ks] = _crossing_periods(
-            adj, beta, ks, need[:, ks], crossable[:, ks], max_work, h, lag
+            adj, beta, ks, need[:, ks], crossable[:, ks], max_work, h, lag, last
         )
     return out * h
 
@@ -98,9 +105,11 @@ def _crossing_periods(
     max_work: float,
     h: float = 0.0,
     lag: float = 0.0,
+    last: int = MAX_PERIODS,
 ) -> np.ndarray:
     """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never); with
-    a drive's ``lag`` > 0, with W_ik(j) ≥ need (:func:`predicted_delays`)."""
+    a drive's ``lag`` > 0, with W_ik(j) ≥ need (:func:`predicted_delays`). The sweep stops
+    at period ``last``: a crossing not found or bounded by then reads ``last``."""
     n, kk = adj.n, len(ks)
     mass = 1.0 / beta
     result = np.where(crossable & (need <= 0.0), 0.0, np.inf)
@@ -125,15 +134,20 @@ def _crossing_periods(
         open_ = (when < 0) & np.isfinite(goal)
         crossed = ~open_.any(axis=0)
         out_of_budget = work > max_work or t >= MAX_PERIODS
+        at_last = t >= last
         # past its certificate a column's crossings are bounded from R's decay; while the
         # sweep is cheap it goes on to find them exactly
-        done = crossed | ((cert >= 0) & (work > EXACT_CROSSING_WORK)) | out_of_budget
+        done = crossed | ((cert >= 0) & (work > EXACT_CROSSING_WORK)) | out_of_budget | at_last
         if not done.any():
             continue
         idx = np.flatnonzero(done)
         c = cols[idx]
         got = when[:, idx] >= 0
         result[:, c] = np.where(got, when[:, idx], result[:, c])
+        if at_last:  # the rest lie past the last period sought: that is all that is asked
+            open_at_last = ~got & np.isfinite(goal[:, idx])
+            result[:, c] = np.where(open_at_last, float(last), result[:, c])
+            break
         # the rest from R(t + m) <= s^m R(t) (A_k >= 0)
         rem = mass - tot[:, idx] + _slack(t, mass)
         s = np.clip(((rem - v[:, idx]) / rem).max(axis=0), 0.0, 1.0)
@@ -218,18 +232,24 @@ def detection_horizon(
     steady = np.array(thresholds.mu(1e9), dtype=float)
     # a stop of a robot whose drive lags its command reaches its velocity through the lag
     lag = cfg.lag if np.ndim(cfg.lag) == 0 or members is None else np.asarray(cfg.lag)[members]
-    delays = predicted_delays(graph, cfg.ko, cfg.dt, steady, cfg.reference_fault, lag=lag)
+    # sought for as long as the run lasts: a longer Δt_d,max changes nothing in it
+    delays = predicted_delays(
+        graph, cfg.ko, cfg.dt, steady, cfg.reference_fault, lag=lag, limit=cfg.run_length
+    )
     # the teammates decide the exclusion (eq. 43): robot k's judgement of itself is
     # reported, not waited for (its own residual sits on its noise and drift offset)
-    self_ok = bool(np.isfinite(np.diag(delays)).all())
+    self_ok = bool((np.diag(delays) <= cfg.run_length).all())
     np.fill_diagonal(delays, 0.0)
     worst = float(delays.max()) + cfg.detection_window
+    longer = bool(np.isfinite(worst) and worst > cfg.run_length)
     info: dict[str, Any] = {
         "source": "analysis (eq. 46)",
         "reference_fault": cfg.reference_fault,
-        "predicted_delays_max": worst if np.isfinite(worst) else None,
+        "predicted_delays_max": worst if np.isfinite(worst) and not longer else None,
         "self_detection_guaranteed": self_ok,
     }
+    if longer:  # the value is then a lower bound, past the run's end
+        info["longer_than_the_run"] = True
     lags = distinct_lags(lag)
     if max(lags) > 0:  # the prediction's premise: a stop's velocity decays through the lag
         info["drive_lag"] = lags[0] if len(lags) == 1 else lags
