@@ -370,6 +370,16 @@ def test_delays_are_sought_no_further_than_the_run_lasts():
     later = finite & ~within
     assert (cut[later] > limit).all() and (cut[later] <= full[later]).all()
     assert np.isinf(cut[~finite]).all() and np.isinf(cut[0, 1])
+    # without a limit, a sweep cut short by its own period cap still gives upper bounds
+    from dftc_mujoco.onboard.thresholds import delays
+
+    cap = delays.MAX_PERIODS
+    delays.MAX_PERIODS = 64
+    try:
+        short = predicted_delays(graph, ko, H, mu, fault)
+    finally:
+        delays.MAX_PERIODS = cap
+    assert (short >= full - 1e-9).all()
     # a run of 6 s on that graph: its horizon is longer than the run
     s = load_scenario(
         "paper_case",

@@ -71,7 +71,7 @@ def predicted_delays(
     lag = float(lag)
     n = graph.n
     beta = h * ko
-    last = MAX_PERIODS if not np.isfinite(limit) else min(MAX_PERIODS, math.floor(limit / h) + 1)
+    last = math.floor(limit / h) + 1 if np.isfinite(limit) else math.inf  # periods
     mass = 1.0 / beta
     need = 2.0 * np.asarray(mu_steady, float) / (h * fault)  # [i, k], in units of S
     adj = Adjacency.of(graph)
@@ -105,11 +105,12 @@ def _crossing_periods(
     max_work: float,
     h: float = 0.0,
     lag: float = 0.0,
-    last: int = MAX_PERIODS,
+    last: float = math.inf,
 ) -> np.ndarray:
     """First period j with S_ik(j) ≥ need (N, K) for the columns ``ks`` (inf if never); with
     a drive's ``lag`` > 0, with W_ik(j) ≥ need (:func:`predicted_delays`). The sweep stops
-    at period ``last``: a crossing not found or bounded by then reads ``last``."""
+    at period ``last`` (inf: no such limit, only the budget's): a crossing not found or
+    bounded by then reads ``last``."""
     n, kk = adj.n, len(ks)
     mass = 1.0 / beta
     result = np.where(crossable & (need <= 0.0), 0.0, np.inf)
