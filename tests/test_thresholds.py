@@ -349,6 +349,7 @@ def test_delays_are_sought_no_further_than_the_run_lasts():
     import sys
 
     from dftc_mujoco import load_scenario, simulate
+    from dftc_mujoco.reporting.report import fault_lines
     from dftc_mujoco.runtime.paths import PACKAGE
 
     sys.path.insert(0, str(PACKAGE.parent / "benchmarks"))
@@ -384,16 +385,21 @@ def test_delays_are_sought_no_further_than_the_run_lasts():
     s = load_scenario(
         "paper_case",
         {
-            "duration": 6.0, "obstacles": [], "faults": [],
+            "duration": 6.0, "obstacles": [],
+            "faults": [{"robot": 5, "kind": "stop", "t": 2.5}],
             "team.robots": n, "team.graph": edges,
             "team.initial_positions": {"layout": "formation", "jitter": 0.05},
             "mission.formation": {"shape": "grid", "side": 0.5},
             "onboard.thresholds": "l1", "fdir.dt_d_max": "auto",
         },
     )  # fmt: skip
-    info = simulate(s, progress=False).summary["dt_d_max"]
+    summary = simulate(s, progress=False).summary
+    info = summary["dt_d_max"]
     assert info["longer_than_the_run"] is True and info["value"] > 6.0
     assert info["predicted_delays_max"] is None and "warning" not in info
+    # the stop is flagged; the report gives no exclusion time, which is only a lower bound
+    (line,) = fault_lines(summary)
+    assert "NOT excluded before the run ended (Δt_d,max, eq. 46, is longer than the run)" in line
 
 
 def test_delays_of_a_lagged_drive_follow_the_signature_of_its_decaying_velocity():

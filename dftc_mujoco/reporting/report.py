@@ -108,16 +108,23 @@ def mission_line(s: dict[str, Any]) -> str:
 def _due(s: dict[str, Any], fault: dict[str, Any]) -> str:
     """Why a flagged fault was not excluded, when the reason is the run's end."""
     due = [
-        e["t_r"]
+        e
         for e in s.get("events", [])
         if e.get("kind") == Kind.EXCLUSION_SCHEDULED
         and e.get("robot") == fault["robot"]
         and e["t"] >= fault["t"]
     ]
     end = s.get("duration")
-    if due and end is not None and due[-1] > end:
-        return f" before the run ended (its exclusion was due at {due[-1]:.2f} s)"
-    return ""
+    if not due or end is None or due[-1]["t_r"] <= end:
+        return ""
+    horizon = s.get("dt_d_max")
+    horizon = horizon if isinstance(horizon, dict) else {}
+    for later in horizon.get("after_exclusions", []):  # the one in force when it was due
+        if later["t"] <= due[-1]["t"]:
+            horizon = later
+    if horizon.get("longer_than_the_run"):  # t_r is then only a lower bound
+        return " before the run ended (Δt_d,max, eq. 46, is longer than the run)"
+    return f" before the run ended (its exclusion was due at {due[-1]['t_r']:.2f} s)"
 
 
 def fault_lines(s: dict[str, Any]) -> list[str]:
