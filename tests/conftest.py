@@ -74,6 +74,44 @@ def fault_free_run() -> RunResult:
     return simulate(make(d))
 
 
+#: one period of paper_case on each path: what most tests and their subprocesses compile
+_WARM = (
+    "from dftc_mujoco import Simulation, load_scenario\n"
+    "from dftc_mujoco.closed_loop.execution import Execution\n"
+    "with Simulation(load_scenario('paper_case'), execution=Execution({!r})) as sim:\n"
+    "    sim.step(2)\n"
+)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Fill numba's cache before the tests start (in the process that starts pytest-xdist's
+    workers, once): on a fresh clone each worker, and each command-line run a test starts
+    meanwhile, would otherwise compile the same functions side by side. Both paths compile
+    at once, one process each; on a warm cache they only load it (a few seconds)."""
+    if hasattr(config, "workerinput") or os.environ.get("NUMBA_DISABLE_JIT") == "1":
+        return
+    import subprocess
+    import sys
+    import time
+
+    t0 = time.perf_counter()
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _WARM.format(period)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for period in ("compiled", "general")
+    ]
+    for proc in procs:
+        _, err = proc.communicate()
+        if proc.returncode != 0:  # the tests that need it will say what is wrong
+            print(f"numba's cache was not filled: {err.strip().splitlines()[-1:]}")
+    took = time.perf_counter() - t0
+    print(f"numba's cache filled for the onboard period ({took:.0f} s)", flush=True)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Run tests/test_ray.py first (the rest keeps its order). Its `ray://` test has the
     head node start a server process per driver; at the end of a full suite on the 2-core
