@@ -8,6 +8,7 @@ compared with brute-force ones on small graphs.
 import numpy as np
 import pytest
 
+from dftc_mujoco.core.events import describe, loaded
 from dftc_mujoco.core.graph import Graph, random_strongly_connected, ring_with_chords
 from dftc_mujoco.errors import ScenarioError
 from dftc_mujoco.onboard.execution.locality import demo_team
@@ -400,6 +401,11 @@ def test_delays_are_sought_no_further_than_the_run_lasts():
     # the stop is flagged; the report gives no exclusion time, which is only a lower bound
     (line,) = fault_lines(summary)
     assert "NOT excluded before the run ended (Δt_d,max, eq. 46, is longer than the run)" in line
+    # and so does the event that schedules it, as the run goes
+    (due,) = [e for e in summary["events"] if e["kind"] == "exclusion_scheduled"]
+    assert due["after_run"] is True and due["t_r"] > 6.0
+    assert describe(loaded(due)).endswith("will not be excluded before the run ends: "
+                                          "Δt_d,max reaches past it")  # fmt: skip
 
 
 def test_delays_of_a_lagged_drive_follow_the_signature_of_its_decaying_velocity():

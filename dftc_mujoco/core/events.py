@@ -60,7 +60,7 @@ KINDS: dict[Kind, tuple[str, ...]] = {
     Kind.REACTIVE_OFF: ("robot",),
     Kind.DETECTION: ("by", "robot", "premises"),
     Kind.PREMISE_VIOLATED: ("premise", "robot", "value", "bound", "until"),
-    Kind.EXCLUSION_SCHEDULED: ("robot", "t_r"),
+    Kind.EXCLUSION_SCHEDULED: ("robot", "t_r", "after_run"),
     Kind.EXCLUSION: ("robot", "flagged_by", "detected_by"),
     Kind.EXCLUSION_CANCELLED: ("robot", "detected_by", "reason"),
     Kind.EXCLUSION_POSTPONED: ("robot", "reason", "last_contact", "t_r", "ratio", "was", "phi_bar"),
@@ -189,6 +189,8 @@ def _premise_violated(e: Mapping[str, Any], r: int) -> str:
 
 
 def _exclusion_scheduled(e: Mapping[str, Any], r: int) -> str:
+    if e.get("after_run"):  # t_r past the run's end (a lower bound where eq. 46's sweep stopped)
+        return f"robot {r} will not be excluded before the run ends: Δt_d,max reaches past it"
     return f"robot {r} will be excluded at {e['t_r']:.2f} s unless nobody flags it then"
 
 

@@ -51,8 +51,10 @@ class Recovery:
         max_faults: int,
         self_exclusion: bool = False,
         postpone_on_contact: bool = True,
+        run_length: float = float("inf"),
     ) -> None:
         self.dt_d_max = float(dt_d_max)
+        self.run_length = float(run_length)  # an exclusion due later is said to be so
         self.max_faults = int(max_faults)
         self.self_exclusion = bool(self_exclusion)
         self.postpone_on_contact = bool(postpone_on_contact)
@@ -86,7 +88,8 @@ class Recovery:
                 self.pending[robot] = t_r
                 # a contact up to T_s + Δt_d,max earlier may explain it (a new start)
                 self.since[robot] = t - self.settle - self.dt_d_max
-                events.append(make(t, Kind.EXCLUSION_SCHEDULED, robot=robot + 1, t_r=t_r))
+                late = {"after_run": True} if t_r > self.run_length else {}
+                events.append(make(t, Kind.EXCLUSION_SCHEDULED, robot=robot + 1, t_r=t_r, **late))
         return events
 
     def counts(self, by: int, robot: int) -> bool:

@@ -145,7 +145,11 @@ class Team:
         self.dt_d_max, self.dt_d_max_info = detection_horizon(config, config.graph, self.thresholds)
         # the exclusion protocol (eqs. 42-43) under the fault hypothesis
         self.recovery = Recovery(
-            self.dt_d_max, config.max_faults, config.self_exclusion, config.postpone_on_contact
+            self.dt_d_max,
+            config.max_faults,
+            config.self_exclusion,
+            config.postpone_on_contact,
+            config.run_length,
         )
         # each robot's own alarm from its fault estimate confirms its exclusion
         self.alarm = EstimateAlarm.of(config, n, getattr(self.thresholds, "phi_bar", None))
