@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from dftc_mujoco import calibrate, load_scenario, simulate
+from dftc_mujoco.calibrate import command
 from dftc_mujoco.calibrate.command import on_plane
 from dftc_mujoco.calibrate.mismatch import LAG_CANDIDATES, Calibration, lag_choice, report
 from dftc_mujoco.calibrate.physics import CHATTER_SHARE
@@ -116,12 +117,15 @@ def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path
 
 
 def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_shorter_steps(
-    capsys,
+    capsys, monkeypatch
 ):
     """Wheel servos that chatter at the scene's 2 ms step without leaving the floor (as
     MuJoCo Menagerie's Stretch 3 does) take most of their command range as mismatch there;
     calibrate measures them again at shorter steps, says so, and keeps the step that calms
-    them: ξ̄ is then a small share of the range (it was 31 %, which a run cannot work in)."""
+    them: ξ̄ is then a small share of the range (it was 31 %, which a run cannot work in).
+    The search goes down to 1 ms here (a 0.5 ms measurement would double the test's time
+    and show nothing more: at 1 ms the mismatch has halved)."""
+    monkeypatch.setattr(command, "CHATTER_STEPS_DOWN_TO", 0.001)
     cal, measured = on_plane(str(DATA / "chatterbot.robot.toml"))
     said = capsys.readouterr().out
     assert "its servos chatter at that step" in said, said
@@ -133,12 +137,14 @@ def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_sho
 
 
 def test_a_drive_that_runs_away_at_the_scene_step_and_chatters_at_the_next_is_calmed_too(
-    capsys,
+    capsys, monkeypatch
 ):
     """Wheel servos that rock the base past the plane's limits at the scene's 2 ms step and,
     at 1 ms, keep it on the floor but chatter (a third of their range as mismatch): the
     step that kept the robot on the plane is checked for chatter as the scene's step is,
-    and calibrate goes on to a step that calms the servos."""
+    and calibrate goes on to a step that calms the servos (down to 0.5 ms here, where the
+    mismatch has halved: a 0.25 ms measurement would double the test's time)."""
+    monkeypatch.setattr(command, "CHATTER_STEPS_DOWN_TO", 0.0005)
     cal, measured = on_plane(str(DATA / "jumpbot.robot.toml"))
     said = capsys.readouterr().out
     assert "it left the plane at 2 ms: measuring at 1 ms" in said, said
