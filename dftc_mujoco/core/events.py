@@ -91,6 +91,7 @@ class Event(TypedDict, total=False):
 
     t: Required[float]
     kind: Required[Kind]
+    after_run: Any
     before: Any
     bound: Any
     by: Any
