@@ -195,6 +195,12 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
     nsub = round(CONTROL_PERIOD / step)
     velocity = np.empty((len(prog.u), 2))
     clamped = np.zeros(len(prog.u), bool)
+    # the speeds the drive asks of its wheels (not its steering) and those they turn at
+    act = drive.actuation  # under a transmission, its columns are the joints, none steered
+    spun = ~act.pos if act.moment is None else np.ones(act.dof_adr.shape[1], bool)
+    dofs = act.dof_adr[0][spun]
+    asked = np.empty((len(prog.u), int(spun.sum())))
+    turned = np.empty_like(asked)
     vel = np.empty(6)
     site = int(sc.site[0])
     ids = drive.controlled()[0]
@@ -205,6 +211,7 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
     for k, u in enumerate(prog.u):
         if k == prog.startup:  # settled: from here on it must stay a planar robot
             watch = Watch(sc.model, data, int(sc.body[0]), sc.model.geom("floor").id)
+        asked[k] = drive.wheel_speeds(u[None])[0][spun]
         ctrl = drive.command(u[None])[0]
         data.ctrl[ids] = ctrl
         c = ctrl[: len(driven)]
@@ -212,6 +219,7 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
         mujoco.mj_step(sc.model, data, nstep=nsub)
         mujoco.mj_objectVelocity(sc.model, data, mujoco.mjtObj.mjOBJ_SITE, site, vel, 0)
         velocity[k] = vel[3:5]
+        turned[k] = data.qvel[dofs]
         t = (k + 1) * CONTROL_PERIOD
         if data.warning.number.any() or not np.isfinite(data.qvel).all():
             raise OffPlane(Trouble(t, "the physics diverged (MuJoCo's accelerations blew up)"))
@@ -229,7 +237,8 @@ def measure(name: str, measured: dict[str, float] | None = None) -> Calibration:
     cal = _analyse(robot.name, prog, mismatch, clamped, limit)
     share = tracking(prog, velocity, expected, limit)
     if not TRACKING[0] <= share <= TRACKING[1]:
-        cal = dataclasses.replace(cal, notes=(*cal.notes, _tracking_note(share)))
+        wheels = wheel_share(prog, asked, turned)
+        cal = dataclasses.replace(cal, notes=(*cal.notes, _tracking_note(share, wheels)))
     return dataclasses.replace(
         cal,
         tracking=share,
@@ -256,13 +265,41 @@ def tracking(prog: Programme, velocity: np.ndarray, model: np.ndarray, limit: fl
     return float(np.sum(v[big] * m[big]) / np.sum(m[big] * m[big]))
 
 
-def _tracking_note(share: float) -> str:
-    """The warning for a robot that moves at a steady share of its commands."""
-    return (
+def wheel_share(prog: Programme, asked: np.ndarray, turned: np.ndarray) -> float:
+    """The share of the speeds the drive asked of its wheels that they turned at, on the
+    smooth part of the programme: the least-squares k of q̇ ≈ k q̇* over the samples whose
+    asked speed is at least a fifth of the largest (each wheel a column of ``asked`` and
+    ``turned``). 1 where the servos deliver what the drive asks."""
+    smooth = slice(prog.startup, prog.jumps[0])
+    a, q = asked[smooth].ravel(), turned[smooth].ravel()
+    big = np.abs(a) >= 0.2 * np.abs(a).max() if a.size and np.abs(a).max() > 0 else None
+    if big is None or not big.any():
+        return 1.0
+    return float(np.sum(q[big] * a[big]) / np.sum(a[big] * a[big]))
+
+
+def _tracking_note(share: float, wheels: float) -> str:
+    """The warning for a robot that moves at a steady share of its commands, with what its
+    wheels did: turned as asked (the base slips, sinks or bumps over them, or the drive
+    model's geometry is not the wheels'), or not (the servos cannot carry their load)."""
+    said = (
         f"on smooth commands the robot moves at {share:.0%} of its command, steadily (no lag "
-        "and no ξ̄ describes that): its wheels do not move it as its drive model assumes; "
-        "check the wheels' radius and axle, friction loss or damping on its passive joints "
-        "(rollers, casters) and its servos' gains"
+        "and no ξ̄ describes that)"
+    )
+    if TRACKING[0] <= wheels <= TRACKING[1]:
+        return (
+            f"{said}, while its wheels turn at {wheels:.0%} of the speeds its drive asks for: "
+            "the servos deliver, but the wheels do not move the base as the drive model "
+            "assumes. Check the wheels' radius and axle (the robot file's or the model's "
+            "geometry), and how they touch the floor: wheels that sink into it under the "
+            "robot's weight (soft contacts: solref, solimp), slip, or roll on a few thin "
+            "rollers with gaps between them"
+        )
+    return (
+        f"{said}: its wheels turn at only {wheels:.0%} of the speeds its drive asks for, so "
+        "its servos cannot carry the load; check their gains (kv, kp), force range and "
+        "control range, and friction loss or damping on its passive joints (rollers, "
+        "casters)"
     )
 
 
