@@ -27,6 +27,7 @@ from dftc_mujoco.calibrate.mismatch import (
     wheel_share,
 )
 from dftc_mujoco.calibrate.physics import CHATTER_SHARE
+from dftc_mujoco.calibrate.track import TRACK_RATIO_MAX
 from dftc_mujoco.closed_loop.loop import Simulation
 from dftc_mujoco.sim import robots, scene
 from dftc_mujoco.sim.plant import Plant
@@ -122,6 +123,26 @@ def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path
     assert "calibration refused, nothing written" in line and "the base rose" in line, err
     assert "at the shorter steps tried (1, 0.5, 0.25, 0.125, 0.1 ms)" in line, err
     assert path.read_bytes() == before
+
+
+def test_a_skid_steer_too_long_to_turn_is_refused_in_one_line_that_says_why(tmp_path, capsys):
+    """The same four-wheel base with its wheels 0.8 m apart front to back on a 0.26 m track
+    (as MuJoCo Menagerie's TIAGo++, whose mecanum rollers the model leaves out, has 0.49 m
+    on 0.45 m): spun in place it hardly turns, its plain wheels scrubbing sideways, and every
+    step of calibrate's search drags it off the plane. Calibrate says so at once, with the
+    fix, and writes nothing; the base as published calibrates (its track slips to 2×)."""
+    path = _copy(tmp_path, "skidbot")
+    xml = path.parent / "skidbot" / "skidbot.xml"
+    text = xml.read_text().replace('pos="0.1 ', 'pos="0.4 ').replace('pos="-0.1 ', 'pos="-0.4 ')
+    xml.write_text(text.replace('size="0.16 0.1 0.03"', 'size="0.46 0.1 0.03"'))
+    before = path.read_text()
+    assert calibrate.main([str(path), "--write"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "calibration refused, nothing written" in err[0], err
+    ratio = float(err[0].split("effective track is ")[1].split(" m, ")[1].split(" times")[0])
+    assert ratio > TRACK_RATIO_MAX, err
+    assert "0.8 m apart front to back" in err[0] and "Model the rollers" in err[0], err
+    assert path.read_text() == before
 
 
 def test_calibrate_measures_a_drive_that_chatters_at_the_scene_step_again_at_shorter_steps(

@@ -18,6 +18,10 @@ from .mismatch import CONTROL_PERIOD, robot_with, step_for
 
 SPIN_SHARE = 0.5
 SETTLE, SPIN = 1.0, 4.0  # s at rest, then s spinning (the turn rate is read over its last half)
+#: an effective track beyond this many times the wheels' own is a base that can hardly turn:
+#: skid steers slip to 1.5-2.5 times theirs (a four-wheel test base: 2.0); a turn then asks
+#: wheel speeds that many times those of a two-wheel drive, and the base scrubs off the plane
+TRACK_RATIO_MAX = 4.0
 
 
 def skid_track(name: str, measured: dict[str, float] | None = None) -> float | None:
@@ -53,4 +57,24 @@ def skid_track(name: str, measured: dict[str, float] | None = None) -> float | N
             f"at ±{rim:.3g} m/s, the skid steer does not turn (yaw rate {rate:.2g} rad/s): its "
             "wheels slip on the floor; it cannot be steered"
         )
-    return float(2.0 * rim / abs(rate))
+    track = float(2.0 * rim / abs(rate))
+    geometric = float(robot.params["axle_width"])
+    if track > TRACK_RATIO_MAX * geometric:
+        rot = data.xmat[body].reshape(3, 3)
+        psi = robot.params.get("forward_angle", 0.0)
+        ahead = rot @ np.array([np.cos(psi), np.sin(psi), 0.0])
+        wheels = sc.model.dof_jntid[drive.actuation.dof_adr[0]]
+        along = data.xanchor[wheels] @ ahead
+        base = float(along.max() - along.min())
+        raise ScenarioError(
+            f"{robot.path}: calibration refused, nothing written: spun in place with its rims "
+            f"at ±{rim:.3g} m/s, the skid steer turns at {geometric / track:.0%} of the rate "
+            f"its wheels' speeds give over their {geometric:.3g} m track (its effective track "
+            f"is {track:.3g} m, {track / geometric:.0f} times that; skid steers slip to 1.5-2.5 "
+            f"times): its plain wheels, {base:.3g} m apart front to back, scrub sideways as it "
+            "turns, so every turn would ask wheel speeds that many times a two-wheel drive's "
+            "and drag the base off the plane. Model the rollers of its wheels (a mecanum or "
+            'omni base is drive = "omni"), or drive it on one pair of wheels with the others '
+            "free to swivel or slide (casters)"
+        )
+    return track
