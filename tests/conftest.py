@@ -84,13 +84,10 @@ _WARM = (
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Hand pytest-xdist the test files in :func:`pytest_collection_modifyitems`' order, and
-    fill numba's cache before the tests start (in the process that starts pytest-xdist's
+    """Fill numba's cache before the tests start (in the process that starts pytest-xdist's
     workers, once): on a fresh clone each worker, and each command-line run a test starts
     meanwhile, would otherwise compile the same functions side by side. Both paths compile
     at once, one process each; on a warm cache they only load it (a few seconds)."""
-    if hasattr(config.option, "loadscopereorder"):  # pytest-xdist: files in our order
-        config.option.loadscopereorder = False
     if hasattr(config, "workerinput") or os.environ.get("NUMBA_DISABLE_JIT") == "1":
         return
     import subprocess
@@ -115,40 +112,13 @@ def pytest_configure(config: pytest.Config) -> None:
     print(f"numba's cache filled for the onboard period ({took:.0f} s)", flush=True)
 
 
-#: the files that take longest on a fresh clone, longest first: pytest-xdist hands each
-#: file to a worker whole, so a long file handed out last keeps one worker busy while the
-#: other idles (the files after these keep their order)
-LONGEST_FIRST = (
-    "test_ray.py",  # first of all: see pytest_collection_modifyitems
-    "test_docs.py",
-    "test_own_robots.py",
-    "test_numba_cache.py",
-    "test_robot_files.py",
-    "test_output.py",
-    "test_benchmarks.py",
-    "test_packaging.py",
-    "test_structure.py",
-    "test_platform.py",
-    "test_campaign.py",
-    "test_physics.py",
-    "test_thresholds.py",
-    "test_hostile.py",
-    "test_robots.py",
-)
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Run the files in :data:`LONGEST_FIRST`'s order, then the rest in theirs (with
-    pytest-xdist's own reordering by number of tests turned off in :func:`pytest_configure`,
-    which put these files, each of few tests, last).
-
-    tests/test_ray.py comes first of all. Its `ray://` test has the head node start a server
-    process per driver; at the end of a full suite on the 2-core machine that process twice
-    failed to come up (once within Ray's own 30 s, once within 150 s), while the same tests
-    pass alone, after test_campaign or test_platform, and after every module between them
-    (one cause not found: each subset passed)."""
-    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+    """Run tests/test_ray.py first (the rest keeps its order). Its `ray://` test has the
+    head node start a server process per driver; at the end of a full suite on the 2-core
+    machine that process twice failed to come up (once within Ray's own 30 s, once within
+    150 s), while the same tests pass alone, after test_campaign or test_platform, and
+    after every module between them (one cause not found: each subset passed)."""
+    items.sort(key=lambda item: item.path.name != "test_ray.py")
 
 
 @contextlib.contextmanager
