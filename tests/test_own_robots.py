@@ -127,8 +127,8 @@ def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path
 
 def test_a_skid_steer_too_long_to_turn_is_refused_in_one_line_that_says_why(tmp_path, capsys):
     """The same four-wheel base with its wheels 0.8 m apart front to back on a 0.26 m track
-    (as MuJoCo Menagerie's TIAGo++, whose mecanum rollers the model leaves out, has 0.49 m
-    on 0.45 m): spun in place it hardly turns, its plain wheels scrubbing sideways, and every
+    (MuJoCo Menagerie's TIAGo++, whose model gives its "omni base" plain wheels, has
+    0.49 m on 0.45 m): spun in place it hardly turns, its plain wheels scrubbing sideways, and every
     step of calibrate's search drags it off the plane. Calibrate says so at once, with the
     fix, and writes nothing; the base as published calibrates (its track slips to 2×)."""
     path = _copy(tmp_path, "skidbot")
@@ -207,7 +207,8 @@ def test_calibrate_says_when_a_robot_moves_at_a_steady_share_of_its_commands(tmp
     s = load_scenario("paper_case", {"team.robot_model": str(path), "mission.scale": 1.4})
     with Simulation(s) as sim:
         said = [e["message"] for e in sim.events.items if e["kind"] == "warning"]
-    assert any("of their commands (calibration.tracking)" in m for m in said), said
+    (warned,) = [m for m in said if "of their commands (calibration.tracking)" in m]
+    assert f"python -m dftc_mujoco.calibrate {path} says whether its wheels" in warned
 
 
 def test_a_shortfall_of_the_wheels_themselves_is_put_on_the_servos():
