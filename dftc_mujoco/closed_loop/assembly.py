@@ -372,12 +372,6 @@ def rewire_mode(s: Scenario) -> str:
     return f.rewire
 
 
-def _calibrate_arg(model: Any) -> str:
-    """What to give ``python -m dftc_mujoco.calibrate`` for ``model``: a built-in robot's
-    name, else its robot file's path."""
-    return model.name if Path(model.path).parent == robots.ROBOTS else str(model.path)
-
-
 def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -> list[str]:
     """What the robot's calibration says of the scenario's noise and gains, one line each:
     a robot never calibrated, a ξ̄ below its measured mismatch, a robot that moves at a
@@ -394,7 +388,7 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
         out.append(
             f"noise.xi_bar = {xi_bar:g} m/s is below the {model.name} model's measured "
             f"mismatch ({model.mismatch:g} m/s, python -m dftc_mujoco.calibrate "
-            f"{_calibrate_arg(model)}; recommended {model.xi_bar:g}): thresholds may raise "
+            f"{model.path}; recommended {model.xi_bar:g}): thresholds may raise "
             "false alarms"
         )
     share = model.calibration.get("tracking")
@@ -403,7 +397,7 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
             f"the {model.name} robots move at {share:.0%} of their commands "
             "(calibration.tracking): their drive model does not match their wheels, ξ̄ is "
             "spent on that shortfall and a fault of the mission's size may go unseen; "
-            f"python -m dftc_mujoco.calibrate {_calibrate_arg(model)} says whether its "
+            f"python -m dftc_mujoco.calibrate {model.path} says whether its "
             "wheels turn as asked (then look at how they meet the floor) or not (then at its "
             "servos)"
         )
