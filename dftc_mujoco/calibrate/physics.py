@@ -82,16 +82,17 @@ class Watch:
 
     def _touching(self, geoms: bool = False) -> set[int]:
         """The robot's bodies (or geoms) that touch the floor now."""
-        d, m = self.data, self.model
-        out = set()
-        for c in d.contact[: d.ncon]:
-            g1, g2 = int(c.geom1), int(c.geom2)
-            if self.floor in (g1, g2):
-                other = g2 if g1 == self.floor else g1
-                b = int(m.geom_bodyid[other])
-                if self.branch[b] >= 0:
-                    out.add(other if geoms else b)
-        return out
+        return {int(x) for x in self._on_floor(geoms)}
+
+    def _on_floor(self, geoms: bool) -> np.ndarray:
+        """The robot's geoms (or their bodies) in the contacts with the floor now (as arrays:
+        this runs every period of the programme)."""
+        pair = self.data.contact.geom[: self.data.ncon]
+        pair = pair[(pair == self.floor).any(axis=1)]
+        other = np.where(pair[:, 0] == self.floor, pair[:, 1], pair[:, 0])
+        body = self.model.geom_bodyid[other]
+        mine = self.branch[body] >= 0
+        return other[mine] if geoms else body[mine]
 
     def check(self, t: float) -> None:
         """Keep the first breach at ``t`` (s into the programme)."""
@@ -108,8 +109,8 @@ class Watch:
         if said:
             self.trouble = Trouble(t, "the base " + " and ".join(said))
             return
-        touched = self._touching(geoms=True)
-        stray = sorted({int(self.model.geom_bodyid[g]) for g in touched if not self.allowed[g]})
+        touched = self._on_floor(geoms=True)
+        stray = np.unique(self.model.geom_bodyid[touched[~self.allowed[touched]]]).tolist()
         if stray:
             names = ", ".join(self.model.body(b).name.split("/")[-1] or f"body {b}" for b in stray)
             self.trouble = Trouble(
