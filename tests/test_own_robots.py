@@ -125,6 +125,45 @@ def test_calibrate_refuses_a_robot_that_leaves_the_plane_while_measured(tmp_path
     assert path.read_bytes() == before
 
 
+ARM_ON_WHEELS = """
+<mujoco>
+  <worldbody>
+    <geom name="floor" type="plane" size="2 2 0.1"/>
+    <body name="base" pos="0 0 0.049">
+      <freejoint/>
+      <geom type="box" size="0.1 0.1 0.02"/>
+      <body name="wheel" pos="0.05 0 -0.02"><geom type="sphere" size="0.03"/></body>
+      <body name="caster" pos="-0.05 0 -0.02"><geom type="sphere" size="0.03"/></body>
+      <body name="arm" pos="0 0 0.2">
+        <joint name="lift" type="slide" axis="0 0 1"/>
+        <geom type="box" size="0.05 0.05 0.02"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_calibrate_names_a_part_that_was_off_the_floor_at_the_start_and_touches_it():
+    """Calibrate's watch lets the parts that touched the floor at the start (wheels, casters)
+    touch it, and names any other part of the robot that comes down onto it (an arm
+    swinging down, a gripper dragging), with when."""
+    from dftc_mujoco.calibrate.physics import Watch
+
+    model = mujoco.MjModel.from_xml_string(ARM_ON_WHEELS)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    watch = Watch(model, data, model.body("base").id, model.geom("floor").id)
+    assert data.ncon >= 2  # the wheel and the caster rest on the floor
+    watch.check(1.0)
+    assert watch.trouble is None
+    data.qpos[model.joint("lift").qposadr[0]] = -0.24  # the arm comes down to the floor
+    mujoco.mj_forward(model, data)
+    watch.check(2.5)
+    assert watch.trouble is not None
+    assert watch.trouble.t == 2.5 and watch.trouble.what.startswith("arm touched the floor")
+
+
 def test_a_skid_steer_too_long_to_turn_is_refused_in_one_line_that_says_why(tmp_path, capsys):
     """The same four-wheel base with its wheels 0.8 m apart front to back on a 0.26 m track
     (MuJoCo Menagerie's TIAGo++, whose model gives its "omni base" plain wheels, has

@@ -110,8 +110,9 @@ class Watch:
             self.trouble = Trouble(t, "the base " + " and ".join(said))
             return
         touched = self._on_floor(geoms=True)
-        stray = np.unique(self.model.geom_bodyid[touched[~self.allowed[touched]]]).tolist()
-        if stray:
+        touched = touched[~self.allowed[touched]]
+        if touched.size:
+            stray = np.unique(self.model.geom_bodyid[touched]).tolist()
             names = ", ".join(self.model.body(b).name.split("/")[-1] or f"body {b}" for b in stray)
             self.trouble = Trouble(
                 t, f"{names} touched the floor (at the start only its wheels were near it)"
