@@ -289,6 +289,23 @@ def test_column_envelope_bounds_the_exact_rule_and_ends_at_its_limit(seed, struc
     _assert_envelope(short, exact)
 
 
+def test_the_sweep_costs_no_more_than_its_budget_however_slowly_the_graph_mixes():
+    """A line of 200 robots talking both ways mixes slowly (no column is certified monotone
+    within the budget) and has no symmetry to share: the sweep stops at its work budget,
+    one column-entry update per robot and in-edge for each column and period, and the
+    steady thresholds stay finite (the resolvent's tails)."""
+    from dftc_mujoco.onboard.thresholds.envelope import CHECK, MAX_WORK
+
+    n = 200
+    graph = Graph(n, [(i, i + 1) for i in range(n - 1)] + [(i + 1, i) for i in range(n - 1)])
+    env = column_envelope(graph, 3.0, H, Start(np.full(n, 0.05), ETA, True), (ETA, 0.002, H * XI))
+    per_period = n + len(graph.edges)  # one column's work a period
+    assert not env.certified.any()
+    assert env.steps.sum() * per_period <= MAX_WORK + CHECK * n * per_period
+    assert env.steps.sum() * per_period > MAX_WORK / 2  # the budget, not the run, ended it
+    assert np.isfinite(env.steady).all()
+
+
 def test_block_row_envelope_bounds_the_exact_rule():
     """eq. B with exact row norms ‖e_iᵀ P_k A_k^j‖ (dense powers) and the ē term."""
     rng = np.random.default_rng(5)
