@@ -21,7 +21,7 @@ from .kernels import Adjacency, advance_crossing, column_of_row
 EXACT_CROSSING_WORK = 5e8
 #: the horizon's sweep stops after this many column-entry updates. It is not the
 #: envelope's smaller budget: a crossing left unfound is bounded far more loosely than an
-#: envelope's tail (on the 20 × 20 k-nearest grid, l1's Δt_d,max of 67 s becomes 8 hours
+#: envelope's tail (on the 20 × 20 k-nearest grid, l1's Δt_d,max of 77 s becomes 8 hours
 #: with the envelope's budget)
 MAX_WORK = 4e9
 
