@@ -309,7 +309,53 @@ def test_a_drive_narrower_than_the_compensations_headroom_is_said_before_the_run
 
     (narrow,) = [m for m in said(str(tmp_path / "slowdisk.robot.toml")) if "headroom" in m]
     assert "±0.04 m/s" in narrow and "premise 'saturation'" in narrow
+    # the anti-windup's band alone (5 cm/s) is wider than ±0.04 m/s: no G helps, and it says so
+    assert "no G up to 50 times the run's brings" in narrow, narrow
     assert not [m for m in said("disk") if "no wider than the compensation's headroom" in m]
+
+
+def test_a_drive_narrower_than_the_headroom_is_told_the_gain_that_leaves_it_room(tmp_path):
+    """At ±0.12 m/s the disk's range is taken by the headroom of the paper's G = 0.01 I
+    (Φ̄ ≈ 0.2 m/s), but not by a larger G's: the warning names the G, and with it the run
+    says nothing of the kind."""
+    base = Path(__file__).parents[1] / "models" / "robots"
+    xml = (base / "disk.xml").read_text()
+    (tmp_path / "disk.xml").write_text(xml.replace('ctrlrange="-1 1"', 'ctrlrange="-0.12 0.12"'))
+    (tmp_path / "slowdisk.robot.toml").write_text((base / "disk.robot.toml").read_text())
+    robot = str(tmp_path / "slowdisk.robot.toml")
+
+    def said(**more: object) -> list[str]:
+        s = load_scenario(
+            "paper_case", {"team.robot_model": robot, "mission.centroid.speed": 0.01, **more}
+        )
+        with Simulation(s) as sim:
+            return [e["message"] for e in sim.events.items if "headroom (" in e["message"]]
+
+    (narrow,) = said()
+    given = narrow.split("--set gains.G=")[1].split(" ")[0]
+    phi = float(narrow.split(f"gains.G={given} gives Φ̄ = ")[1].split(" m/s")[0])
+    assert 0.01 < float(given) <= 0.5 and phi + 0.05 < 0.12, narrow
+    assert said(**{"gains.G": float(given)}) == []
+
+
+def test_calibrate_raises_g_until_the_compensation_leaves_the_drive_room():
+    """Calibrate keeps the compensation's gain G only where a run's bound Φ̄ on a healthy
+    robot's ‖φ̂‖ (with ξ̄ and the lag the run models) and the anti-windup's band leave the
+    drive some of its range: a ±0.12 m/s drive gets the smallest larger G that does (Φ̄ at
+    the paper's G = 0.01 I is about 0.2 m/s, more with a lag), a ±1 m/s drive keeps G, and
+    a ±0.04 m/s drive, which the band alone fills, keeps it too (the run says why)."""
+    from dftc_mujoco.calibrate.compensation import range_fit, range_fit_report
+    from dftc_mujoco.closed_loop.assembly import compensation_headroom
+
+    G, phi, first = range_fit(0.01, 0.12, "paper_case", {}, 0.005, (0.0, 0.0))
+    assert G > 0.01 and compensation_headroom(phi) < 0.12 <= compensation_headroom(first)
+    line = range_fit_report(0.01, G, phi, first, 0.12)
+    assert line is not None and f"G = {G:g} I leaves it room" in line
+    lagged, phi_lag, first_lag = range_fit(0.01, 0.12, "paper_case", {}, 0.06, (0.0, 0.165))
+    assert first_lag > first and lagged >= G and compensation_headroom(phi_lag) < 0.12
+    assert range_fit(0.01, 1.0, "paper_case", {}, 0.005, (0.0, 0.0))[0] == 0.01
+    assert range_fit(0.01, 0.04, "paper_case", {}, 0.005, (0.0, 0.0))[0] == 0.01
+    assert range_fit_report(0.01, 0.01, first, first, 0.04) is None
 
 
 def test_a_calibrated_physics_step_is_the_step_of_every_run_with_the_robot(tmp_path):

@@ -8,7 +8,14 @@ import sys
 from pathlib import Path
 
 from ..errors import EXIT_OK, EXIT_OUTPUT, ScenarioError
-from .compensation import acceleration, acceleration_report, compensation, compensation_report
+from .compensation import (
+    acceleration,
+    acceleration_report,
+    compensation,
+    compensation_report,
+    range_fit,
+    range_fit_report,
+)
 from .drift import REPLAN_WINDOW, drift
 from .files import Change, check_writable, values_of, write
 from .mismatch import (
@@ -115,12 +122,19 @@ def _calibrate(args: argparse.Namespace, written: list[Path]) -> int:
         )
         line, warn = compensation_report(loop_results)
         print(f"WARNING: {line}" if warn else line)
-        if loop_results[0].rings and "gains.G" not in overrides:
-            overrides["gains.G"] = loop_results[-1].G
+        g = loop_results[-1].G
+        xi_bar = float(overrides.get("noise.xi_bar", cal.recommended_xi_bar))
+        lags = (cal.lag, cal.fast_lag)  # the paper's rules model lag, the drive rule either
+        G, phi, phi_g = range_fit(g, cal.command_limit, args.scenario, overrides, xi_bar, lags)
+        widened = range_fit_report(g, G, phi, phi_g, cal.command_limit)
+        if widened:
+            print(widened)
+        if (loop_results[0].rings or widened) and "gains.G" not in overrides:
+            overrides["gains.G"] = G
         overrides.setdefault("noise.xi_bar", cal.recommended_xi_bar)  # split for the new ξ̄
-        cal = dataclasses.replace(cal, compensation_G=loop_results[-1].G)
+        cal = dataclasses.replace(cal, compensation_G=G)
         _say("jumping commands, at each acceleration tried")
-        jumps = acceleration(args.model, loop_results[-1].G, lag=cal.lag, measured=measured)
+        jumps = acceleration(args.model, G, lag=cal.lag, measured=measured)
         line, warn = acceleration_report(jumps)
         print(f"WARNING: {line}" if warn else line)
         if not jumps[-1][1].runs_away:

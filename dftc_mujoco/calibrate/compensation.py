@@ -230,6 +230,53 @@ def acceleration_report(results: list[tuple[float, Compensation]]) -> tuple[str,
     )
 
 
+def range_fit(
+    g: float,
+    limit: float,
+    scenario_name: str,
+    overrides: dict,
+    xi_bar: float,
+    lags: tuple[float, ...],
+) -> tuple[float, float, float]:
+    """(G, its Φ̄, Φ̄ at ``g``): the smallest of ``g`` and its multiples
+    (``assembly.G_WIDER``) whose bound Φ̄ on a healthy robot's ‖φ̂‖ in a run (η̄ and
+    ``xi_bar``, the largest of the ``lags`` the run may model) leaves a drive of per-axis
+    range ``limit`` room beside the compensation's headroom (``assembly.input_limit``);
+    ``g`` itself where none does."""
+    from ..closed_loop.assembly import G_WIDER, compensation_headroom
+    from ..onboard.thresholds import estimator_gain
+    from ..scenario import load_scenario
+
+    s = load_scenario(scenario_name, overrides)
+    K = np.asarray(s.gains.K, float)
+
+    def bound(x: float) -> float:
+        return estimator_gain(
+            K, x * np.eye(2), CONTROL_PERIOD, s.noise.eta_bar, xi_bar, lag=np.array(lags)
+        )
+
+    first = bound(g)
+    if not math.isfinite(limit) or compensation_headroom(first) < limit:
+        return g, first, first
+    for m in G_WIDER:
+        phi = bound(m * g)
+        if compensation_headroom(phi) < limit:
+            return m * g, phi, first
+    return g, first, first
+
+
+def range_fit_report(g: float, G: float, phi: float, first: float, limit: float) -> str | None:
+    """The line to print when :func:`range_fit` raised G (``g`` → ``G``), or None."""
+    if G == g:
+        return None
+    return (
+        f"at G = {g:g} I a healthy robot's |phi_hat| bound in a run, Phi_bar = {first:.3g} "
+        f"m/s (with xi_bar and the drive's lag), and the anti-windup's band take the whole "
+        f"command range ±{limit:.3g} m/s; G = {G:g} I leaves it room (Phi_bar = {phi:.3g} "
+        "m/s; the fault estimate settles more slowly): stored as compensation_G"
+    )
+
+
 def compensation_report(results: list[Compensation]) -> tuple[str, bool]:
     """The line to print about the compensation loop, and whether it is a warning."""
     first, last = results[0], results[-1]

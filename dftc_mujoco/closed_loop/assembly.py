@@ -110,17 +110,21 @@ def effective_G(s: Scenario, robot: robots.RobotModel | None) -> np.ndarray:
 
 
 def compensation_bound(
-    s: Scenario, robot: robots.RobotModel | None, models: tuple[robots.RobotModel, ...] = ()
+    s: Scenario,
+    robot: robots.RobotModel | None,
+    models: tuple[robots.RobotModel, ...] = (),
+    G: np.ndarray | None = None,
 ) -> float:
     """Φ̄: the bound on a healthy robot's ‖φ̂‖ (the fault estimator's ℓ1 gain from η̄ and ξ̄,
-    with the drive's lag, the largest of the team's ``models``' lags); inf without FDIR or
-    compensation, or where the estimator's loop is unstable (refused elsewhere)."""
+    with the drive's lag, the largest of the team's ``models``' lags; at the run's G, or at
+    ``G``); inf without FDIR or compensation, or where the estimator's loop is unstable
+    (refused elsewhere)."""
     if not (s.fdir.enabled and s.fdir.compensate):
         return np.inf
     try:
         return estimator_gain(
             np.asarray(s.gains.K),
-            effective_G(s, robot),
+            effective_G(s, robot) if G is None else G,
             s.physics.control_period,
             s.noise.eta_bar,
             effective_xi_bar(s, robot),
@@ -412,22 +416,47 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
     return out
 
 
-def _narrow_range(name: str, limit: float, phi_bar: float, nominal: bool) -> str | None:
+#: multiples of the run's G tried for a drive whose range the compensation's headroom takes
+G_WIDER = (2.0, 5.0, 10.0, 20.0, 50.0)
+
+
+def _narrow_range(
+    s: Scenario, model: robots.RobotModel, models: tuple[robots.RobotModel, ...], limit: float,
+    phi_bar: float,
+) -> str | None:  # fmt: skip
     """The warning for a drive whose whole command range the compensation's headroom (Φ̄ and
     the anti-windup's band, :func:`input_limit`) takes: nothing keeps a healthy robot's
-    compensated command ū out of the band by design."""
-    if nominal or not (np.isfinite(limit) and np.isfinite(phi_bar)):
+    compensated command ū out of the band by design. It gives the smallest larger G
+    (:data:`G_WIDER`) whose Φ̄ leaves the drive room, or says that none does."""
+    if s.fdir.input == "nominal" or not (np.isfinite(limit) and np.isfinite(phi_bar)):
         return None
     headroom = compensation_headroom(phi_bar)
     if headroom < limit:
         return None
+    G = effective_G(s, model)
+    wider = [(m, compensation_bound(s, model, models, m * G)) for m in G_WIDER]
+    fits = [(m, phi) for m, phi in wider if compensation_headroom(phi) < limit]
+    if fits:
+        m, phi = fits[0]
+        scalar = np.allclose(G, G[0, 0] * np.eye(len(G)))
+        given = f"gains.G={m * G[0, 0]:.3g}" if scalar else f"gains.G {m:g} times larger"
+        fix = (
+            f"a larger G lowers Φ̄ (the fault estimate then settles more slowly): "
+            f"--set {given} gives Φ̄ = {phi:.3g} m/s"
+        )
+    else:
+        fix = (
+            f"no G up to {G_WIDER[-1]:g} times the run's brings Φ̄ inside the range: the "
+            f"robot's mismatch ξ̄ = {effective_xi_bar(s, model):.3g} m/s and the band take it "
+            "(a drive with a wider range, or one that follows its commands closer)"
+        )
     return (
-        f"the {name} robots' command range of ±{limit:.3g} m/s per axis is no wider than the "
-        f"compensation's headroom ({headroom:.3g} m/s: a healthy robot's bound Φ̄ = "
+        f"the {model.name} robots' command range of ±{limit:.3g} m/s per axis is no wider than "
+        f"the compensation's headroom ({headroom:.3g} m/s: a healthy robot's bound Φ̄ = "
         f"{phi_bar:.3g} m/s and the anti-windup's {ANTI_WINDUP_BAND * 100:g} cm/s band): "
         "nothing keeps a healthy robot's compensated command ū out of the band by design; "
         "the run checks the threshold rules' premise 'saturation', and flags raised while "
-        "it is broken carry no guarantee"
+        f"it is broken carry no guarantee; {fix}"
     )
 
 
@@ -475,7 +504,7 @@ def preflight(
     )
     if refusal:
         found.refusals.append(refusal)
-    narrow = _narrow_range(model.name, limit, config.phi_bar, s.fdir.input == "nominal")
+    narrow = _narrow_range(s, model, tuple(models), limit, config.phi_bar)
     found.warnings += [narrow] if narrow else []
     found.refusals += premises.rule_refusals(
         rule, s.fdir.compensate, s.fdir.phi_low_pass, str(s.source)
