@@ -239,11 +239,11 @@ def range_fit(
     lags: tuple[float, ...],
 ) -> tuple[float, float, float]:
     """(G, its Φ̄, Φ̄ at ``g``): the smallest of ``g`` and its multiples
-    (``assembly.G_WIDER``) whose bound Φ̄ on a healthy robot's ‖φ̂‖ in a run (η̄ and
+    (``assembly.wider_G``) whose bound Φ̄ on a healthy robot's ‖φ̂‖ in a run (η̄ and
     ``xi_bar``, the largest of the ``lags`` the run may model) leaves a drive of per-axis
     range ``limit`` room beside the compensation's headroom (``assembly.input_limit``);
     ``g`` itself where none does."""
-    from ..closed_loop.assembly import G_WIDER, compensation_headroom
+    from ..closed_loop.assembly import compensation_headroom, wider_G
     from ..onboard.thresholds import estimator_gain
     from ..scenario import load_scenario
 
@@ -258,11 +258,8 @@ def range_fit(
     first = bound(g)
     if not math.isfinite(limit) or compensation_headroom(first) < limit:
         return g, first, first
-    for m in G_WIDER:
-        phi = bound(m * g)
-        if compensation_headroom(phi) < limit:
-            return m * g, phi, first
-    return g, first, first
+    fits = wider_G(lambda m: bound(m * g), limit)
+    return (fits[0] * g, fits[1], first) if fits else (g, first, first)
 
 
 def range_fit_report(g: float, G: float, phi: float, first: float, limit: float) -> str | None:

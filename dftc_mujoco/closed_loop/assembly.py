@@ -10,7 +10,7 @@ hypothesis; and the six onboard blocks, the scenario's or the caller's. The loop
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -420,6 +420,17 @@ def calibration_warnings(s: Scenario, model: robots.RobotModel, xi_bar: float) -
 G_WIDER = (2.0, 5.0, 10.0, 20.0, 50.0)
 
 
+def wider_G(bound: Callable[[float], float], limit: float) -> tuple[float, float] | None:
+    """The smallest multiple m of G in :data:`G_WIDER` whose Φ̄ = ``bound(m)`` leaves a drive
+    of per-axis range ``limit`` room beside the compensation's headroom, and that Φ̄; None
+    where none does (the run's warning and calibrate's choice of G share it)."""
+    for m in G_WIDER:
+        phi = bound(m)
+        if compensation_headroom(phi) < limit:
+            return m, phi
+    return None
+
+
 def _narrow_range(
     s: Scenario, model: robots.RobotModel, models: tuple[robots.RobotModel, ...], limit: float,
     phi_bar: float,
@@ -434,10 +445,9 @@ def _narrow_range(
     if headroom < limit:
         return None
     G = effective_G(s, model)
-    wider = [(m, compensation_bound(s, model, models, m * G)) for m in G_WIDER]
-    fits = [(m, phi) for m, phi in wider if compensation_headroom(phi) < limit]
+    fits = wider_G(lambda m: compensation_bound(s, model, models, m * G), limit)
     if fits:
-        m, phi = fits[0]
+        m, phi = fits
         scalar = np.allclose(G, G[0, 0] * np.eye(len(G)))
         given = f"gains.G={m * G[0, 0]:.3g}" if scalar else f"gains.G {m:g} times larger"
         fix = (
